@@ -1,0 +1,46 @@
+# One-command set-up: every target creates .venv, installs the pinned requirements and
+# colcon-builds the package when needed, so a clean clone needs only python3 and the registries.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+VPY := $(VENV)/bin/python
+STAMP := $(VENV)/.requirements-installed
+INSTALL := install/imu_allan
+# The environment `source install/setup.bash` would give, without needing a ROS install.
+RUN_ENV := PATH="$(CURDIR)/$(VENV)/bin:$$PATH" \
+	AMENT_PREFIX_PATH="$(CURDIR)/$(INSTALL):$(CURDIR)/$(VENV)" \
+	PYTHONPATH="$(CURDIR)/$(INSTALL)/lib/python3.11/site-packages$${PYTHONPATH:+:$$PYTHONPATH}" \
+	MPLBACKEND=Agg
+TESTS ?= test
+PYTEST_ARGS ?=
+
+.PHONY: all venv build test lint demo bench clean
+
+all: build
+
+$(STAMP): requirements.txt
+	test -x $(VPY) || $(PYTHON) -m venv $(VENV)
+	$(VPY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+# colcon's isolated layout: install/imu_allan/lib/imu_allan/<executable>.
+build: $(STAMP)
+	$(RUN_ENV) $(VENV)/bin/colcon --log-base log build --paths . \
+		--build-base build --install-base install --event-handlers console_cohesion- summary-
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check imu_allan test scripts setup.py
+
+test: build
+	$(RUN_ENV) $(VPY) -m pytest -q $(TESTS) $(PYTEST_ARGS)
+
+demo: build
+	$(RUN_ENV) $(VPY) scripts/demo.py
+
+bench: build
+	$(RUN_ENV) $(VPY) scripts/bench.py
+
+clean:
+	rm -rf build install log $(VENV)

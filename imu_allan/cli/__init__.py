@@ -1,0 +1,1 @@
+"""Command-line entry points (analyze, discrepancy, gx3_sim)."""

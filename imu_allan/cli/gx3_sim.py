@@ -1,0 +1,655 @@
+"""gx3_sim: a simulated LORD MicroStrain 3DM-GX3-25 on a pseudo-terminal.
+
+The simulator opens a pseudo-terminal in raw mode, prints the path a driver should open as the
+first line on stdout, and then behaves like a 3DM-GX3-25 with single-byte firmware
+(``reference/gx3_protocol.md``): it answers the commands, streams continuous mode at
+1000 Hz / decimation, paced by the baud rate, with noise from
+:func:`imu_allan.core.simulate.simulate`.
+
+Choices where the protocol is silent (gx3_protocol.md §15): unknown command bytes and a bare
+``FA`` are ignored; an invalid continuous-command byte is ignored and the current one echoed;
+the 0xC4 reply precedes the first record; the device powers up in Active mode (or streaming,
+with ``--stream``); polled data commands are answered at once; 0xCD replies after at most
+``--max-bias-delay`` seconds.  Records are paced per record: one whose bytes cannot leave
+before the next record is due (baud too low for the rate) is not sent, as a UART overrun
+would lose it; its timer value is skipped, so the host sees a gap.
+
+Values on the wire, in device units: angular rate rad/s (noise only), acceleration g (noise
+plus 1 g along ``--gravity-axis``; the real unit reads about -1 g on z when level, the
+default), magnetic field gauss (a fixed field plus small noise), orientation matrix identity,
+Euler angles zero.
+
+Fault injection: ``--corrupt-rate`` flips one data byte of a record (the checksum then fails),
+``--drop-rate`` silently skips records, ``--garbage-rate`` inserts bursts of non-header junk
+bytes before records, ``--stall-after/--stall-seconds`` makes the device go silent (it
+ignores commands) and then resume, ``--disconnect-after/--disconnect-seconds`` closes the
+terminal (the port vanishes), then comes back as a freshly powered-up device on a new
+terminal (use ``--link`` for a stable path).
+
+``--record-truth FILE`` writes a CSV row per record (``index,status,code,timer`` then the
+float32 values exactly as sent, device units) and per command reply, so tests can compare a
+driver's output with what was sent.
+"""
+
+import argparse
+import errno
+import math
+import os
+import select
+import signal
+import struct
+import sys
+import time
+import tty
+
+import numpy as np
+
+from ..core.model import ModelError, NoiseModel, thesis_gx3_25_model
+from ..core.simulate import simulate
+from ..core.units import AXES, STANDARD_GRAVITY
+from ..io import gx3_protocol as p
+
+#: Headers and confirmation bytes are never produced by the garbage generator, so every burst
+#: is rejected as junk (a resync) rather than as a bad checksum.
+JUNK_BYTES = bytes(b for b in range(256) if b not in p.REPLY_LENGTHS)
+#: Field of the simulated magnetometer, gauss (a mid-latitude Earth field).
+EARTH_FIELD_GAUSS = (0.20, 0.02, 0.45)
+MAG_NOISE_GAUSS = 0.0005
+TRUTH_COLUMNS = ('index', 'status', 'code', 'timer', 'accel_x', 'accel_y', 'accel_z',
+                 'gyro_x', 'gyro_y', 'gyro_z', 'mag_x', 'mag_y', 'mag_z', 'm11', 'm12', 'm13',
+                 'm21', 'm22', 'm23', 'm31', 'm32', 'm33', 'euler_roll', 'euler_pitch',
+                 'euler_yaw')
+ID_STRINGS = {0: '6223', 1: '6223.01234', 2: '3DM-GX3-25', 3: '5g 300d/s', 4: 'SIMULATED'}
+
+
+class UsageError(Exception):
+    """Bad command-line arguments."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise UsageError(message)
+
+
+def build_parser():
+    """Command-line parser of gx3_sim."""
+    ap = _Parser(prog='gx3_sim', description='Simulated 3DM-GX3-25 on a pseudo-terminal.')
+    ap.add_argument('--model', help='noise model YAML file (default: thesis 3DM-GX3-25 values)')
+    ap.add_argument('--gravity-axis', default='-z',
+                    help='axis that reads 1 g: x, y, z, -x, -y, -z or none (default -z)')
+    ap.add_argument('--gravity', type=float, default=STANDARD_GRAVITY,
+                    help='m/s^2 per g used to express the noise in g (default 9.80665)')
+    ap.add_argument('--rate-hz', type=float, default=100.0,
+                    help='power-up data rate, Hz (decimation = 1000/rate; default 100)')
+    ap.add_argument('--baud', type=int, default=p.DEFAULT_BAUD,
+                    help='power-up baud rate used for pacing (default 115200)')
+    ap.add_argument('--stream', default=None,
+                    help='power up streaming this data command (hex, e.g. C2)')
+    ap.add_argument('--timer-start', type=int, default=0,
+                    help='device timer at power-up, ticks (e.g. 4294900000 to test rollover)')
+    ap.add_argument('--seed', type=int, default=None, help='random seed')
+    ap.add_argument('--link', help='also make this symlink to the terminal (stable path)')
+    ap.add_argument('--record-truth', metavar='FILE', help='CSV of every record sent')
+    ap.add_argument('--duration', type=float, default=None, help='exit after this many s')
+    ap.add_argument('--firmware', type=int, default=1130, help='firmware number (1130)')
+    ap.add_argument('--serial', default=ID_STRINGS[1], help='serial number string')
+    ap.add_argument('--max-bias-delay', type=float, default=0.2,
+                    help='cap on the 0xCD gyro-bias capture delay, s (default 0.2)')
+    ap.add_argument('--corrupt-rate', type=float, default=0.0,
+                    help='probability that a record gets one data byte flipped')
+    ap.add_argument('--drop-rate', type=float, default=0.0,
+                    help='probability that a record is not sent')
+    ap.add_argument('--garbage-rate', type=float, default=0.0,
+                    help='probability of a burst of 1..32 junk bytes before a record')
+    ap.add_argument('--stall-after', type=float, default=None,
+                    help='seconds of streaming before the device goes silent')
+    ap.add_argument('--stall-seconds', type=float, default=2.0,
+                    help='length of the stall, s (default 2)')
+    ap.add_argument('--disconnect-after', type=float, default=None,
+                    help='seconds of streaming before the terminal is closed')
+    ap.add_argument('--disconnect-seconds', type=float, default=1.0,
+                    help='time before the device comes back, s (default 1)')
+    return ap
+
+
+def check_args(args):
+    """Validate argument values; raise UsageError with a one-line reason."""
+    for name in ('corrupt_rate', 'drop_rate', 'garbage_rate'):
+        value = getattr(args, name)
+        if not 0.0 <= value <= 1.0:
+            raise UsageError(f'--{name.replace("_", "-")} must be in [0, 1], got {value}')
+    if not (math.isfinite(args.rate_hz) and 0 < args.rate_hz <= 1000):
+        raise UsageError(f'--rate-hz must be in (0, 1000], got {args.rate_hz}')
+    if args.baud not in p.BAUD_RATES:
+        raise UsageError(f'--baud must be one of {", ".join(map(str, p.BAUD_RATES))}')
+    if gravity_vector(args.gravity_axis) is None:
+        raise UsageError(f'--gravity-axis must be x, y, z, -x, -y, -z or none, '
+                         f'got {args.gravity_axis!r}')
+    if args.stream is not None:
+        try:
+            code = int(args.stream, 16)
+        except ValueError:
+            code = -1
+        if code not in p.DATA_RECORDS:
+            raise UsageError(f'--stream must be a data command in hex (e.g. C2), '
+                             f'got {args.stream!r}')
+        args.stream = code
+    if not 0 <= args.timer_start < p.TIMER_MODULUS:
+        raise UsageError('--timer-start must be in [0, 2**32)')
+    for name in ('stall_after', 'stall_seconds', 'disconnect_after', 'disconnect_seconds',
+                 'duration', 'max_bias_delay'):
+        value = getattr(args, name)
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise UsageError(f'--{name.replace("_", "-")} must be a number >= 0')
+
+
+def gravity_vector(axis):
+    """Gravity reading in g for an axis name ('x', '-z', 'none'); None if the name is bad."""
+    axis = str(axis).strip().lower()
+    if axis == 'none':
+        return np.zeros(3)
+    sign = -1.0 if axis.startswith('-') else 1.0
+    name = axis.lstrip('+-')
+    if name not in ('x', 'y', 'z'):
+        return None
+    vec = np.zeros(3)
+    vec['xyz'.index(name)] = sign
+    return vec
+
+
+def _f32(values):
+    """Round to float32 (what goes on the wire) and return Python floats."""
+    return [float(v) for v in np.asarray(values, dtype=np.float32)]
+
+
+class NoiseSource:
+    """Noise rows (gyro rad/s, accel m/s^2) generated block-wise at the current rate."""
+
+    BLOCK_SECONDS = 60.0
+
+    def __init__(self, model, seed):
+        """Wrap a NoiseModel and a seed."""
+        self.model = model
+        self.rng = np.random.default_rng(seed)
+        self.rate = None
+        self.block = np.zeros((0, 6))
+        self.i = 0
+
+    def next(self, rate_hz):
+        """Next sample (6 values in AXES order) at ``rate_hz``."""
+        if rate_hz != self.rate or self.i >= len(self.block):
+            n = max(16, int(self.BLOCK_SECONDS * rate_hz))
+            self.block = simulate(self.model, n, rate_hz, seed=self.rng, axes=AXES)
+            self.rate, self.i = rate_hz, 0
+        row = self.block[self.i]
+        self.i += 1
+        return row
+
+
+class Device:
+    """Protocol state of one powered-up 3DM-GX3-25 (no I/O: feed commands, take bytes)."""
+
+    def __init__(self, args, noise, now):
+        """Power up at host time ``now`` (monotonic seconds)."""
+        self.args = args
+        self.noise = noise
+        self.power_on = now
+        self.timer_start = args.timer_start
+        self.settings = p.SamplingSettings(decimation=p.decimation_for_rate(args.rate_hz))
+        self.baud = args.baud
+        self.inbuf = bytearray()
+        self.in_since = now
+        self.stream_code = 0
+        self.preset = 0
+        self.mode_preset = 1
+        self.delayed = []          # (due_time, reply bytes)
+        self.pending_baud = None
+        self.gravity_g = gravity_vector(args.gravity_axis)
+        self.mag_rng = np.random.default_rng(None if args.seed is None else args.seed + 1)
+        if args.stream:
+            self.start_stream(args.stream, now)
+
+    # --- timing
+    def ticks(self, now):
+        """Device timer (u32 ticks) at host time ``now``."""
+        return (self.timer_start + int((now - self.power_on) * p.TICKS_PER_SECOND)) \
+            % p.TIMER_MODULUS
+
+    @property
+    def period(self):
+        """Output period, s."""
+        return self.settings.decimation / p.BASE_RATE_HZ
+
+    def start_stream(self, code, now):
+        """Start streaming ``code``: records at now + k * period."""
+        self.stream_code = code
+        self.k = 0
+        self.stream_t0 = now
+        self.stream_ticks0 = self.ticks(now)
+        self.next_due = now + self.period
+
+    def record_ticks(self, k):
+        """Timer of streamed record k (k >= 1): 62.5 * decimation ticks apart (exactly)."""
+        return (self.stream_ticks0 + (k * self.settings.decimation * 125) // 2) \
+            % p.TIMER_MODULUS
+
+    # --- data
+    def make_record(self, code, timer):
+        """Build one data record; return ``(bytes, truth dict of float32 values)``."""
+        row = self.noise.next(self.settings.rate_hz)
+        gyro = _f32(row[:3])
+        accel = _f32(row[3:] / self.args.gravity + self.gravity_g)
+        mag = _f32(np.asarray(EARTH_FIELD_GAUSS)
+                   + MAG_NOISE_GAUSS * self.mag_rng.standard_normal(3))
+        matrix = _f32(np.eye(3).ravel())
+        euler = _f32(np.zeros(3))
+        parts = {'accel': accel, 'gyro': gyro, 'mag': mag, 'matrix': matrix, 'euler': euler,
+                 'raw_accel': accel, 'raw_gyro': gyro, 'delta_angle': gyro,
+                 'delta_velocity': accel, 'stab_accel': accel, 'stab_mag': mag,
+                 'update_matrix': matrix, 'quaternion': _f32([1, 0, 0, 0])}
+        values = []
+        truth = {}
+        for name, _ in p.DATA_RECORDS[code]:
+            values += parts[name]
+            truth[name] = parts[name]
+        return p.encode_record(code, values, timer), truth
+
+    def due_records(self, now):
+        """Yield ``(k, timer, bytes, truth)`` for streamed records due by ``now``."""
+        while self.stream_code and self.next_due <= now:
+            self.k += 1
+            timer = self.record_ticks(self.k)
+            data, truth = self.make_record(self.stream_code, timer)
+            yield self.next_due, timer, data, truth
+            self.next_due = self.stream_t0 + (self.k + 1) * self.period
+
+    # --- commands
+    def feed(self, data, now):
+        """Process host bytes; return the list of replies (bytes) to send now."""
+        if data:
+            if not self.inbuf:
+                self.in_since = now
+            self.inbuf += data
+        replies = []
+        while self.inbuf:
+            code = self.inbuf[0]
+            length = p.COMMAND_LENGTHS.get(code)
+            if length is None:
+                del self.inbuf[0]          # unknown byte: ignored
+                self.in_since = now
+                continue
+            if len(self.inbuf) < length:
+                if now - self.in_since > 0.2:
+                    del self.inbuf[0]      # truncated command: give up on it
+                    self.in_since = now
+                    continue
+                break
+            cmd = bytes(self.inbuf[:length])
+            confirm = p.CONFIRM.get(code)
+            if code == p.STOP_CONTINUOUS and cmd[1:3] != confirm:
+                del self.inbuf[0]          # a bare FA (GX2 style) is ignored
+                continue
+            del self.inbuf[:length]
+            self.in_since = now
+            if confirm is not None and cmd[1:3] != confirm:
+                replies.append(p.ERROR_REPLY)
+                continue
+            reply = self.command(cmd, now)
+            if reply:
+                replies.append(reply)
+        return replies
+
+    def command(self, cmd, now):
+        """Execute one complete command; return its reply (or None)."""
+        code = cmd[0]
+        timer = self.ticks(now)
+        if code in p.DATA_RECORDS or code == p.TEMPERATURES:
+            if code == p.TEMPERATURES:
+                return p.with_checksum(struct.pack('>B4HI', code, 2139, 2048, 2048, 2048,
+                                                   timer))
+            return self.make_record(code, timer)[0]
+        if code == p.SET_CONTINUOUS:
+            cc = cmd[3]
+            if cc == 0:
+                self.stream_code = 0
+            elif cc in p.DATA_RECORDS:
+                self.start_stream(cc, now)
+            return p.encode_continuous_reply(self.stream_code, timer)
+        if code == p.STOP_CONTINUOUS:
+            self.stream_code = 0
+            return None
+        if code == p.DEVICE_RESET:
+            self.__init__(self.args, self.noise, now)
+            return None
+        if code == p.SAMPLING_SETTINGS:
+            function = cmd[3]
+            if function in (1, 2, 3):
+                dec, flags, fw, mw, up, north, power = struct.unpack_from('>HHBBHHB', cmd, 4)
+                new = p.SamplingSettings(dec, flags, fw, mw, up, north, power).clamped()
+                changed = new.decimation != self.settings.decimation
+                self.settings = new
+                if changed and self.stream_code:
+                    self.start_stream(self.stream_code, now)
+                if function == 3:
+                    return None
+            return p.encode_sampling_reply(self.settings)
+        if code == p.COMM_SETTINGS:
+            port, function, baud = cmd[3], cmd[4], struct.unpack_from('>I', cmd, 5)[0]
+            if port == 1 and function in (1, 2) and baud in p.BAUD_RATES:
+                self.pending_baud = baud   # applies after the reply has gone out
+                return p.encode_comm_reply(baud)
+            return p.encode_comm_reply(self.baud)
+        if code == p.FIRMWARE_VERSION:
+            return p.encode_firmware_reply(self.args.firmware)
+        if code == p.DEVICE_ID:
+            sel = cmd[1]
+            text = self.args.serial if sel == 1 else ID_STRINGS.get(sel, '')
+            return p.encode_device_id_reply(sel, text)
+        if code in (p.MODE, p.MODE_PRESET, p.CONTINUOUS_PRESET):
+            return self.mode_command(code, cmd[3], now)
+        if code == p.TIMER:
+            function, value = struct.unpack_from('>BI', cmd, 3)
+            if function == 1:
+                self.timer_start, self.power_on = value, now
+                timer = value
+            return p.encode_timer_reply(timer)
+        if code == p.CAPTURE_GYRO_BIAS:
+            ms = struct.unpack_from('>H', cmd, 3)[0]
+            due = now + min(ms / 1000.0, self.args.max_bias_delay)
+            self.delayed.append((due, p.with_checksum(struct.pack('>B3fI', code, 0, 0, 0,
+                                                                  self.ticks(due)))))
+            return None
+        if code in (0xC9, 0xCA):
+            return p.with_checksum(cmd[:1] + cmd[3:15] + struct.pack('>I', timer))
+        if code == 0xD0:
+            return p.with_checksum(cmd[:1] + cmd[3:5] + struct.pack('>I', timer))
+        if code in (p.STATIONARY_TEST, p.REALIGN):
+            return p.with_checksum(bytes([code]) + bytes(4))
+        if code in (0xE4, 0xE5):
+            return p.with_checksum(bytes([code]) + bytes(2))
+        return None
+
+    def mode_command(self, code, m, now):
+        """0xD4 mode, 0xD5 mode preset, 0xD6 continuous preset."""
+        if code == p.CONTINUOUS_PRESET:
+            if m in p.DATA_RECORDS:
+                self.preset = m
+            return p.encode_mode_reply(self.preset, code)
+        if code == p.MODE_PRESET:
+            if m in (1, 2, 3):
+                self.mode_preset = m
+            return p.encode_mode_reply(self.mode_preset, code)
+        if m == 1 or m in (3, 4, 5):
+            self.stream_code = 0
+        elif m == 2 and self.preset:
+            self.start_stream(self.preset, now)
+        current = 2 if self.stream_code else 1
+        return p.encode_mode_reply(current if m in (0, 1, 2) else m, code)
+
+    def delayed_due(self, now):
+        """Replies whose delay has expired."""
+        due = [r for t, r in self.delayed if t <= now]
+        self.delayed = [(t, r) for t, r in self.delayed if t > now]
+        return due
+
+
+class Terminal:
+    """The pseudo-terminal pair.
+
+    The simulator keeps a slave fd open so the port survives a driver closing and reopening it.
+    """
+
+    def __init__(self, link=None):
+        """Open a pty in raw mode (and point ``link`` at it)."""
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        tty.setraw(self.master)
+        os.set_blocking(self.master, False)
+        self.path = os.ttyname(self.slave)
+        self.link = link
+        if link:
+            tmp = f'{link}.tmp{os.getpid()}'
+            if os.path.lexists(tmp):
+                os.unlink(tmp)
+            os.symlink(self.path, tmp)
+            os.replace(tmp, link)
+
+    @property
+    def name(self):
+        """What a driver should open."""
+        return self.link or self.path
+
+    def read(self):
+        """Bytes the host wrote (b'' if none)."""
+        try:
+            return os.read(self.master, 4096)
+        except (BlockingIOError, InterruptedError):
+            return b''
+        except OSError as exc:
+            if exc.errno == errno.EIO:
+                return b''
+            raise
+
+    def write(self, data):
+        """Write what fits; return the number of bytes written (0 when nobody reads)."""
+        try:
+            return os.write(self.master, data)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError as exc:
+            if exc.errno == errno.EIO:
+                return 0
+            raise
+
+    def close(self):
+        """Close both ends (the port vanishes) and remove the link."""
+        if self.link and os.path.islink(self.link) and os.readlink(self.link) == self.path:
+            os.unlink(self.link)
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+class Truth:
+    """CSV log of what was sent (float32 values printed exactly, device units)."""
+
+    def __init__(self, path):
+        """Open the file (or do nothing when path is None)."""
+        self.stream = open(path, 'w', encoding='utf-8') if path else None
+        self.index = 0
+        self.last_flush = time.monotonic()
+        if self.stream:
+            self.stream.write('# gx3_sim truth: device units (accel g, gyro rad/s, mag gauss, '
+                              'timer ticks at 62500/s); status ok, corrupted, dropped, '
+                              'overrun, unread, reply, event\n')
+            self.stream.write(','.join(TRUTH_COLUMNS) + '\n')
+
+    def row(self, status, code, timer, truth=None):
+        """Append one row."""
+        self.index += 1
+        if not self.stream:
+            return
+        cols = [str(self.index), status, f'0x{code:02X}', str(timer)]
+        truth = truth or {}
+        for name, n in (('accel', 3), ('gyro', 3), ('mag', 3), ('matrix', 9), ('euler', 3)):
+            vals = truth.get(name)
+            cols += [repr(v) for v in vals] if vals else [''] * n
+        self.stream.write(','.join(cols) + '\n')
+        now = time.monotonic()
+        if now - self.last_flush > 0.1:
+            self.flush()
+            self.last_flush = now
+
+    def flush(self):
+        """Flush to disk."""
+        if self.stream:
+            self.stream.flush()
+
+    def close(self):
+        """Flush and close."""
+        if self.stream:
+            self.stream.close()
+            self.stream = None
+
+
+class Simulator:
+    """The run loop: terminal I/O, pacing, faults, truth log."""
+
+    def __init__(self, args, model):
+        """Set up the terminal and the device."""
+        self.args = args
+        self.rng = np.random.default_rng(None if args.seed is None else args.seed + 2)
+        self.noise = NoiseSource(model, args.seed)
+        self.truth = Truth(args.record_truth)
+        self.term = Terminal(args.link)
+        now = time.monotonic()
+        self.device = Device(args, self.noise, now)
+        self.line_free_at = now
+        self.stream_time = 0.0       # seconds spent streaming (drives the fault schedule)
+        self.stalled_until = None
+        self.stalled_done = False
+        self.disconnected_done = False
+
+    def send(self, data, now):
+        """Write bytes paced by the baud rate; return the status for the truth log."""
+        start = max(now, self.line_free_at)
+        if start - now > self.device.period + 1e-3:
+            return 'overrun'
+        self.line_free_at = start + len(data) * p.BITS_PER_BYTE / self.device.baud
+        written = self.term.write(data)
+        return 'ok' if written == len(data) else 'unread'
+
+    def send_reply(self, reply, now):
+        """Send a command reply (and apply a pending baud change after it)."""
+        self.term.write(reply)
+        timed = reply[0] in (p.SET_CONTINUOUS, p.TIMER)
+        self.truth.row('reply', reply[0], p.timer_of(reply) if timed else 0)
+        pending = self.device.pending_baud
+        if pending:
+            self.device.baud = pending
+            self.device.pending_baud = None
+
+    def stream_records(self, now):
+        """Send every record due, applying the fault switches."""
+        args = self.args
+        for due, timer, data, truth in self.device.due_records(now):
+            self.stream_time += self.device.period
+            code = data[0]
+            if args.drop_rate and self.rng.random() < args.drop_rate:
+                self.truth.row('dropped', code, timer, truth)
+                continue
+            status = 'ok'
+            if args.garbage_rate and self.rng.random() < args.garbage_rate:
+                junk = bytes(self.rng.choice(np.frombuffer(JUNK_BYTES, np.uint8),
+                                             int(self.rng.integers(1, 33))))
+                self.term.write(junk)
+                self.truth.row('garbage', 0, len(junk))
+            if args.corrupt_rate and self.rng.random() < args.corrupt_rate:
+                bad = bytearray(data)
+                bad[int(self.rng.integers(1, len(data) - 2))] ^= int(self.rng.integers(1, 256))
+                data = bytes(bad)
+                status = 'corrupted'
+            sent = self.send(data, due)
+            self.truth.row(status if sent == 'ok' else sent, code, timer, truth)
+
+    def faults(self, now):
+        """Stall and disconnect schedule (in seconds of streaming)."""
+        args = self.args
+        if (args.stall_after is not None and not self.stalled_done
+                and self.stream_time >= args.stall_after):
+            self.stalled_done = True
+            self.stalled_until = now + args.stall_seconds
+            self.truth.row('event', 0, self.device.ticks(now))
+            self.say(f'stall {args.stall_seconds:g} s')
+        if (args.disconnect_after is not None and not self.disconnected_done
+                and self.stream_time >= args.disconnect_after):
+            self.disconnected_done = True
+            self.say('disconnect')
+            self.term.close()
+            self.truth.row('event', 1, 0)
+            time.sleep(args.disconnect_seconds)
+            self.term = Terminal(args.link)
+            now = time.monotonic()
+            self.device = Device(args, self.noise, now)   # a freshly powered-up unit
+            self.line_free_at = now
+            self.say(f'reconnected {self.term.path}')
+
+    def say(self, text):
+        """Progress line on stderr (stdout carries only the port path)."""
+        print(f'gx3_sim: {text}', file=sys.stderr, flush=True)
+
+    def run(self):
+        """Serve until the duration is over or a signal arrives."""
+        print(self.term.name, flush=True)
+        end = None if self.args.duration is None else time.monotonic() + self.args.duration
+        while True:
+            now = time.monotonic()
+            if end is not None and now >= end:
+                return
+            if self.stalled_until is not None:
+                if now < self.stalled_until:
+                    select.select([self.term.master], [], [], min(0.05, self.stalled_until - now))
+                    self.term.read()        # a hung device loses what it is sent
+                    self.device.inbuf.clear()
+                    continue
+                # The device wakes up: the timer kept running, the stream resumes from now.
+                self.stalled_until = None
+                if self.device.stream_code:
+                    self.device.start_stream(self.device.stream_code, time.monotonic())
+                self.say('stall over')
+                continue
+            wait = 0.05
+            if self.device.stream_code:
+                wait = min(wait, max(0.0, self.device.next_due - now))
+            if self.device.delayed:
+                wait = min(wait, max(0.0, min(t for t, _ in self.device.delayed) - now))
+            ready, _, _ = select.select([self.term.master], [], [], wait)
+            now = time.monotonic()
+            data = self.term.read() if ready else b''
+            for reply in self.device.feed(data, now) + self.device.delayed_due(now):
+                self.send_reply(reply, now)
+            self.stream_records(now)
+            self.faults(now)
+
+    def close(self):
+        """Release the terminal and the truth file."""
+        self.truth.close()
+        self.term.close()
+
+
+def _terminate(signum, frame):
+    raise SystemExit(0)
+
+
+def main(argv=None):
+    """Entry point of ``gx3_sim``."""
+    try:
+        args = build_parser().parse_args(argv)
+        check_args(args)
+        model = NoiseModel.from_yaml(args.model) if args.model else thesis_gx3_25_model()
+    except UsageError as exc:
+        print(f'gx3_sim: error: {exc}', file=sys.stderr)
+        return 2
+    except ModelError as exc:
+        print(str(exc).splitlines()[0], file=sys.stderr)
+        return 2
+    signal.signal(signal.SIGTERM, _terminate)
+    try:
+        sim = Simulator(args, model)
+    except OSError as exc:
+        print(f'gx3_sim: error: {exc.filename or args.record_truth}: {exc.strerror}',
+              file=sys.stderr)
+        return 2
+    try:
+        sim.run()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        sim.close()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

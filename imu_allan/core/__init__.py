@@ -1,0 +1,1 @@
+"""ROS-free numerics: Allan deviation, confidence intervals, noise terms, fit, simulation."""

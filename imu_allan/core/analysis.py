@@ -1,0 +1,172 @@
+"""The offline analysis pipeline: validate, preprocess, Allan deviation, fit, verdicts.
+
+ROS-free and I/O-free: it takes :class:`~imu_allan.io.samples.Samples` and returns an
+:class:`Analysis`; readers, report writers and the ``analyze`` command sit around it.  Every
+problem with the data raises :class:`~imu_allan.io.errors.InputError` naming the source.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..io.errors import InputError
+from .allan import (
+    DEFAULT_MIN_CLUSTERS,
+    DEFAULT_POINTS_PER_DECADE,
+    AllanResult,
+    allan_deviation,
+    tau_grid,
+)
+from .fit import FitError, FittedModel, fit_noise_model
+from .preprocess import OutlierReport, TimingReport, check_timing, replace_outliers
+from .units import is_gyro
+
+#: Motion thresholds on 1-s block means, relative to the record's median: a still MEMS IMU's
+#: 1-s averages wander by ~1e-4 rad/s and ~1e-3 m/s^2; a moving robot by orders more.
+MOTION_GYRO_RAD_S = 0.02
+MOTION_ACCEL_M_S2 = 0.2
+#: A gap longer than this many nominal intervals (and 1 s) is a jump, not a dropped sample.
+JUMP_INTERVALS = 100
+
+
+@dataclass
+class AnalysisOptions:
+    """Knobs of :func:`analyze_samples` (command-line options map onto these)."""
+
+    terms: list = None
+    points_per_decade: float = DEFAULT_POINTS_PER_DECADE
+    min_clusters: int = DEFAULT_MIN_CLUSTERS
+    replace_outliers: bool = False
+    tau_max: float = None
+    rate_hz: float = None
+    allow_jumps: bool = False
+    online: bool = False
+
+
+@dataclass
+class Analysis:
+    """Everything the reports show about one record."""
+
+    source: str
+    axes: tuple
+    n_samples: int
+    rate_hz: float
+    duration_s: float
+    timing: TimingReport
+    outliers: OutlierReport
+    result: AllanResult
+    fit: FittedModel
+    static: bool
+    motion: dict
+    warnings: list = field(default_factory=list)
+    data: np.ndarray = None
+    t: np.ndarray = None
+
+
+def _validate(samples):
+    where = samples.source or 'input'
+    if samples.n == 0:
+        raise InputError(where, 'no samples')
+    if samples.n < 2:
+        raise InputError(where, 'only one sample; need a record to compute an Allan deviation')
+    bad = ~np.isfinite(samples.data)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise InputError(where, f'non-finite value {samples.data[i, j]} in {samples.axes[j]} '
+                                f'at sample {i} (t={samples.t[i]:.6f} s)')
+    if not np.all(np.isfinite(samples.t)):
+        raise InputError(where, f'non-finite time stamp at sample '
+                                f'{int(np.flatnonzero(~np.isfinite(samples.t))[0])}')
+    back = np.flatnonzero(np.diff(samples.t) <= 0)
+    if back.size:
+        i = int(back[0]) + 1
+        raise InputError(where, f'time stamps do not increase: sample {i} (t={samples.t[i]:.9f} s)'
+                                f' is not after sample {i - 1} (t={samples.t[i - 1]:.9f} s); '
+                                f'{back.size} such step(s)')
+
+
+def motion_verdict(data, axes, rate_hz):
+    """Is the record static?  Compare 1-s block means with the record median per axis.
+
+    Returns ``(static, details)``: details holds the 95th percentile excursion per axis (SI)
+    and the threshold used.
+    """
+    block = max(int(round(rate_hz)), 1)
+    n_blocks = data.shape[0] // block
+    details = {}
+    static = True
+    if n_blocks < 2:
+        return True, details
+    means = data[:n_blocks * block].reshape(n_blocks, block, -1).mean(axis=1)
+    excursion = np.percentile(np.abs(means - np.median(means, axis=0)), 95.0, axis=0)
+    for j, axis in enumerate(axes):
+        limit = MOTION_GYRO_RAD_S if is_gyro(axis) else MOTION_ACCEL_M_S2
+        moving = bool(excursion[j] > limit)
+        details[axis] = {'excursion_p95': float(excursion[j]), 'threshold': limit,
+                         'moving': moving}
+        static = static and not moving
+    return static, details
+
+
+def analyze_samples(samples, options=None):
+    """Run the whole analysis on one record; raise InputError for unusable data."""
+    options = options or AnalysisOptions()
+    where = samples.source or 'input'
+    _validate(samples)
+    warnings = list(samples.warnings)
+    timing = check_timing(samples.t)
+    rate = options.rate_hz or timing.rate_hz
+    if timing.n_gaps:
+        jump = timing.longest_gap_s > max(1.0, JUMP_INTERVALS * timing.nominal_dt)
+        if jump and not options.allow_jumps:
+            i = int(timing.gap_indices[np.argmax(np.diff(samples.t)[timing.gap_indices])])
+            raise InputError(where, f'time stamps jump by {timing.longest_gap_s:.3f} s after '
+                                    f'sample {i} (t={samples.t[i]:.6f} s); the Allan '
+                                    f'deviation needs an unbroken record')
+        warnings.append(f'{timing.n_gaps} gap(s) in the time stamps, about '
+                        f'{timing.missing_samples} sample(s) missing (longest '
+                        f'{timing.longest_gap_s:.4f} s); samples are treated as evenly spaced')
+    if timing.jitter > 0.05:
+        warnings.append(f'time-stamp jitter is {100 * timing.jitter:.1f} % of the sample '
+                        f'interval; the device timer or a driver with even stamps helps')
+    data = samples.data
+    outliers_data, outliers = replace_outliers(data, samples.axes)
+    if options.replace_outliers:
+        data = outliers_data
+        if outliers.total:
+            warnings.append(f'{outliers.total} outlier(s) replaced (Tukey F=3): '
+                            + ', '.join(f'{a} {c}' for a, c in outliers.counts.items() if c))
+    n = data.shape[0]
+    needed = 2 * options.min_clusters
+    if n < needed:
+        raise InputError(where, f'record of {n} samples ({n / rate:.3g} s) is too short for '
+                                f'any averaging time (needs at least {needed} samples)')
+    taus = None
+    if options.tau_max is not None:
+        longest = n / rate / options.min_clusters
+        if options.tau_max > longest:
+            raise InputError(where, f'record of {n / rate:.4g} s is too short for averaging '
+                                    f'times up to {options.tau_max:g} s (at most '
+                                    f'{longest:.4g} s with {options.min_clusters} clusters)')
+        taus = tau_grid(n, options.points_per_decade, options.min_clusters,
+                        m_max=int(options.tau_max * rate)) / rate
+    if options.online:
+        from .streaming import online_allan
+        result = online_allan(data, rate, axes=samples.axes)
+    else:
+        result = allan_deviation(data, rate, taus=taus,
+                                 points_per_decade=options.points_per_decade,
+                                 min_clusters=options.min_clusters, axes=samples.axes)
+    try:
+        fit = fit_noise_model(result, terms=options.terms)
+    except FitError as exc:
+        raise InputError(where, str(exc)) from None
+    static, motion = motion_verdict(samples.data, samples.axes, rate)
+    if not static:
+        moving = [a for a, d in motion.items() if d['moving']]
+        warnings.append('the IMU was not static (' + ', '.join(moving) + ' moved): the Allan '
+                        'deviation then measures the motion, not the sensor noise')
+    return Analysis(source=where, axes=tuple(samples.axes), n_samples=n, rate_hz=rate,
+                    duration_s=n / rate, timing=timing, outliers=outliers, result=result,
+                    fit=fit, static=static, motion=motion, warnings=warnings, data=data,
+                    t=samples.t)

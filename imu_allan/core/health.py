@@ -1,0 +1,326 @@
+"""IMU health: fitted noise coefficients against a noise budget, plus stamp checks.
+
+ROS-free.  The allan node turns the :class:`Health` records built here into
+``diagnostic_msgs/DiagnosticStatus`` entries on ``/diagnostics``; tests and offline tools use
+them directly.
+
+Levels follow ``diagnostic_msgs/DiagnosticStatus``: 0 OK, 1 WARN, 2 ERROR, 3 STALE.
+
+Budget rule (per axis and budgeted term, with the fitted value v and its 68.3 % interval
+[lo, hi]): ERROR when lo > error_ratio x budget, WARN when lo > warn_ratio x budget, else OK.
+Using the lower end of the interval means a level is raised only when the data show the
+budget is missed, not when a short record merely cannot yet prove that it is met.
+
+Budget file format (YAML, continuous-time SI units as in :mod:`imu_allan.core.units`)::
+
+    warn_ratio: 1.0
+    error_ratio: 2.0
+    gyro:  {white_noise: 5.2e-4, bias_instability: 8.7e-5}
+    accel: {white_noise: 7.8e-4, bias_instability: 3.9e-4}
+    axes:  {gyro_z: {bias_instability: 1.0e-4}}   # optional per-axis overrides
+"""
+
+from dataclasses import dataclass, field
+import math
+import os
+
+import numpy as np
+import yaml
+
+from ..io.errors import InputError
+from .units import AXES, IEEE_TERMS, conventional, sensor_of, si_unit
+
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
+
+#: The packaged 3DM-GX3-25 datasheet budget.
+DEFAULT_BUDGET_FILE = os.path.join(os.path.dirname(os.path.dirname(__file__)), 'data',
+                                   'gx3_25_budget.yaml')
+
+
+@dataclass
+class Health:
+    """One diagnostic record: a name, a level (0-3), a one-line message and key-values."""
+
+    name: str
+    level: int
+    message: str
+    values: dict = field(default_factory=dict)
+
+
+@dataclass
+class NoiseBudget:
+    """Per-axis limits ``limits[axis][term]`` (SI) with the WARN / ERROR ratios."""
+
+    limits: dict
+    warn_ratio: float = 1.0
+    error_ratio: float = 2.0
+    source: str = ''
+
+    @classmethod
+    def from_dict(cls, data, where='budget'):
+        """Build from the file layout; raise :class:`InputError` naming ``where`` on problems."""
+        if not isinstance(data, dict):
+            raise InputError(where, 'expected a mapping with gyro/accel/axes entries')
+        unknown = set(data) - {'gyro', 'accel', 'axes', 'warn_ratio', 'error_ratio',
+                               'description'}
+        if unknown:
+            raise InputError(where, f'unknown key(s) {", ".join(sorted(unknown))}')
+        ratios = {}
+        for key, default in (('warn_ratio', 1.0), ('error_ratio', 2.0)):
+            try:
+                ratios[key] = float(data.get(key, default))
+            except (TypeError, ValueError):
+                raise InputError(where, f'{key} is not a number') from None
+            if not math.isfinite(ratios[key]) or ratios[key] <= 0:
+                raise InputError(where, f'{key} must be a positive number')
+        if ratios['error_ratio'] < ratios['warn_ratio']:
+            raise InputError(where, 'error_ratio must be >= warn_ratio')
+        axes_section = data.get('axes') or {}
+        if not isinstance(axes_section, dict):
+            raise InputError(where, 'axes must be a mapping of axis name to terms')
+        for axis in axes_section:
+            if axis not in AXES:
+                raise InputError(where, f'unknown axis {axis!r} (known: {", ".join(AXES)})')
+        limits = {}
+        for axis in AXES:
+            merged = {**(data.get(sensor_of(axis)) or {}), **(axes_section.get(axis) or {})}
+            checked = {}
+            for term, value in merged.items():
+                if term not in IEEE_TERMS:
+                    raise InputError(where, f'{axis}: unknown or unbudgetable term {term!r} '
+                                     f'(known: {", ".join(IEEE_TERMS)})')
+                try:
+                    value = float(value)
+                except (TypeError, ValueError):
+                    raise InputError(where, f'{axis}.{term} is not a number') from None
+                if not math.isfinite(value) or value <= 0:
+                    raise InputError(where, f'{axis}.{term} must be a positive number')
+                checked[term] = value
+            if checked:
+                limits[axis] = checked
+        if not limits:
+            raise InputError(where, 'budget names no term for any axis')
+        return cls(limits, ratios['warn_ratio'], ratios['error_ratio'], str(where))
+
+    @classmethod
+    def from_yaml(cls, path=None):
+        """Load a budget file (default: the packaged 3DM-GX3-25 datasheet budget)."""
+        path = path or DEFAULT_BUDGET_FILE
+        try:
+            with open(path, encoding='utf-8') as stream:
+                data = yaml.safe_load(stream)
+        except OSError as exc:
+            raise InputError(path, f'cannot read budget file ({exc.strerror})') from None
+        except yaml.YAMLError as exc:
+            raise InputError(path, f'not valid YAML ({str(exc).splitlines()[0]})') from None
+        return cls.from_dict(data, where=str(path))
+
+    def limit(self, axis, term):
+        """Budget of a term on an axis, or NaN when not budgeted."""
+        return self.limits.get(axis, {}).get(term, math.nan)
+
+
+def _fmt(value):
+    return f'{value:.3g}' if math.isfinite(value) else 'nan'
+
+
+def budget_health(coeffs, budget, axes=AXES, prefix=''):
+    """Compare a coefficient table with a budget; one :class:`Health` per axis.
+
+    Parameters
+    ----------
+    coeffs : numpy.ndarray or None
+        Shape (len(axes), 5, 3): ``[axis, term, (value, ci_low, ci_high)]`` in the order of
+        :data:`~imu_allan.core.units.IEEE_TERMS`, NaN where a term is not detected (the
+        ``imu/allan_coeffs`` layout).  None means no estimate yet: every axis is STALE.
+    budget : NoiseBudget
+    axes : sequence of str
+        Axis names of the table rows.
+
+    Returns
+    -------
+    list of Health
+        Values per budgeted term: ``<term>`` (measured), ``<term>.ci_low``, ``<term>.ci_high``,
+        ``<term>.budget``, ``<term>.ratio`` (measured / budget), ``<term>.unit`` (SI) and
+        ``<term>.conventional`` (value in datasheet units).
+
+    """
+    out = []
+    for i, axis in enumerate(axes):
+        name = f'{prefix}{axis} noise'
+        terms = budget.limits.get(axis, {})
+        if coeffs is None:
+            out.append(Health(name, STALE, 'no estimate yet (collecting still samples)',
+                              {f'{t}.budget': v for t, v in terms.items()}))
+            continue
+        level, problems, values = OK, [], {}
+        for term, limit in terms.items():
+            j = IEEE_TERMS.index(term)
+            value, low, high = (float(v) for v in coeffs[i, j])
+            values[term] = value
+            values[f'{term}.ci_low'] = low
+            values[f'{term}.ci_high'] = high
+            values[f'{term}.budget'] = limit
+            values[f'{term}.ratio'] = value / limit if math.isfinite(value) else math.nan
+            values[f'{term}.unit'] = si_unit(axis, term)
+            if math.isfinite(value):
+                conv, unit = conventional(axis, term, value)
+                values[f'{term}.conventional'] = f'{conv:.4g} {unit}'
+            if not math.isfinite(value):
+                continue  # not detected: below what this record can resolve
+            # Without an interval the point value is all we have.
+            low_end = low if math.isfinite(low) else value
+            if low_end > budget.error_ratio * limit:
+                term_level = ERROR
+            elif low_end > budget.warn_ratio * limit:
+                term_level = WARN
+            else:
+                term_level = OK
+            if term_level > OK:
+                problems.append(f'{term} {_fmt(value)} [{_fmt(low)}, {_fmt(high)}] '
+                                f'{si_unit(axis, term)} exceeds budget {_fmt(limit)} '
+                                f'({value / limit:.2f}x)')
+            level = max(level, term_level)
+        if level == OK:
+            detected = [t for t in terms if math.isfinite(values.get(t, math.nan))]
+            message = ('within budget' if detected
+                       else 'no budgeted term detected yet')
+        else:
+            message = '; '.join(problems)
+        out.append(Health(name, level, message, values))
+    return out
+
+
+class StampMonitor:
+    """Header-stamp checks on a sample stream: order, gaps and rate (bounded memory).
+
+    Out-of-order or repeated stamps (not later than the last kept one) are dropped.  A gap is a
+    spacing above ``gap_factor`` sample intervals: the samples on both sides are kept, but the
+    Allan estimate restarts its phase there (missing samples would otherwise shift it).
+    """
+
+    def __init__(self, rate_hz, gap_factor=1.5):
+        """``rate_hz``: configured sample rate, Hz; ``gap_factor``: gap threshold in intervals."""
+        if not rate_hz or rate_hz <= 0:
+            raise ValueError('rate_hz must be > 0')
+        self.rate_hz = float(rate_hz)
+        self.gap_factor = float(gap_factor)
+        self.last_t = None
+        self.first_t = None
+        self.n_kept = 0
+        self.out_of_order = 0
+        self.gaps = 0
+        self.max_gap_s = 0.0
+        # Counters since the last call to :meth:`take_recent` (for "recent" diagnostics).
+        self._recent = {'n': 0, 't0': None, 't1': None, 'gaps': 0, 'out_of_order': 0}
+
+    def check(self, t):
+        """Check stamps ``t`` (s, shape (n,)); return ``(keep, break_before)`` boolean arrays.
+
+        ``break_before[i]`` marks a kept sample that follows a gap.
+        """
+        t = np.asarray(t, dtype=float)
+        n = t.size
+        if n == 0:
+            return np.zeros(0, bool), np.zeros(0, bool)
+        last = -math.inf if self.last_t is None else self.last_t
+        running = np.maximum.accumulate(np.concatenate(([last], t)))
+        keep = t > running[:-1]
+        kept_t = t[keep]
+        break_before = np.zeros(n, bool)
+        if kept_t.size:
+            prev = np.concatenate(([last], kept_t[:-1]))
+            dt = kept_t - prev
+            gap = np.isfinite(dt) & (dt > self.gap_factor / self.rate_hz)
+            break_before[np.flatnonzero(keep)[gap]] = True
+            n_gap = int(gap.sum())
+            self.gaps += n_gap
+            self._recent['gaps'] += n_gap
+            if n_gap:
+                self.max_gap_s = max(self.max_gap_s, float(dt[gap].max()))
+            if self.first_t is None:
+                self.first_t = float(kept_t[0])
+            if self._recent['t0'] is None:
+                self._recent['t0'] = float(kept_t[0])
+            self._recent['t1'] = float(kept_t[-1])
+            self._recent['n'] += int(kept_t.size)
+            self.last_t = float(kept_t[-1])
+            self.n_kept += int(kept_t.size)
+        dropped = int(n - keep.sum())
+        self.out_of_order += dropped
+        self._recent['out_of_order'] += dropped
+        return keep, break_before
+
+    def measured_rate(self):
+        """Mean sample rate over the whole run from the kept stamps (Hz), NaN if unknown."""
+        if self.n_kept < 2 or self.last_t <= self.first_t:
+            return math.nan
+        return (self.n_kept - 1) / (self.last_t - self.first_t)
+
+    def take_recent(self):
+        """Return and reset the counters since the previous call (rate over that span)."""
+        r = self._recent
+        span = (r['t1'] - r['t0']) if r['t0'] is not None else 0.0
+        rate = (r['n'] - 1) / span if r['n'] >= 2 and span > 0 else math.nan
+        out = {'samples': r['n'], 'rate_hz': rate, 'gaps': r['gaps'],
+               'out_of_order': r['out_of_order']}
+        # The next span starts at the last stamp seen, so consecutive spans tile the run.
+        self._recent = {'n': 1 if r['t1'] is not None else 0, 't0': r['t1'], 't1': r['t1'],
+                        'gaps': 0, 'out_of_order': 0}
+        return out
+
+
+def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
+                  excluded_share=math.nan, max_excluded_share=0.5, name='IMU stream'):
+    """Health of the input stream: stamps, rate and motion-gate exclusions.
+
+    Parameters
+    ----------
+    monitor : StampMonitor
+    recent : dict
+        ``monitor.take_recent()`` for the span since the last report.
+    silence_s : float
+        Time since the last message arrived (s; wall or ROS clock), inf if none ever.
+    timeout_s : float
+        ERROR when silent for longer than this.
+    rate_tolerance : float
+        WARN when the measured rate differs from the configured one by more than this fraction
+        (10 %, the diagnostic_updater FrequencyStatus default).
+    excluded_share : float
+        Share of decided samples the stationarity gate left out (0-1), NaN when gating is off.
+    max_excluded_share : float
+        WARN above this share: the estimate is starved (the IMU is moving most of the time).
+
+    """
+    rate = recent['rate_hz'] if math.isfinite(recent['rate_hz']) else monitor.measured_rate()
+    values = {
+        'rate_hz': rate, 'expected_rate_hz': monitor.rate_hz,
+        'samples_total': monitor.n_kept,
+        'gaps_total': monitor.gaps, 'gaps_recent': recent['gaps'],
+        'max_gap_s': monitor.max_gap_s,
+        'out_of_order_total': monitor.out_of_order,
+        'out_of_order_recent': recent['out_of_order'],
+        'silence_s': silence_s,
+        'excluded_share': excluded_share,
+    }
+    if monitor.n_kept == 0:
+        if math.isfinite(silence_s) and silence_s > timeout_s:
+            return Health(name, ERROR, f'no usable samples for {silence_s:.1f} s', values)
+        return Health(name, STALE, 'no samples received yet', values)
+    if silence_s > timeout_s:
+        return Health(name, ERROR, f'no samples for {silence_s:.1f} s', values)
+    level, problems = OK, []
+    if math.isfinite(rate) and abs(rate / monitor.rate_hz - 1.0) > rate_tolerance:
+        level = WARN
+        problems.append(f'rate {rate:.4g} Hz differs from configured {monitor.rate_hz:.4g} Hz')
+    if recent['gaps']:
+        level = WARN
+        problems.append(f'{recent["gaps"]} stamp gap(s) (max {monitor.max_gap_s:.3g} s)')
+    if recent['out_of_order']:
+        level = WARN
+        problems.append(f'{recent["out_of_order"]} out-of-order stamp(s) dropped')
+    if math.isfinite(excluded_share) and excluded_share > max_excluded_share:
+        level = WARN
+        problems.append(f'{100 * excluded_share:.0f} % of samples excluded as motion')
+    return Health(name, level, '; '.join(problems) if problems else 'ok', values)

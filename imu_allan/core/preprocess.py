@@ -1,0 +1,94 @@
+"""Preprocessing from the thesis, as options: outliers, time-stamp checks, unit conversion.
+
+* Tukey's fences (thesis section 4.2): a sample below Q1 - F IQR or above Q3 + F IQR (F = 3,
+  "extreme" outliers) is replaced by the mean of the inliers of its axis, as the thesis does;
+  the count per axis is returned so nothing is replaced silently.
+* Time stamps: the sample rate comes from the median interval; gaps (an interval longer than
+  1.5 nominal intervals), jitter (std of the intervals relative to nominal) and non-increasing
+  stamps are reported.  The Allan estimator assumes even spacing, so callers decide whether a
+  record with gaps is acceptable.
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+TUKEY_F = 3.0
+GAP_FACTOR = 1.5
+
+
+@dataclass
+class OutlierReport:
+    """What :func:`replace_outliers` changed: counts and indices per axis."""
+
+    counts: dict = field(default_factory=dict)
+    indices: dict = field(default_factory=dict)
+    fences: dict = field(default_factory=dict)
+
+    @property
+    def total(self):
+        """Samples replaced over all axes."""
+        return int(sum(self.counts.values()))
+
+
+def tukey_fences(values, f=TUKEY_F):
+    """Lower and upper Tukey fences ``Q1 - f IQR`` and ``Q3 + f IQR``."""
+    q1, q3 = np.percentile(values, [25.0, 75.0])
+    iqr = q3 - q1
+    return q1 - f * iqr, q3 + f * iqr
+
+
+def replace_outliers(data, axes, f=TUKEY_F):
+    """Return a copy of ``data`` (n, A) with Tukey outliers replaced by the inlier mean."""
+    data = np.array(data, dtype=float, copy=True)
+    report = OutlierReport()
+    for j, axis in enumerate(axes):
+        col = data[:, j]
+        lo, hi = tukey_fences(col, f)
+        bad = (col < lo) | (col > hi)
+        report.fences[axis] = (float(lo), float(hi))
+        report.counts[axis] = int(bad.sum())
+        report.indices[axis] = np.flatnonzero(bad)
+        if bad.any() and not bad.all():
+            col[bad] = col[~bad].mean()
+    return data, report
+
+
+@dataclass
+class TimingReport:
+    """Sample-time statistics of a record."""
+
+    rate_hz: float
+    nominal_dt: float
+    duration_s: float
+    n_gaps: int
+    longest_gap_s: float
+    missing_samples: int
+    jitter: float
+    n_nonincreasing: int
+    gap_indices: np.ndarray
+
+
+def check_timing(t, gap_factor=GAP_FACTOR):
+    """Analyse time stamps ``t`` (s): rate, gaps, jitter and non-increasing steps.
+
+    ``missing_samples`` estimates how many samples the gaps lost; ``jitter`` is the std of
+    the regular intervals divided by the nominal interval.
+    """
+    t = np.asarray(t, dtype=float)
+    dt = np.diff(t)
+    if dt.size == 0:
+        raise ValueError('need at least two samples to know the sample rate')
+    positive = dt[dt > 0]
+    if positive.size == 0:
+        raise ValueError('time stamps never increase')
+    nominal = float(np.median(positive))
+    gaps = dt > gap_factor * nominal
+    regular = dt[(dt > 0) & ~gaps]
+    jitter = float(np.std(regular) / nominal) if regular.size else 0.0
+    missing = int(np.sum(np.round(dt[gaps] / nominal) - 1)) if gaps.any() else 0
+    return TimingReport(
+        rate_hz=1.0 / nominal, nominal_dt=nominal, duration_s=float(t[-1] - t[0]) + nominal,
+        n_gaps=int(gaps.sum()), longest_gap_s=float(dt[gaps].max()) if gaps.any() else 0.0,
+        missing_samples=missing, jitter=jitter, n_nonincreasing=int(np.sum(dt <= 0)),
+        gap_indices=np.flatnonzero(gaps))

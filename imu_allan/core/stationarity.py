@@ -1,0 +1,196 @@
+"""Stationarity gate: find the still spans of an IMU stream (Allan analysis needs a still IMU).
+
+ROS-free, streaming, bounded memory.  The stream is cut into windows of ``window_s`` seconds
+(counted in samples from the start of the stream, so decisions do not depend on how the stream
+is chunked).  A window is *raw-moving* when, on any axis,
+
+* its standard deviation exceeds ``std_factor`` x the noise floor of that axis (vibration,
+  shaking), or
+* its mean differs from the previous window's mean by more than ``step_factor`` x the floor x
+  sqrt(2 / w) (w samples per window: that is the standard deviation of the difference of two
+  window means of white noise, so ``step_factor`` = 8 is an 8-sigma test; it catches tilts,
+  starts and stops that barely change the in-window spread), or
+* the gyro magnitude of its mean exceeds ``gyro_max`` rad/s (a steady turn; no MEMS bias is
+  that large).
+
+The noise floor of each axis is the ``floor_quantile`` quantile of the standard deviations of
+the last ``floor_windows`` windows (moving or not), so it follows a real change of the noise
+level within a minute and stays correct as long as the IMU is still for more than that share
+of the time.  A window is finally excluded when it, the next window (motion starting inside it)
+or any of the ``hold_s`` seconds of windows before it was raw-moving (settling after motion).
+Each decision therefore waits for the next window: the gate delays samples by one to two windows.
+"""
+
+import math
+
+import numpy as np
+
+
+class StationarityGate:
+    """Streaming motion detector; :meth:`update` returns the samples it has decided on.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Sample rate, Hz.
+    n_axes : int
+        Number of columns (6: gyro x/y/z rad/s, accel x/y/z m/s^2).
+    gyro_columns : sequence of int
+        Columns holding angular rate (used for the ``gyro_max`` test).
+    window_s, std_factor, step_factor, gyro_max, hold_s, floor_windows, floor_quantile : float
+        See the module docstring.  ``gyro_max`` in rad/s, times in s.
+    min_floor : float
+        Lower bound of the floor (units of the samples) so constant or coarsely quantized
+        signals do not divide by zero.
+
+    """
+
+    def __init__(self, rate_hz, n_axes=6, gyro_columns=(0, 1, 2), window_s=0.2,
+                 std_factor=3.0, step_factor=8.0, gyro_max=0.1, hold_s=1.0,
+                 floor_windows=256, floor_quantile=0.2, min_floor=1e-9):
+        if not rate_hz or rate_hz <= 0:
+            raise ValueError('rate_hz must be > 0')
+        if window_s <= 0 or std_factor <= 1 or step_factor <= 0 or gyro_max <= 0:
+            raise ValueError('window_s, step_factor and gyro_max must be > 0, std_factor > 1')
+        if not 0 < floor_quantile < 1 or floor_windows < 4 or hold_s < 0:
+            raise ValueError('need 0 < floor_quantile < 1, floor_windows >= 4, hold_s >= 0')
+        self.rate_hz = float(rate_hz)
+        self.n_axes = int(n_axes)
+        self.gyro_columns = [c for c in gyro_columns if c < self.n_axes]
+        self.w = max(4, int(round(window_s * rate_hz)))
+        self.std_factor = float(std_factor)
+        self.step_factor = float(step_factor)
+        self.gyro_max = float(gyro_max)
+        self.hold_windows = int(math.ceil(hold_s * rate_hz / self.w))
+        self.floor_quantile = float(floor_quantile)
+        self.min_floor = float(min_floor)
+        # Fixed-size state: the partial window, the window awaiting its decision, the ring of
+        # window standard deviations for the floor.
+        self._part = np.zeros((self.w, self.n_axes))
+        self._part_n = 0
+        self._held = np.zeros((self.w, self.n_axes))
+        self._held_raw = None  # raw-moving flag of the held window; None when none is held
+        self._ring = np.full((int(floor_windows), self.n_axes), np.nan)
+        self._ring_i = 0
+        self._prev_mean = None
+        self._since_raw = 10 ** 9  # windows since the last raw-moving one
+        self.n_decided = 0
+        self.n_excluded = 0
+
+    def memory_bytes(self):
+        """Bytes held in numpy buffers (constant for the life of the gate)."""
+        return self._part.nbytes + self._held.nbytes + self._ring.nbytes
+
+    @property
+    def excluded_share(self):
+        """Share of the decided samples that were excluded (0-1), NaN before any decision."""
+        return self.n_excluded / self.n_decided if self.n_decided else math.nan
+
+    @property
+    def pending(self):
+        """Samples received but not yet decided (at most two windows)."""
+        return self._part_n + (self.w if self._held_raw is not None else 0)
+
+    def _floor(self):
+        filled = self._ring[np.isfinite(self._ring[:, 0])]
+        if filled.shape[0] == 0:
+            return None
+        return np.maximum(np.quantile(filled, self.floor_quantile, axis=0), self.min_floor)
+
+    def _raw_moving(self, window):
+        mean = window.mean(axis=0)
+        std = window.std(axis=0)
+        floor = self._floor()
+        moving = False
+        if self.gyro_columns and np.linalg.norm(mean[self.gyro_columns]) > self.gyro_max:
+            moving = True
+        if floor is not None:
+            if np.any(std > self.std_factor * floor):
+                moving = True
+            if self._prev_mean is not None:
+                limit = self.step_factor * floor * math.sqrt(2.0 / self.w)
+                if np.any(np.abs(mean - self._prev_mean) > limit):
+                    moving = True
+        self._prev_mean = mean
+        self._ring[self._ring_i] = std
+        self._ring_i = (self._ring_i + 1) % self._ring.shape[0]
+        return moving
+
+    def _complete_window(self, window, out_data, out_mask):
+        raw = self._raw_moving(window)
+        if self._held_raw is not None:
+            # Decide the held window now that its successor is known.
+            self._since_raw = 0 if self._held_raw else self._since_raw + 1
+            moving = raw or self._since_raw <= self.hold_windows
+            out_data.append(self._held.copy())
+            out_mask.append(np.full(self.w, not moving))
+            self.n_decided += self.w
+            self.n_excluded += self.w if moving else 0
+        self._held[:] = window
+        self._held_raw = raw
+
+    def update(self, block):
+        """Feed samples (n, n_axes); return ``(data, still)`` for the samples now decided.
+
+        The returned samples are the input delayed by one to two windows, in order;
+        ``still`` (bool) is True where the sample may enter the Allan estimate.
+        """
+        block = np.asarray(block, dtype=float)
+        if block.ndim == 1:
+            block = block[:, None]
+        out_data, out_mask = [], []
+        i, n = 0, block.shape[0]
+        while i < n:
+            take = min(self.w - self._part_n, n - i)
+            self._part[self._part_n:self._part_n + take] = block[i:i + take]
+            self._part_n += take
+            i += take
+            if self._part_n == self.w:
+                self._complete_window(self._part, out_data, out_mask)
+                self._part_n = 0
+        if not out_data:
+            return np.zeros((0, self.n_axes)), np.zeros(0, bool)
+        return np.concatenate(out_data), np.concatenate(out_mask)
+
+    def flush(self):
+        """Decide everything still pending (end of a record); return ``(data, still)``.
+
+        The held window is decided without a successor; a partial last window takes the
+        decision of its predecessor.
+        """
+        out_data, out_mask = [], []
+        last_still = True
+        if self._held_raw is not None:
+            self._since_raw = 0 if self._held_raw else self._since_raw + 1
+            moving = self._since_raw <= self.hold_windows
+            out_data.append(self._held.copy())
+            out_mask.append(np.full(self.w, not moving))
+            self.n_decided += self.w
+            self.n_excluded += self.w if moving else 0
+            last_still = not moving
+            self._held_raw = None
+        if self._part_n:
+            out_data.append(self._part[:self._part_n].copy())
+            out_mask.append(np.full(self._part_n, last_still))
+            self.n_decided += self._part_n
+            self.n_excluded += 0 if last_still else self._part_n
+            self._part_n = 0
+        if not out_data:
+            return np.zeros((0, self.n_axes)), np.zeros(0, bool)
+        return np.concatenate(out_data), np.concatenate(out_mask)
+
+
+def stationary_mask(data, rate_hz, **options):
+    """Mask of the still samples of a whole record; return ``(still, excluded_share)``.
+
+    ``data`` (n, A) in SI units with gyro columns first (the package axis order); ``options``
+    are :class:`StationarityGate` parameters.
+    """
+    data = np.asarray(data, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    gate = StationarityGate(rate_hz, n_axes=data.shape[1], **options)
+    _, m1 = gate.update(data)
+    _, m2 = gate.flush()
+    still = np.concatenate([m1, m2])
+    return still, gate.excluded_share

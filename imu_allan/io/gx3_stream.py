@@ -1,0 +1,130 @@
+"""Stream framer for the 3DM-GX3-25 single-byte protocol (ROS-free).
+
+The protocol has no sync pattern and no length field: a reply is recognised by its header
+byte, the fixed length that header implies, and a valid checksum.  Header values also occur
+inside float data, so a header match alone is not a frame boundary.  :class:`StreamParser`
+therefore slides one byte at a time (the MicroStrain sample-code method, gx3_protocol.md §13)
+over a buffer fed with arbitrary chunks, and accepts a packet only when the header is known,
+the full length is available and the checksum matches.  Its output does not depend on how
+the bytes were chunked.
+
+What it rejects is counted (:class:`ParserStats`):
+
+* ``bad_checksums``: a complete candidate with a wrong checksum found where a packet was
+  expected (right after a good packet, or right after the previous counted bad packet) -
+  i.e. a damaged packet, not a header-like byte inside other data;
+* ``rejected_bytes``: every byte not part of an accepted packet;
+* ``resyncs``: good packets found somewhere other than the expected position (after junk,
+  lost bytes or a truncated packet).
+"""
+
+from dataclasses import asdict, dataclass
+import re
+
+from .gx3_protocol import REPLY_LENGTHS
+
+
+@dataclass
+class ParserStats:
+    """Counters of a :class:`StreamParser` (all cumulative)."""
+
+    bytes_in: int = 0
+    packets: int = 0
+    bad_checksums: int = 0
+    rejected_bytes: int = 0
+    resyncs: int = 0
+
+    def as_dict(self):
+        """Plain dict of the counters."""
+        return asdict(self)
+
+
+class StreamParser:
+    """Find checksummed packets in a byte stream fed in arbitrary chunks.
+
+    ``codes``: reply codes to accept (default: every reply of the protocol).  Use
+    :meth:`feed` for each chunk; it returns the complete good packets (``bytes``, header to
+    checksum) in stream order.  :meth:`flush` at end of stream counts a trailing partial
+    packet as rejected.
+    """
+
+    def __init__(self, codes=None):
+        """Accept the reply codes ``codes`` (iterable of ints) or all known replies."""
+        codes = sorted(REPLY_LENGTHS if codes is None else codes)
+        unknown = [c for c in codes if c not in REPLY_LENGTHS]
+        if unknown:
+            raise ValueError(f'unknown reply codes: {unknown}')
+        self._lengths = [0] * 256
+        for code in codes:
+            self._lengths[code] = REPLY_LENGTHS[code]
+        self._header_re = re.compile(b'[' + b''.join(re.escape(bytes([c])) for c in codes)
+                                     + b']')
+        self._buf = bytearray()
+        self._base = 0          # absolute stream offset of _buf[0]
+        self._expect = 0        # absolute offset where the next packet is expected
+        self.stats = ParserStats()
+
+    def reset(self):
+        """Forget buffered bytes (e.g. after reopening the port); counters are kept."""
+        self._base += len(self._buf)
+        self._buf.clear()
+        self._expect = self._base
+
+    @property
+    def buffered(self):
+        """Bytes held back waiting for the rest of a candidate packet."""
+        return len(self._buf)
+
+    def feed(self, data):
+        """Add a chunk of bytes; return the list of complete good packets found."""
+        stats = self.stats
+        stats.bytes_in += len(data)
+        buf = self._buf
+        buf += data
+        lengths = self._lengths
+        base = self._base
+        n = len(buf)
+        i = 0
+        out = []
+        while i < n:
+            length = lengths[buf[i]]
+            if not length:
+                # Not a header byte: jump to the next one (or the end).
+                m = self._header_re.search(buf, i + 1)
+                j = m.start() if m else n
+                stats.rejected_bytes += j - i
+                i = j
+                continue
+            end = i + length
+            if end > n:
+                break           # wait for the rest of this candidate
+            if (sum(buf[i:end - 2]) & 0xFFFF) == (buf[end - 2] << 8 | buf[end - 1]):
+                if base + i != self._expect:
+                    stats.resyncs += 1
+                out.append(bytes(buf[i:end]))
+                stats.packets += 1
+                i = end
+                self._expect = base + end
+                continue
+            if base + i == self._expect:
+                # A damaged packet where one was due; the next one is due after it.
+                stats.bad_checksums += 1
+                self._expect = base + end
+            stats.rejected_bytes += 1
+            i += 1
+        del buf[:i]
+        self._base = base + i
+        return out
+
+    def flush(self):
+        """End of stream: count the bytes still buffered (a partial packet) as rejected."""
+        self.stats.rejected_bytes += len(self._buf)
+        self.reset()
+
+
+def parse_bytes(data, codes=None):
+    """Parse a complete byte string; return ``(packets, stats)``."""
+    parser = StreamParser(codes)
+    packets = parser.feed(data)
+    parser.flush()
+    return packets, parser.stats

@@ -1,0 +1,113 @@
+"""PNG plots of an analysis (matplotlib, Agg backend, no screen needed).
+
+* ``adev_<sensor>.png``: Allan deviation per axis with its 68.3 % band, each fitted term's line
+  (dashed), the total model (solid), slope guides -1, -1/2, 0, +1/2, +1 (grey), and the
+  denoised curve when given.
+* ``timeseries.png``: the raw samples per axis (1-s means on top) with Tukey outliers marked.
+"""
+
+import math
+
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from ..core import terms as _terms  # noqa: E402
+from ..core.units import GYRO_AXES, is_gyro, sample_unit  # noqa: E402
+
+_COLORS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
+_SLOPES = (-1.0, -0.5, 0.0, 0.5, 1.0)
+
+
+def _slope_guides(ax, tau, adev):
+    """A fan of the IEEE slopes (-1 .. +1, 0.7 decade long) below the curves, at the left."""
+    t0 = tau[0] * 1.3
+    span = min(10.0 ** 0.7, tau[-1] / t0)
+    y0 = np.nanmin(adev) / 3.0
+    ts = np.array([t0, t0 * span])
+    for slope in _SLOPES:
+        ys = y0 * (ts / t0) ** slope
+        ax.plot(ts, ys, color='0.65', lw=0.8, zorder=0)
+        ax.annotate(f'{slope:+g}' if slope else '0', (ts[1], ys[1]), fontsize=7,
+                    color='0.45', xytext=(2, 0), textcoords='offset points', va='center')
+    ax.annotate('slopes', (t0, y0), fontsize=7, color='0.45', xytext=(0, -8),
+                textcoords='offset points')
+
+
+def plot_adev(path, analysis, sensor, denoised=None):
+    """Allan deviation plot of one sensor ('gyro' or 'accel'); returns False if no axis."""
+    res, fit = analysis.result, analysis.fit
+    axes = [a for a in analysis.axes if is_gyro(a) == (sensor == 'gyro')]
+    if not axes:
+        return False
+    fig, ax = plt.subplots(figsize=(8.0, 5.6), dpi=110)
+    tau = res.tau
+    fine = np.logspace(math.log10(tau[0]), math.log10(tau[-1]), 200)
+    for k_axis, axis in enumerate(axes):
+        j = res.axis_index(axis)
+        color = _COLORS[axis[-1]]
+        ax.fill_between(tau, res.ci_low[:, j], res.ci_high[:, j], color=color, alpha=0.18,
+                        lw=0)
+        ax.plot(tau, res.adev[:, j], 'o', ms=2.5, color=color, label=f'{axis} measured')
+        for term, params in fit.model.terms.get(axis, {}).items():
+            curve = np.sqrt(_terms.term_avar(term, params, fine, res.rate_hz))
+            ax.plot(fine, curve, '--', color=color, lw=0.8, alpha=0.7)
+            if k_axis == 0:  # name each term once, where it dominates the first axis
+                k = int(np.nanargmax(curve / np.sqrt(fit.model_avar(axis, fine))))
+                ax.annotate(term.replace('_', ' '), (fine[k], curve[k]), fontsize=7,
+                            color='0.3', xytext=(0, 4), textcoords='offset points')
+        ax.plot(fine, np.sqrt(fit.model_avar(axis, fine)), '-', color=color, lw=1.2,
+                label=f'{axis} model')
+        if denoised is not None:
+            dj = denoised.result.axis_index(axis)
+            ax.plot(denoised.result.tau, denoised.result.adev[:, dj], ':', color=color, lw=1.4,
+                    label=f'{axis} denoised')
+    _slope_guides(ax, tau, res.adev[:, [res.axis_index(a) for a in axes]])
+    ax.set_xscale('log')
+    ax.set_yscale('log')
+    ax.set_xlabel('averaging time tau (s)')
+    ax.set_ylabel(f'Allan deviation ({sample_unit(axes[0])})')
+    name = 'gyroscope' if sensor == 'gyro' else 'accelerometer'
+    ax.set_title(f'{name}: overlapping Allan deviation, 68.3 % bands, fitted terms\n'
+                 f'{analysis.source} ({analysis.duration_s / 3600:.2f} h at '
+                 f'{analysis.rate_hz:.4g} Hz)', fontsize=9)
+    ax.grid(True, which='both', color='0.92', lw=0.5)
+    ax.legend(fontsize=7, ncol=2, loc='best')
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return True
+
+
+def plot_timeseries(path, analysis, raw):
+    """Raw samples per axis against time with outliers (Tukey F=3) marked in black."""
+    axes = list(analysis.axes)
+    fig, subplots = plt.subplots(len(axes), 1, figsize=(8.0, 1.5 * len(axes) + 0.8), dpi=100,
+                                 sharex=True, squeeze=False)
+    t = analysis.t - analysis.t[0]
+    step = max(1, t.size // 20000)  # plot at most ~20k points per axis; outliers all shown
+    block = max(int(round(analysis.rate_hz)), 1)
+    n_blocks = t.size // block
+    for j, axis in enumerate(axes):
+        ax = subplots[j, 0]
+        color = _COLORS[axis[-1]] if axis in GYRO_AXES else 'tab:' + {
+            'x': 'orange', 'y': 'olive', 'z': 'purple'}[axis[-1]]
+        ax.plot(t[::step], raw[::step, j], lw=0.4, color=color, alpha=0.6)
+        if n_blocks >= 2:
+            means = raw[:n_blocks * block, j].reshape(n_blocks, block).mean(axis=1)
+            ax.plot(t[block // 2:n_blocks * block:block], means, lw=0.9, color='k', alpha=0.7)
+        idx = analysis.outliers.indices.get(axis, np.zeros(0, dtype=int))
+        if idx.size:
+            ax.plot(t[idx], raw[idx, j], 'x', color='k', ms=4,
+                    label=f'{idx.size} outlier(s)')
+            ax.legend(fontsize=6, loc='upper right')
+        ax.set_ylabel(f'{axis}\n({sample_unit(axis)})', fontsize=7)
+        ax.tick_params(labelsize=7)
+    subplots[-1, 0].set_xlabel('time since start (s)')
+    subplots[0, 0].set_title(f'raw samples (light), 1-s means (black), Tukey F=3 outliers (x)'
+                             f'\n{analysis.source}', fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

@@ -1,0 +1,114 @@
+"""Reports of an :class:`~imu_allan.core.analysis.Analysis`: JSON, console text, Kalibr.
+
+JSON follows the contract of design.md section 6 (SI units, continuous-time coefficients) and
+adds ``verdict``, ``timing``, ``outliers`` and ``kalibr`` blocks.
+"""
+
+import math
+
+import numpy as np
+
+from ..core.units import is_gyro, sample_unit
+
+ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
+             'intervals with Greenhall-Riley EDF; joint GLS non-negative fit')
+
+
+def _floats(values):
+    return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=float)]
+
+
+def kalibr_values(analysis):
+    """Kalibr ``imu.yaml`` values: continuous-time, the worst axis per sensor.
+
+    ``*_noise_density`` is the white-noise coefficient N; ``*_random_walk`` is the rate random
+    walk K (bias random walk); the per-axis values are returned too, for comments.
+    """
+    out = {'update_rate': float(analysis.rate_hz)}
+    per_axis = {}
+    for sensor, prefix in (('gyro', 'gyroscope'), ('accel', 'accelerometer')):
+        axes = [a for a in analysis.axes if is_gyro(a) == (sensor == 'gyro')]
+        for key, term in (('noise_density', 'white_noise'), ('random_walk', 'rate_random_walk')):
+            values = {a: analysis.fit.value(a, term) for a in axes}
+            per_axis[f'{prefix}_{key}'] = values
+            finite = [v for v in values.values() if math.isfinite(v)]
+            out[f'{prefix}_{key}'] = max(finite) if finite else None
+    return out, per_axis
+
+
+def analysis_to_json(analysis):
+    """The report dictionary of one analysis (JSON-ready)."""
+    res = analysis.result
+    axes = {}
+    for j, axis in enumerate(analysis.axes):
+        axes[axis] = {
+            'unit': sample_unit(axis),
+            'adev': {'tau': _floats(res.tau), 'adev': _floats(res.adev[:, j]),
+                     'ci_low': _floats(res.ci_low[:, j]), 'ci_high': _floats(res.ci_high[:, j]),
+                     'edf': _floats(res.edf[:, j])},
+            'terms': analysis.fit.term_report(axis),
+            'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis])},
+        }
+    timing = analysis.timing
+    kalibr, _ = kalibr_values(analysis)
+    return {
+        'source': analysis.source,
+        'n_samples': int(analysis.n_samples),
+        'sample_rate_hz': float(analysis.rate_hz),
+        'duration_s': float(analysis.duration_s),
+        'units': 'SI; noise coefficients are continuous-time',
+        'estimator': ESTIMATOR,
+        'axes': axes,
+        'verdict': {
+            'static': bool(analysis.static),
+            'motion': analysis.motion,
+            'tau_max_s': float(res.tau[-1]),
+            'warnings': list(analysis.warnings),
+        },
+        'timing': {'gaps': timing.n_gaps, 'missing_samples': timing.missing_samples,
+                   'longest_gap_s': timing.longest_gap_s, 'jitter': timing.jitter},
+        'outliers': {'rule': 'Tukey F=3', 'replaced': bool(analysis.outliers.total and
+                                                           analysis.data is not None),
+                     'counts': dict(analysis.outliers.counts)},
+        'kalibr': kalibr,
+    }
+
+
+def _fmt(value):
+    return f'{value:.4g}' if value is not None and math.isfinite(value) else '-'
+
+
+def console_summary(analysis):
+    """A human-readable summary: terms in SI and conventional units, then the verdict."""
+    lines = [f'{analysis.source}: {analysis.n_samples} samples at {analysis.rate_hz:.6g} Hz, '
+             f'{analysis.duration_s:.1f} s ({analysis.duration_s / 3600:.2f} h); averaging times '
+             f'{analysis.result.tau[0]:.3g} .. {analysis.result.tau[-1]:.4g} s',
+             'noise coefficients (continuous-time, 68.3 % intervals):',
+             f'  {"axis":8} {"term":17} {"value (SI)":>11} {"interval (SI)":>23} {"unit":>17}'
+             f'  {"conventional":>11} {"unit"}']
+    for axis in analysis.axes:
+        report = analysis.fit.term_report(axis)
+        if not report:
+            lines.append(f'  {axis:8} (no term detected)')
+        for term, entry in report.items():
+            lo, hi = entry['ci']
+            conv = entry['conventional']
+            lines.append(f'  {axis:8} {term:17} {_fmt(entry["value"]):>11} '
+                         f'[{_fmt(lo):>10}, {_fmt(hi):>10}] {entry["unit"]:>17}'
+                         f'  {_fmt(conv["value"]):>11} {conv["unit"]}')
+            for extra in ('tau_c', 'frequency_hz'):
+                if extra in entry:
+                    e = entry[extra]
+                    lines.append(f'  {"":8} {"  " + extra:17} {_fmt(e["value"]):>11} '
+                                 f'[{_fmt(e["ci"][0]):>10}, {_fmt(e["ci"][1]):>10}] '
+                                 f'{e["unit"]:>17}')
+    kalibr, per_axis = kalibr_values(analysis)
+    kal = ', '.join(f'{k} {_fmt(v)}' for k, v in kalibr.items() if k != 'update_rate')
+    lines.append(f'Kalibr (continuous-time, worst axis): {kal}')
+    lines.append('verdict: ' + ('static' if analysis.static else 'NOT static (moving)'))
+    if analysis.outliers.total:
+        lines.append(f'outliers beyond Tukey fences (F=3): {analysis.outliers.total}')
+    for warning in analysis.warnings:
+        lines.append(f'warning: {warning}')
+    return '\n'.join(lines)
+

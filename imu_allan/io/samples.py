@@ -1,0 +1,44 @@
+"""The in-memory form of an IMU recording that every reader returns."""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.units import AXES
+
+
+@dataclass
+class Samples:
+    """Time-stamped IMU samples in SI units.
+
+    Attributes
+    ----------
+    t : numpy.ndarray
+        Shape (n,), time in seconds (header stamp for bags, device timer for raw captures).
+    data : numpy.ndarray
+        Shape (n, A), rad/s for gyro axes and m/s^2 for accel axes, columns in ``axes`` order.
+    axes : tuple of str
+        Axis names, a subset of :data:`imu_allan.core.units.AXES` in that order.
+    source : str
+        Where the samples came from (file name, topic).
+    gravity : float
+        m/s^2 per g used to convert the input, if it was in g.
+    warnings : list of str
+        Things the reader skipped or repaired, each one line.
+    extra : dict
+        Extra columns (for example ``mag_x``) by name, each shape (n,).
+
+    """
+
+    t: np.ndarray
+    data: np.ndarray
+    axes: tuple = AXES
+    source: str = ''
+    gravity: float = 9.80665
+    warnings: list = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def n(self):
+        """Number of samples."""
+        return int(self.t.shape[0])

@@ -1,0 +1,1 @@
+"""Thin rclpy nodes: parameters, QoS, timers and publishing; the numerics live in core/."""

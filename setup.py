@@ -1,0 +1,37 @@
+"""Build script for the imu_allan ament_python package."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'imu_allan'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        ('share/' + PACKAGE + '/config', glob('config/*.yaml')),
+        ('share/' + PACKAGE + '/launch', glob('launch/*.launch.py')),
+    ],
+    package_data={PACKAGE: ['data/*.yaml']},
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='imu_allan maintainers',
+    maintainer_email='maintainers@imu-allan.dev',
+    description='Online and offline IMU noise monitoring with the Allan variance.',
+    license='BSD-3-Clause',
+    extras_require={'test': ['pytest']},
+    entry_points={
+        'console_scripts': [
+            'driver = imu_allan.nodes.driver:main',
+            'allan = imu_allan.nodes.allan:main',
+            'denoise = imu_allan.nodes.denoise:main',
+            'analyze = imu_allan.cli.analyze:main',
+            'discrepancy = imu_allan.cli.discrepancy:main',
+            'gx3_sim = imu_allan.cli.gx3_sim:main',
+        ],
+    },
+)

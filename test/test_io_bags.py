@@ -1,0 +1,335 @@
+"""Bag reading and writing: real bags, topic choice, damaged input, fast == generic, round trips."""
+
+import os
+from pathlib import Path
+import shutil
+
+import numpy as np
+import pytest
+from rosbags.typesys import Stores, get_typestore
+
+from imu_allan.io.bag_reader import bag_topics, list_imu_topics, read_bag
+from imu_allan.io.bag_writer import copy_bag_with_topic, write_imu_bag
+from imu_allan.io.errors import InputError
+from imu_allan.io.samples import Samples
+
+DATA = Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data' / 'bags'
+needs_data = pytest.mark.skipif(not DATA.is_dir(),
+                                reason=f'real test bags not found in {DATA.resolve()}')
+JAZZY = get_typestore(Stores.ROS2_JAZZY)
+JACKAL = ('test2.bag', 'jackal_test2_sqlite3', 'jackal_test2_mcap',
+          'jackal_test2_mcap/jackal_test2_mcap.mcap',
+          'jackal_test2_sqlite3/jackal_test2_sqlite3.db3')
+
+
+def _samples(n=500, rate=100.0, seed=3, t0=1_700_000_000.0):
+    rng = np.random.default_rng(seed)
+    data = rng.normal(0.0, 0.01, size=(n, 6))
+    data[:, 5] += 9.81
+    return Samples(t=t0 + np.arange(n) / rate, data=data)
+
+
+def _same(a, b):
+    return np.array_equal(a.t, b.t) and np.array_equal(a.data, b.data)
+
+
+# ---------------------------------------------------------------------------------------- real
+
+
+@needs_data
+def test_jackal_bag_same_in_all_three_forms():
+    """ROS 1, sqlite3 and MCAP forms of test2: 3,061 messages, identical values, both paths."""
+    ref = read_bag(DATA / 'test2.bag', fast=False)
+    assert ref.n == 3061
+    assert ref.t[0] == pytest.approx(47.58)
+    assert ref.t[-1] - ref.t[0] == pytest.approx(61.2, abs=0.05)
+    # A moving robot: gravity mostly on z, and the rates vary.
+    assert 9.0 < np.median(ref.data[:, 5]) < 10.5
+    assert np.std(ref.data[:, 2]) > 0.01
+    for name in JACKAL:
+        for fast in (True, False):
+            s = read_bag(DATA / name, fast=fast)
+            assert s.n == 3061, (name, fast)
+            assert _same(s, ref), (name, fast)
+            assert s.warnings == []
+            assert s.source.endswith(':/imu/data')
+
+
+@needs_data
+def test_husky_bag_and_topic_listing():
+    topics = bag_topics(DATA / 'test1.bag')
+    assert topics['/imu/data'] == ('sensor_msgs/msg/Imu', 11865)
+    assert topics['/fix'][0] == 'sensor_msgs/msg/NavSatFix'
+    assert list_imu_topics(DATA / 'test1.bag') == ['/imu/data']
+    fast = read_bag(DATA / 'test1.bag')
+    assert fast.n == 11865
+    assert _same(fast, read_bag(DATA / 'test1.bag', topic='/imu/data', fast=False))
+    for name in ('jackal_test2_mcap', 'jackal_test2_sqlite3', 'test2.bag'):
+        assert list_imu_topics(DATA / name) == ['/imu/data']
+        assert bag_topics(DATA / name)['/jackal_velocity_controller/odom'][1] == 3060
+
+
+@needs_data
+def test_named_topic_of_other_type_and_unknown_topic():
+    for name in ('test2.bag', 'jackal_test2_mcap', 'jackal_test2_sqlite3'):
+        for fast in (True, False):
+            with pytest.raises(InputError, match='nav_msgs/msg/Odometry, not sensor_msgs'):
+                read_bag(DATA / name, topic='/jackal_velocity_controller/odom', fast=fast)
+            with pytest.raises(InputError, match=r'no topic /nope \(Imu topics: /imu/data\)'):
+                read_bag(DATA / name, topic='/nope', fast=fast)
+
+
+# ------------------------------------------------------------------------------ topic choice
+
+
+def _odom(stamp_ns):
+    ts = JAZZY.types
+    sec, nsec = divmod(stamp_ns, 1_000_000_000)
+    return ts['nav_msgs/msg/Odometry'](
+        header=ts['std_msgs/msg/Header'](
+            stamp=ts['builtin_interfaces/msg/Time'](sec=sec, nanosec=nsec), frame_id='odom'),
+        child_frame_id='base_link',
+        pose=ts['geometry_msgs/msg/PoseWithCovariance'](
+            pose=ts['geometry_msgs/msg/Pose'](
+                position=ts['geometry_msgs/msg/Point'](x=1.0, y=2.0, z=0.0),
+                orientation=ts['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0)),
+            covariance=np.zeros(36)),
+        twist=ts['geometry_msgs/msg/TwistWithCovariance'](
+            twist=ts['geometry_msgs/msg/Twist'](
+                linear=ts['geometry_msgs/msg/Vector3'](x=0.5, y=0.0, z=0.0),
+                angular=ts['geometry_msgs/msg/Vector3'](x=0.0, y=0.0, z=0.1)),
+            covariance=np.zeros(36)))
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_several_imu_topics_need_a_choice(tmp_path, storage):
+    s = _samples(200)
+    second = _samples(50, seed=9)
+    from imu_allan.io.bag_writer import encode_imu
+    rows, stamps = encode_imu(second.t, second.data, 'imu2')
+    msgs = [(int(ns), JAZZY.deserialize_cdr(r.tobytes(), 'sensor_msgs/msg/Imu'))
+            for ns, r in zip(stamps, rows)]
+    odom = [(int(ns), _odom(int(ns))) for ns in stamps[:20]]
+    path = tmp_path / 'two'
+    write_imu_bag(path, s, topic='/imu/a', storage=storage,
+                  extra_topics={'/imu/b': ('sensor_msgs/msg/Imu', msgs),
+                                '/odom': ('nav_msgs/msg/Odometry', odom),
+                                '/imu/empty': ('sensor_msgs/msg/Imu', [])})
+    assert sorted(list_imu_topics(path)) == ['/imu/a', '/imu/b', '/imu/empty']
+    for fast in (True, False):
+        with pytest.raises(InputError) as err:
+            read_bag(path, fast=fast)
+        assert 'several Imu topics' in str(err.value) and '--topic' in str(err.value)
+        assert '/imu/a' in str(err.value) and '/imu/b' in str(err.value)
+        a = read_bag(path, topic='/imu/a', fast=fast)
+        b = read_bag(path, topic='/imu/b', fast=fast)
+        assert a.n == 200 and b.n == 50
+        assert np.array_equal(a.data, s.data) and np.array_equal(b.data, second.data)
+        with pytest.raises(InputError, match='topic /imu/empty has no messages'):
+            read_bag(path, topic='/imu/empty', fast=fast)
+        with pytest.raises(InputError, match='is nav_msgs/msg/Odometry'):
+            read_bag(path, topic='/odom', fast=fast)
+
+
+def test_bag_without_imu_topic(tmp_path):
+    path = tmp_path / 'odom_only'
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        c = w.add_connection('/odom', 'nav_msgs/msg/Odometry', typestore=JAZZY)
+        w.write(c, 1000, JAZZY.serialize_cdr(_odom(1000), 'nav_msgs/msg/Odometry'))
+    for fast in (True, False):
+        with pytest.raises(InputError, match='no sensor_msgs/msg/Imu topic'):
+            read_bag(path, fast=fast)
+
+
+# ------------------------------------------------------------------------ fast == generic
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
+def test_mixed_frame_id_lengths_fast_equals_generic(tmp_path, storage):
+    """Differing frame_id lengths (so differing CDR paddings) interleaved, plus other topics."""
+    s = _samples(300)
+    ts = get_typestore(Stores.ROS1_NOETIC if storage == 'ros1' else Stores.ROS2_JAZZY)
+    extra = []
+    from imu_allan.io.bag_writer import encode_imu
+    # Odd stamps with other frame ids: lengths 1..12 hit every padding case.
+    for i, fid in enumerate(['a', 'ab', 'abc', 'abcd', 'abcde', 'abcdef', 'abcdefghijkl']):
+        t = s.t[:1] + 0.001 * (i + 1) + np.arange(20) * 0.01
+        rows, stamps = encode_imu(t, s.data[:20] * (i + 2), fid, ros1=storage == 'ros1')
+        for ns, r in zip(stamps, rows):
+            msg = (ts.deserialize_ros1 if storage == 'ros1' else ts.deserialize_cdr)(
+                r.tobytes(), 'sensor_msgs/msg/Imu')
+            extra.append((int(ns), msg))
+    # Same topic needed: write the base samples, then add the others through extra_topics
+    # on the same topic name is not possible, so use one topic made only of mixed messages.
+    name = 'mixed.bag' if storage == 'ros1' else 'mixed'
+    path = tmp_path / name
+    write_imu_bag(path, s, topic='/imu/base', storage=storage,
+                  extra_topics={'/imu/mixed': ('sensor_msgs/msg/Imu', extra)})
+    fast = read_bag(path, topic='/imu/mixed', fast=True)
+    gen = read_bag(path, topic='/imu/mixed', fast=False)
+    assert fast.n == gen.n == 140
+    assert _same(fast, gen)
+    assert np.all(np.diff(fast.t) >= 0)  # receive-time order = stamp order here
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
+def test_write_read_round_trip(tmp_path, storage):
+    """Samples -> bag -> samples: values bit-identical, stamps to the nanosecond."""
+    s = _samples(2000, rate=400.0, t0=1_700_000_123.0)
+    path = tmp_path / ('r.bag' if storage == 'ros1' else 'r')
+    write_imu_bag(path, s, storage=storage, frame_id='gx3_25')
+    assert list_imu_topics(path) == ['/imu/data_raw']
+    for fast in (True, False):
+        r = read_bag(path, fast=fast)
+        assert r.n == 2000
+        assert np.array_equal(r.data, s.data)
+        assert np.max(np.abs(r.t - s.t)) < 1e-6  # ns stamps; float64 at 1.7e9 s is 2.4e-7
+    with pytest.raises(InputError, match='already exists'):
+        write_imu_bag(path, s, storage=storage)
+
+
+def test_compressed_mcap_and_partial_axes(tmp_path):
+    s = _samples(5000)
+    gyro_only = Samples(t=s.t, data=s.data[:, :3], axes=('gyro_x', 'gyro_y', 'gyro_z'))
+    path = tmp_path / 'z'
+    write_imu_bag(path, gyro_only, storage='mcap', compress=True)
+    fast = read_bag(path)
+    assert _same(fast, read_bag(path, fast=False))
+    assert np.array_equal(fast.data[:, :3], s.data[:, :3])
+    assert not fast.data[:, 3:].any()  # absent axes are written as 0
+
+
+# ----------------------------------------------------------------------------------- damage
+
+
+def test_missing_and_not_a_bag(tmp_path):
+    with pytest.raises(InputError, match='no such file or directory'):
+        read_bag(tmp_path / 'nothing.mcap')
+    garbage = tmp_path / 'garbage.mcap'
+    garbage.write_bytes(os.urandom(4000))
+    with pytest.raises(InputError, match='not a bag'):
+        read_bag(garbage)
+    text = tmp_path / 'notes.bag'
+    text.write_text('hello\n')
+    with pytest.raises(InputError, match='not a bag'):
+        read_bag(text)
+    empty = tmp_path / 'empty.db3'
+    empty.write_bytes(b'')
+    with pytest.raises(InputError, match='empty file'):
+        read_bag(empty)
+    folder = tmp_path / 'folder'
+    folder.mkdir()
+    with pytest.raises(InputError, match='no metadata.yaml'):
+        read_bag(folder)
+
+
+def test_truncated_mcap_returns_readable_part_with_warning(tmp_path):
+    s = _samples(20000, rate=200.0)
+    path = tmp_path / 'full'
+    write_imu_bag(path, s, storage='mcap')
+    raw = (path / 'full.mcap').read_bytes()
+    cut = tmp_path / 'cut.mcap'
+    cut.write_bytes(raw[:len(raw) * 6 // 10])
+    for fast in (True, False):
+        r = read_bag(cut, fast=fast)
+        assert 0 < r.n < 20000
+        assert r.n > 20000 * 0.5  # everything before the cut, including the cut chunk's start
+        assert np.array_equal(r.data, s.data[:r.n]) and np.array_equal(r.t, read_bag(
+            path).t[:r.n])
+        assert len(r.warnings) == 1 and 'truncated' in r.warnings[0]
+    tiny = tmp_path / 'tiny.mcap'
+    tiny.write_bytes(raw[:60])
+    with pytest.raises(InputError, match='damaged MCAP, no Imu data readable'):
+        read_bag(tiny)
+
+
+def test_corrupt_compressed_chunk_is_skipped(tmp_path):
+    s = _samples(30000, rate=200.0)
+    path = tmp_path / 'z'
+    write_imu_bag(path, s, storage='mcap', compress=True)
+    f = path / 'z.mcap'
+    raw = bytearray(f.read_bytes())
+    # Break the zstd frame magic of the second chunk (rosbags writes no chunk CRC, so damage
+    # inside the compressed payload could pass unnoticed; a broken frame cannot).
+    magic = b'\x28\xb5\x2f\xfd'
+    second = raw.index(magic, raw.index(magic) + 1)
+    raw[second:second + 4] = b'\x00\x00\x00\x00'
+    bad = tmp_path / 'bad.mcap'
+    bad.write_bytes(bytes(raw))
+    r = read_bag(bad)
+    assert 0 < r.n < 30000
+    assert any('corrupt chunk' in w for w in r.warnings)
+    # The rows read are the original ones (a whole chunk is missing, nothing is garbled).
+    idx = np.searchsorted(s.t, r.t)
+    assert np.array_equal(s.data[idx], r.data)
+
+
+def test_damaged_sqlite_and_ros1(tmp_path):
+    s = _samples(3000)
+    db = tmp_path / 'sq'
+    write_imu_bag(db, s, storage='sqlite3')
+    raw = (db / 'sq.db3').read_bytes()
+    cut = tmp_path / 'cut.db3'
+    cut.write_bytes(raw[:len(raw) // 2])
+    for fast in (True, False):
+        try:
+            r = read_bag(cut, fast=fast)
+        except InputError as err:
+            assert str(err).startswith(str(cut)) and '\n' not in str(err)
+        else:
+            assert 0 < r.n < 3000 and r.warnings
+            assert np.array_equal(r.data, s.data[:r.n])
+    bag = tmp_path / 'r.bag'
+    write_imu_bag(bag, s, storage='ros1')
+    raw = bag.read_bytes()
+    cut1 = tmp_path / 'cut.bag'
+    cut1.write_bytes(raw[:len(raw) // 2])
+    for fast in (True, False):
+        try:
+            r = read_bag(cut1, fast=fast)
+        except InputError as err:
+            assert str(err).startswith(str(cut1)) and '\n' not in str(err)
+        else:
+            assert 0 < r.n < 3000 and r.warnings
+            assert np.array_equal(r.data, s.data[:r.n])
+    folder = tmp_path / 'garbage_folder'
+    shutil.copytree(db, folder)
+    (folder / 'sq.db3').write_bytes(os.urandom(3000))
+    for fast in (True, False):
+        with pytest.raises(InputError):
+            read_bag(folder, fast=fast)
+    (folder / 'sq.db3').unlink()
+    with pytest.raises(InputError, match='storage file missing'):
+        read_bag(folder)
+
+
+# ------------------------------------------------------------------------------------- copy
+
+
+@needs_data
+@pytest.mark.parametrize('src', ['jackal_test2_mcap', 'jackal_test2_sqlite3', 'test2.bag'])
+def test_copy_bag_with_denoised_topic(tmp_path, src):
+    orig = read_bag(DATA / src)
+    den = Samples(t=orig.t, data=orig.data * 0.5)
+    out = tmp_path / 'with_denoised'
+    copy_bag_with_topic(DATA / src, out, '/imu/data_denoised', den, frame_id='base_link')
+    assert (out / 'with_denoised.mcap').exists()
+    topics = bag_topics(out)
+    assert topics['/imu/data'] == ('sensor_msgs/msg/Imu', 3061)
+    assert topics['/jackal_velocity_controller/odom'] == ('nav_msgs/msg/Odometry', 3060)
+    assert topics['/imu/data_denoised'] == ('sensor_msgs/msg/Imu', 3061)
+    for fast in (True, False):
+        assert _same(read_bag(out, topic='/imu/data', fast=fast), orig)
+        d = read_bag(out, topic='/imu/data_denoised', fast=fast)
+        assert np.array_equal(d.data, den.data) and np.max(np.abs(d.t - orig.t)) < 1e-9
+    # The copied odometry still deserializes (ROS 1 sources are migrated to ROS 2 types).
+    from rosbags.highlevel import AnyReader
+    with AnyReader([out]) as reader:
+        conns = [c for c in reader.connections if c.msgtype == 'nav_msgs/msg/Odometry']
+        first = next(reader.messages(connections=conns))
+        odom = reader.deserialize(first[2], first[0].msgtype)
+        assert odom.header.stamp.sec == 47
+        assert not hasattr(odom.header, 'seq')
+    with pytest.raises(InputError, match='already exists'):
+        copy_bag_with_topic(DATA / src, tmp_path / 'x', '/imu/data', den)
