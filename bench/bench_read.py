@@ -7,6 +7,7 @@ per-message deserializer and the message -> numpy adapter) and ``read_bag(..., f
 same numbers. Usage: ``python bench/bench_read.py [N]``.
 """
 
+from functools import partial
 from pathlib import Path
 import sys
 import tempfile
@@ -40,16 +41,16 @@ def main():
             name = f'bag_{storage}' + ('.bag' if storage == 'ros1' else '')
             path = Path(tmp) / name
             samples = Samples(t=t[:count], data=data[:count])
-            _, dt_w = _timed(lambda: write_imu_bag(path, samples, storage=storage))
+            _, dt_w = _timed(partial(write_imu_bag, path, samples, storage=storage))
             print(f'  {storage:8s} write {count} msgs: {dt_w:6.2f} s '
                   f'({count / dt_w / 1e3:7.0f} k msg/s)')
-            fast, dt_f = _timed(lambda: read_bag(path, fast=True))
-            gen, dt_g = _timed(lambda: read_bag(path, fast=False))
+            fast, dt_f = _timed(partial(read_bag, path, fast=True))
+            gen, dt_g = _timed(partial(read_bag, path, fast=False))
             same = np.array_equal(fast.t, gen.t) and np.array_equal(fast.data, gen.data)
             print(f'  {storage:8s} generic: {dt_g:6.2f} s ({count / dt_g / 1e3:7.0f} k msg/s)   '
                   f'fast: {dt_f:6.3f} s ({count / dt_f / 1e6:5.2f} M msg/s)   '
                   f'speed-up x{dt_g / dt_f:5.1f}   identical: {same}')
-            fast2, dt_f2 = _timed(lambda: read_bag(path, fast=True))
+            fast2, dt_f2 = _timed(partial(read_bag, path, fast=True))
             print(f'  {storage:8s} fast (second run, warm cache): {dt_f2:6.3f} s '
                   f'({count / dt_f2 / 1e6:5.2f} M msg/s)')
             path_size = sum(f.stat().st_size for f in Path(tmp).rglob('*') if f.is_file())
@@ -58,7 +59,7 @@ def main():
                 zpath = Path(tmp) / f'bag_{storage}_zstd'
                 if storage == 'mcap':
                     write_imu_bag(zpath, samples, storage='mcap', compress=True)
-                    fz, dt_z = _timed(lambda: read_bag(zpath, fast=True))
+                    fz, dt_z = _timed(partial(read_bag, zpath, fast=True))
                     print(f'  mcap+zstd fast: {dt_z:6.3f} s ({count / dt_z / 1e6:5.2f} M msg/s)')
                     del fz
             _ = path_size

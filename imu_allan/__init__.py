@@ -6,13 +6,32 @@ The ROS-free Python API (SI units, continuous-time coefficients)::
     result = imu_allan.allan_deviation(data, rate_hz)      # (n, A) -> tau, adev, ci_low/high
     model = imu_allan.fit_noise_model(result)              # terms with 68.3 % intervals
     sim = imu_allan.simulate(model.model, n, rate_hz, seed=1)
+
+Names are loaded on first use (PEP 562) so that commands answering ``--help`` or rejecting bad
+input do not pay for importing scipy.
 """
 
-from .core.allan import AllanResult, allan_deviation
-from .core.fit import FittedModel, fit_noise_model
-from .core.model import NoiseModel, thesis_gx3_25_model
-from .core.simulate import simulate
-from .core.units import AXES, IEEE_TERMS
+import importlib
 
-__all__ = ['allan_deviation', 'AllanResult', 'fit_noise_model', 'FittedModel', 'NoiseModel',
-           'thesis_gx3_25_model', 'simulate', 'AXES', 'IEEE_TERMS']
+_API = {
+    'allan_deviation': 'core.allan', 'AllanResult': 'core.allan',
+    'fit_noise_model': 'core.fit', 'FittedModel': 'core.fit',
+    'NoiseModel': 'core.model', 'thesis_gx3_25_model': 'core.model',
+    'simulate': 'core.simulate',
+    'AXES': 'core.units', 'IEEE_TERMS': 'core.units',
+}
+__all__ = sorted(_API)
+
+
+def __getattr__(name):
+    """Import the module that defines ``name`` on first access."""
+    if name not in _API:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    value = getattr(importlib.import_module(f'.{_API[name]}', __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    """List the public API."""
+    return sorted(list(globals()) + __all__)

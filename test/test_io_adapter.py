@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import get_typestore, Stores
 
 from imu_allan.io.bag_reader import _decode_rows
 from imu_allan.io.bag_writer import encode_imu
@@ -28,6 +28,7 @@ def _rosbags_imu(sec, nanosec, w, a, frame_id='imu_link'):
 
 
 def test_rosbags_message_to_row():
+    """A rosbags Imu gives the stamp and the six values in AXES order."""
     msg = _rosbags_imu(12, 340_000_000, (0.1, -0.2, 0.3), (1.0, 2.0, 9.81))
     stamp, row = imu_to_row(msg)
     assert stamp == 12 + 340_000_000 * 1e-9

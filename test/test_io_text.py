@@ -19,6 +19,7 @@ DATA = Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data'
 
 
 def test_csv_round_trip_is_exact(tmp_path):
+    """write_csv -> read_csv gives the same float64 bits, extra columns included."""
     rng = np.random.default_rng(7)
     n = 1234
     data = rng.normal(size=(n, 6)) * np.array([1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1e-2])
@@ -37,6 +38,7 @@ def test_csv_round_trip_is_exact(tmp_path):
 
 
 def test_csv_subset_of_axes_any_order(tmp_path):
+    """A subset of axis columns in any order reads back in AXES order; comments are skipped."""
     path = tmp_path / 'g.csv'
     path.write_text('# a comment\nt,gyro_z,gyro_x\n0.0,3,1\n\n0.01,6,4\n')
     r = read_csv(path)
@@ -46,6 +48,7 @@ def test_csv_subset_of_axes_any_order(tmp_path):
 
 
 def test_csv_header_only_and_one_sample(tmp_path):
+    """A header with no rows (n = 0) and a single row are read; the analyzer decides."""
     path = tmp_path / 'h.csv'
     path.write_text('t,accel_z\n')
     r = read_csv(path)
@@ -70,6 +73,7 @@ def test_csv_header_only_and_one_sample(tmp_path):
     ('t,gyro_x\nnan,1\n', 'line 2, column t: nan'),
 ])
 def test_csv_bad_input(tmp_path, text, message):
+    """Every bad CSV is a one-line InputError naming the file, line and column."""
     path = tmp_path / 'bad.csv'
     path.write_text(text)
     with pytest.raises(InputError) as err:
@@ -80,6 +84,7 @@ def test_csv_bad_input(tmp_path, text, message):
 
 
 def test_csv_missing_and_binary(tmp_path):
+    """A missing file and a binary file are InputErrors."""
     with pytest.raises(InputError, match='no such file'):
         read_csv(tmp_path / 'none.csv')
     path = tmp_path / 'bin.csv'
@@ -113,6 +118,7 @@ Computed gyro bias (x;y;z): = 0.001043793745; 0.004222712480; -0.010834034532
 
 
 def test_thesis_log_parsing(tmp_path):
+    """The thesis figure 4.2 sample: gravity from the header, g -> m/s^2, damaged lines skipped."""
     path = tmp_path / 'imu_log.txt'
     path.write_text(THESIS_LOG)
     s = read_thesis_log(path)
@@ -131,6 +137,7 @@ def test_thesis_log_parsing(tmp_path):
 
 
 def test_thesis_log_default_gravity_and_errors(tmp_path):
+    """No gravity in the header means 9.80665; a file with no data line is an InputError."""
     path = tmp_path / 'plain.txt'
     path.write_text('0.0; 0.0; 1.0; 0.1; 0.2; 0.3; 1000000000\n'
                     '0.0; 0.0; 1.0; 0.1; 0.2; 0.3; 1010000000\n')
@@ -148,6 +155,7 @@ def test_thesis_log_default_gravity_and_errors(tmp_path):
 
 
 def test_detect_and_read_every_format(tmp_path):
+    """Auto-detection by folder, extension and content; explicit formats are checked."""
     s = Samples(t=np.arange(50) / 100.0 + 10.0, data=np.random.default_rng(1).normal(size=(50, 6)))
     csv = tmp_path / 'a.csv'
     write_csv(csv, s)
@@ -187,7 +195,34 @@ def test_detect_and_read_every_format(tmp_path):
 
 @pytest.mark.skipif(not (DATA / 'gx3_25_captures').is_dir(), reason='GX3 captures not found')
 def test_gx3raw_detected_and_dispatched():
+    """A raw 3DM-GX3-25 capture is recognised by its first byte and read by the GX3 reader."""
     path = DATA / 'gx3_25_captures' / '20140313_191853.3dmgx3.log'
     assert detect_format(path) == 'gx3raw'
     s = read_samples(path)
     assert s.n > 50 and s.data.shape[1] == len(s.axes)
+
+
+def test_thesis_log_fast_and_line_paths_agree(tmp_path):
+    """Long logs are parsed in numpy blocks; a damaged block falls back to line parsing.
+
+    Both must give Python's float() of every field and the exact integer stamps.
+    """
+    rng = np.random.default_rng(5)
+    n = 45_000
+    vals = rng.normal(0.0, 0.01, size=(n, 6))
+    ns = 1445776339557671000 + np.arange(n, dtype=np.int64) * 10_000_000
+    lines = ['; '.join(f'{v:.12f}' for v in vals[i]) + f'; {ns[i]}' for i in range(n)]
+    lines[30_123] = '\\\\{' + lines[30_123] + '\\\\}'  # damaged line in the second block
+    path = tmp_path / 'long.txt'
+    path.write_text('gravity modulus at measure location: 9.8\n' + '\n'.join(lines) + '\n')
+    s = read_thesis_log(path)
+    keep = np.ones(n, dtype=bool)
+    keep[30_123] = False
+    expect = np.array([[float(x) for x in ln.split(';')[:6]] for ln in
+                       np.array(lines, dtype=object)[keep]])
+    assert s.n == n - 1
+    assert np.array_equal(s.data[:, :3], expect[:, 3:])
+    assert np.array_equal(s.data[:, 3:], expect[:, :3] * 9.8)
+    sec = ns[keep] // 1_000_000_000
+    assert np.array_equal(s.t, sec + (ns[keep] - sec * 1_000_000_000) * 1e-9)
+    assert s.warnings == ['1 malformed line(s) skipped (line 30125)']

@@ -11,13 +11,13 @@ import os
 from pathlib import Path
 import sys
 
-from ..core.analysis import AnalysisOptions, analyze_samples
-from ..core.units import IEEE_TERMS
+from ..core.units import ALL_TERMS, IEEE_TERMS
 from ..io.errors import InputError
-from ..io.readers import FORMATS, read_samples
-from ..io.report import analysis_to_json, console_summary
-from .common import EXIT_BAD_INPUT, ArgumentParser, guarded
+from .common import ArgumentParser, EXIT_BAD_INPUT, guarded
 from .progress import Progress
+
+# Kept here (not imported from io.readers) so that --help and argument errors need no scipy.
+FORMATS = ('auto', 'rosbag2', 'ros1', 'csv', 'thesis', 'gx3raw')
 
 
 def build_parser():
@@ -74,7 +74,7 @@ def _options(args):
         raise InputError('--min-clusters', 'must be at least 2')
     if args.tau_max is not None and not args.tau_max > 0:
         raise InputError('--tau-max', 'must be > 0')
-    from ..core.units import ALL_TERMS
+    from ..core.analysis import AnalysisOptions
     for term in terms or []:
         if term not in ALL_TERMS:
             raise InputError('--terms', f'unknown term {term!r} (known: {", ".join(ALL_TERMS)})')
@@ -85,6 +85,7 @@ def _options(args):
 
 
 def _denoised_analysis(samples, analysis, options):
+    from ..core.analysis import analyze_samples
     from ..core.denoise import denoise
     from ..io.samples import Samples
     clean = denoise(analysis.data, analysis.rate_hz)
@@ -107,6 +108,9 @@ def _write_denoised_bag(path, fmt, samples, denoised_samples, topic, out_dir):
 
 def run_one(path, args, options, progress=None):
     """Analyse one input; return ``(report dict, console text)``; raise InputError."""
+    from ..core.analysis import analyze_samples
+    from ..io.readers import read_samples
+    from ..io.report import analysis_to_json, console_summary
     step = progress.step if progress else (lambda _name: None)
     step('reading')
     fmt = args.format

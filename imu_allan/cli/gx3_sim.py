@@ -165,7 +165,7 @@ def _f32(values):
 class NoiseSource:
     """Noise rows (gyro rad/s, accel m/s^2) generated block-wise at the current rate."""
 
-    BLOCK_SECONDS = 60.0
+    BLOCK_SECONDS = 20.0
 
     def __init__(self, model, seed):
         """Wrap a NoiseModel and a seed."""
@@ -506,6 +506,10 @@ class Simulator:
         self.term = Terminal(args.link)
         now = time.monotonic()
         self.device = Device(args, self.noise, now)
+        # Generate the first noise block before announcing the port, so the first records
+        # are not late.
+        self.noise.next(self.device.settings.rate_hz)
+        self.noise.i = 0
         self.line_free_at = now
         self.stream_time = 0.0       # seconds spent streaming (drives the fault schedule)
         self.stalled_until = None
@@ -541,12 +545,15 @@ class Simulator:
                 self.truth.row('dropped', code, timer, truth)
                 continue
             status = 'ok'
-            if args.garbage_rate and self.rng.random() < args.garbage_rate:
+            garbage = bool(args.garbage_rate and self.rng.random() < args.garbage_rate)
+            if garbage:
                 junk = bytes(self.rng.choice(np.frombuffer(JUNK_BYTES, np.uint8),
                                              int(self.rng.integers(1, 33))))
                 self.term.write(junk)
                 self.truth.row('garbage', 0, len(junk))
-            if args.corrupt_rate and self.rng.random() < args.corrupt_rate:
+            # Not both on one record: a damaged record right after junk looks like junk to
+            # any framer, which would make the expected counters ambiguous.
+            elif args.corrupt_rate and self.rng.random() < args.corrupt_rate:
                 bad = bytearray(data)
                 bad[int(self.rng.integers(1, len(data) - 2))] ^= int(self.rng.integers(1, 256))
                 data = bytes(bad)

@@ -21,11 +21,6 @@ import numpy as np
 from . import edf as _edf
 from .units import AXES
 
-try:  # numba is the fast path; the numpy reference below is always available
-    import numba
-except ImportError:  # pragma: no cover - numba is a pinned requirement
-    numba = None
-
 #: Fewest non-overlapping clusters allowed at the longest averaging time (tau_max = T / 10).
 DEFAULT_MIN_CLUSTERS = 10
 DEFAULT_POINTS_PER_DECADE = 10
@@ -140,31 +135,42 @@ def avar_reference(data, ms):
     return out
 
 
-if numba is not None:
-    @numba.njit(parallel=True, fastmath=True, cache=True)
-    def _avar_kernel(x, ms):  # pragma: no cover - compiled; compared with avar_reference
-        n_axes, n_phase = x.shape
-        n_tau = ms.shape[0]
-        out = np.empty((n_tau, n_axes))
-        for job in numba.prange(n_axes * n_tau):
-            a = job // n_tau
-            i = job % n_tau
-            m = ms[i]
-            xa = x[a]
-            s = 0.0
-            for k in range(n_phase - 2 * m):
-                d = xa[k + 2 * m] - 2.0 * xa[k + m] + xa[k]
-                s += d * d
-            out[i, a] = s / (2.0 * m * m * (n_phase - 2 * m))
-        return out
+_KERNEL = []
+
+
+def _kernel():
+    """Compile (or load from numba's cache) the parallel AVAR kernel on first use.
+
+    numba is imported here, not at module import, so commands that never compute a deviation
+    (``--help``, bad input) start fast.
+    """
+    if not _KERNEL:
+        import numba
+
+        @numba.njit(parallel=True, fastmath=True, cache=True)
+        def avar_kernel(x, ms):  # pragma: no cover - compiled; compared with avar_reference
+            n_axes, n_phase = x.shape
+            n_tau = ms.shape[0]
+            out = np.empty((n_tau, n_axes))
+            for job in numba.prange(n_axes * n_tau):
+                a = job // n_tau
+                i = job % n_tau
+                m = ms[i]
+                xa = x[a]
+                s = 0.0
+                for k in range(n_phase - 2 * m):
+                    d = xa[k + 2 * m] - 2.0 * xa[k + m] + xa[k]
+                    s += d * d
+                out[i, a] = s / (2.0 * m * m * (n_phase - 2 * m))
+            return out
+        _KERNEL.append(avar_kernel)
+    return _KERNEL[0]
 
 
 def avar_fast(data, ms):
     """Overlapping AVAR like :func:`avar_reference`, compiled and parallel over axes x taus."""
-    if numba is None:
-        return avar_reference(data, ms)
     x = np.ascontiguousarray(_phase(np.asarray(data, dtype=float)).T)
-    return _avar_kernel(x, np.ascontiguousarray(ms, dtype=np.int64))
+    return _kernel()(x, np.ascontiguousarray(ms, dtype=np.int64))
 
 
 # Dominant-term noise identification: unweighted relative fit of the five IEEE shapes, then the

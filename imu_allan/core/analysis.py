@@ -11,14 +11,14 @@ import numpy as np
 
 from ..io.errors import InputError
 from .allan import (
+    allan_deviation,
+    AllanResult,
     DEFAULT_MIN_CLUSTERS,
     DEFAULT_POINTS_PER_DECADE,
-    AllanResult,
-    allan_deviation,
     tau_grid,
 )
-from .fit import FitError, FittedModel, fit_noise_model
-from .preprocess import OutlierReport, TimingReport, check_timing, replace_outliers
+from .fit import fit_noise_model, FitError, FittedModel
+from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
 from .units import is_gyro
 
 #: Motion thresholds on 1-s block means, relative to the record's median: a still MEMS IMU's

@@ -19,11 +19,12 @@ to the data), the workflow
 4. locates the band of averaging times where the data leave the model's band (smoothed |z| > 2
    around the largest excursion);
 5. lets every effect the model lacks compete: each is added and all terms are refitted (a
-   weighted least-squares fit in log-deviation, the same metric as the gap); the winner has the
-   lowest information criterion IC = (T_eff / T) Q + 2 k (Q = sum z^2 after the fit, k the
-   added parameters) and is only accepted if its improvement is significant (a Satterthwaite
-   chi-square test of Delta Q under the correlated null, Bonferroni over the candidates, and for
-   Gauss-Markov / sinusoid also over the T_eff positions their hump could take);
+   weighted least-squares fit in log-deviation, the same metric as the gap); with the effective
+   Akaike criterion AIC = (T_eff / T) Q + 2 k (Q = sum z^2 after the fit, k parameters), the
+   winner is the candidate whose AIC drop per added parameter is largest, and it is only
+   accepted if its improvement is significant (a Satterthwaite chi-square test of Delta Q under
+   the correlated null, Bonferroni over the candidates, and for Gauss-Markov / sinusoid also
+   over the T_eff positions their hump could take);
 6. adds it, refits, re-simulates, re-measures, and repeats until nothing significant is left.
 
 Everything is SI (rad/s, m/s^2, s, Hz) and ROS-free.  ``docs/discrepancy.md`` explains the method
@@ -40,12 +41,12 @@ from scipy.special import digamma, polygamma
 from scipy.stats import chi2
 
 from . import terms as _terms
-from .allan import allan_deviation
+from .allan import allan_deviation, avar_fast
 from .edf import edf_oadev
 from .fit import correlation_matrix
 from .model import ModelError, NoiseModel
 from .simulate import simulate
-from .units import ALL_TERMS, AXES, TERM_PARAMETERS, si_unit
+from .units import ALL_TERMS, AXES, si_unit, TERM_PARAMETERS
 
 #: Default starting terms: the thesis's own model (white noise + bias instability).
 DEFAULT_START = ('white_noise', 'bias_instability')
@@ -286,7 +287,7 @@ class AxisFit:
     at_bound: dict = field(default_factory=dict)
 
 
-class _Problem:
+class FitProblem:
     """Measured ln(adev) of one axis with a fixed reference spread (from the current model)."""
 
     def __init__(self, y, tau, rate_hz, band):
@@ -299,6 +300,15 @@ class _Problem:
         self.t_eff = band.effective_count()
         # the AVAR level each point asks for, used to scale amplitudes and start the fit
         self.target = np.exp(2.0 * (y - self.bias))
+        self._shapes = {}
+
+    def shape(self, term, position=None):
+        """AVAR per unit squared amplitude at this problem's tau (cached for fixed shapes)."""
+        if term in NONLINEAR:
+            return _shape(term, self.tau, self.rate_hz, position)
+        if term not in self._shapes:
+            self._shapes[term] = _shape(term, self.tau, self.rate_hz)
+        return self._shapes[term]
 
     def residual(self, avar):
         return (self.y - 0.5 * np.log(np.maximum(avar, 1e-300)) - self.bias) / self.sd
@@ -311,8 +321,7 @@ class _Problem:
 
 def _nnls_start(prob, names, positions):
     """Relative-error NNLS of squared amplitudes for fixed positions; returns (amps, Q)."""
-    shapes = np.column_stack([_shape(t, prob.tau, prob.rate_hz, positions.get(t))
-                              for t in names])
+    shapes = np.column_stack([prob.shape(t, positions.get(t)) for t in names])
     w = 1.0 / (2.0 * prob.target * prob.sd)
     a = shapes * w[:, None]
     scale = np.linalg.norm(a, axis=0)
@@ -326,7 +335,7 @@ def _nnls_start(prob, names, positions):
 
 
 def fit_terms(prob, names, init=None, hints=None):
-    """Fit ``names`` (all amplitudes and positions free) to a :class:`_Problem`.
+    """Fit ``names`` (all amplitudes and positions free) to a :class:`FitProblem`.
 
     ``init`` ({term: params}) and ``hints`` ({term: position}) seed the search; hump terms are
     started from a grid of positions over the measured span plus the hints.
@@ -358,8 +367,8 @@ def fit_terms(prob, names, init=None, hints=None):
     # parameter vector: ln amplitude per term, then ln position per hump term
     bounds_lo, bounds_hi = [], []
     for t in names:
-        shape = _shape(t, prob.tau, prob.rate_hz,
-                       math.sqrt(np.prod(position_range(t, prob.tau))) if t in nl else None)
+        shape = prob.shape(t, math.sqrt(np.prod(position_range(t, prob.tau)))
+                           if t in nl else None)
         if t in nl:  # amplitude bound from the hump's peak level, position-independent
             peak = float(np.max(shape))
             top = math.sqrt(float(np.max(prob.target)) / peak)
@@ -379,7 +388,7 @@ def fit_terms(prob, names, init=None, hints=None):
         pos = dict(zip(nl, np.exp(theta[len(names):])))
         avar = np.zeros(prob.tau.shape)
         for t, a in zip(names, amps):
-            avar = avar + a * a * _shape(t, prob.tau, prob.rate_hz, pos.get(t))
+            avar = avar + a * a * prob.shape(t, pos.get(t))
         return avar
 
     def fun(theta):
@@ -412,13 +421,20 @@ def fit_terms(prob, names, init=None, hints=None):
     for i, (t, kind) in enumerate(labels):
         pname = TERM_PARAMETERS[t][0 if kind == 'amp' else 1]
         sd = math.sqrt(max(cov[i, i], 0.0)) if np.isfinite(cov[i, i]) else math.inf
-        fit.intervals68.setdefault(t, {})[pname] = (
-            float(math.exp(theta[i] - _Z68 * sd)), float(math.exp(theta[i] + _Z68 * sd)))
-        fit.intervals95.setdefault(t, {})[pname] = (
-            float(math.exp(theta[i] - _Z95 * sd)), float(math.exp(theta[i] + _Z95 * sd)))
+        fit.intervals68.setdefault(t, {})[pname] = _log_interval(theta[i], _Z68 * sd)
+        fit.intervals95.setdefault(t, {})[pname] = _log_interval(theta[i], _Z95 * sd)
         fit.at_bound.setdefault(t, {})[pname] = bool(
             theta[i] - bounds_lo[i] < 1e-2 * span[i] or bounds_hi[i] - theta[i] < 1e-2 * span[i])
     return fit
+
+
+def _log_interval(log_value, half_width):
+    """Interval exp(log_value -+ half_width), clipped to the float range (0 .. 1e300)."""
+    if not math.isfinite(half_width):
+        return 0.0, math.inf
+    lo = math.exp(max(log_value - half_width, -700.0))
+    hi = math.exp(min(log_value + half_width, 690.0))
+    return float(lo), float(hi)
 
 
 def _sandwich(jac, corr):
@@ -469,6 +485,7 @@ class Candidate:
     ic: float
     p_value: float
     significant: bool
+    gain: float = 0.0  # (AIC of the current terms - AIC with the candidate) / k
 
 
 @dataclass
@@ -487,6 +504,7 @@ class Step:
     candidates: list
     index: int = 0
     excursion: tuple = None
+    snapshot: int = 0  # index of the snapshot before the step (the one after is snapshot + 1)
 
     def to_dict(self):
         """Contract fields plus the evidence behind the choice."""
@@ -546,12 +564,12 @@ def _n_params(term):
 
 def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False,
                         gap=None):
-    """Fit every effect the axis lacks; return (candidates sorted by IC, baseline fit).
+    """Fit every effect the axis lacks; return (candidates, best first; baseline fit).
 
     ``current`` is the axis's ``{term: params}``; with ``fixed`` the current parameters came
     from a model file and a pure refit ('recalibration') competes as well.
     """
-    prob = _Problem(y, tau, rate_hz, band)
+    prob = FitProblem(y, tau, rate_hz, band)
     gap = gap or measure_gap(y, band, alpha)
     hints = {'gauss_markov': gap.peak_tau / GM_PEAK, 'sinusoid': SINE_PEAK / gap.peak_tau}
     base_names = list(current)
@@ -576,7 +594,7 @@ def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False
             p = min(1.0, p * max(prob.t_eff, 1.0))
         p_adj = min(1.0, p * n_tests)
         results.append(Candidate(term, fit, delta, k, scale * fit.q + 2.0 * k, p_adj,
-                                 p_adj < alpha))
+                                 p_adj < alpha, (scale * delta - 2.0 * k) / k))
     if fixed and base is not None:
         q_fixed = float(np.sum(prob.residual(band.avar) ** 2))
         delta = q_fixed - base.q
@@ -584,8 +602,9 @@ def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False
         p_adj = min(1.0, p * n_tests)
         k = sum(_n_params(t) for t in base_names)
         results.append(Candidate('recalibration', base, delta, k, scale * base.q + 2.0 * k,
-                                 p_adj, p_adj < alpha))
-    results.sort(key=lambda c: c.ic)
+                                 p_adj, p_adj < alpha, (scale * delta - 2.0 * k) / k))
+    # the effect that lowers the (effective) AIC most per added parameter ranks first
+    results.sort(key=lambda c: -c.gain)
     return results, base
 
 
@@ -666,18 +685,35 @@ def _measured_band(measured, j):
                 0.5 * np.sqrt(polygamma(1, half)))
 
 
-def _bands(model, axes, measured, n_sims, rng):
-    """Analytic bands of every axis pooled with ``n_sims`` simulated runs."""
-    bands = {a: model_band(model.terms.get(a, {}), measured.tau, measured.m,
-                           measured.n_samples, measured.rate_hz) for a in axes}
-    if n_sims > 0:
-        runs = []
-        for _ in range(n_sims):
-            x = simulate(model, measured.n_samples, measured.rate_hz, seed=rng, axes=axes)
-            sim = allan_deviation(x, measured.rate_hz, taus=measured.tau, axes=axes)
-            runs.append(np.log(np.maximum(sim.adev, 1e-300)))
-        runs = np.array(runs)  # (K, T, A)
-        bands = {a: pool_simulations(bands[a], runs[:, :, j]) for j, a in enumerate(axes)}
+def _simulate_axis(axis_terms, axis, measured, n_sims, rng):
+    """ln(adev) of ``n_sims`` simulated runs of one axis through the same estimator (K, T)."""
+    model = NoiseModel({axis: axis_terms}, measured.rate_hz)
+    runs = np.empty((n_sims, measured.tau.size))
+    for k in range(n_sims):
+        x = simulate(model, measured.n_samples, measured.rate_hz, seed=rng, axes=[axis])
+        # the AVAR kernel of allan_deviation itself, on the measured averaging factors
+        runs[k] = 0.5 * np.log(np.maximum(avar_fast(x, measured.m)[:, 0], 1e-300))
+    return runs
+
+
+def _bands(current, axes, measured, n_sims, rng, previous=None):
+    """Analytic bands of every axis pooled with ``n_sims`` simulated runs.
+
+    Axes whose terms did not change since ``previous`` (a dict of bands) keep their bands:
+    re-simulating an unchanged model would only add noise and time.
+    """
+    bands = {}
+    for axis in axes:
+        old = (previous or {}).get(axis)
+        if old is not None and old[0] == current[axis]:
+            bands[axis] = old[1]
+            continue
+        band = model_band(current[axis], measured.tau, measured.m, measured.n_samples,
+                          measured.rate_hz)
+        if n_sims > 0:
+            band = pool_simulations(band, _simulate_axis(current[axis], axis, measured,
+                                                         n_sims, rng))
+        bands[axis] = band
     return bands
 
 
@@ -687,11 +723,11 @@ def start_model(measured, axes, terms, alpha=ALPHA):
     for j, axis in enumerate(axes):
         y = np.log(measured.adev[:, j])
         band = _measured_band(measured, j)
-        fit = fit_terms(_Problem(y, measured.tau, measured.rate_hz, band), list(terms))
+        fit = fit_terms(FitProblem(y, measured.tau, measured.rate_hz, band), list(terms))
         # second pass with the spread the fitted model itself implies
         band = model_band(fit.terms, measured.tau, measured.m, measured.n_samples,
                           measured.rate_hz)
-        fit = fit_terms(_Problem(y, measured.tau, measured.rate_hz, band), list(terms),
+        fit = fit_terms(FitProblem(y, measured.tau, measured.rate_hz, band), list(terms),
                         init=fit.terms)
         out[axis] = fit.terms
     return NoiseModel(out, measured.rate_hz)
@@ -773,8 +809,7 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
     tau = measured.tau
     rng = np.random.default_rng(seed)
     current = {a: dict(initial.terms.get(a, {})) for a in work_axes}
-    model_now = NoiseModel(current, measured.rate_hz)
-    bands = _bands(model_now, work_axes, measured, n_sims, rng)
+    bands = _bands(current, work_axes, measured, n_sims, rng)
     gaps = {a: measure_gap(ys[a], bands[a], alpha) for a in work_axes}
     initial_gaps = dict(gaps)
     snapshots = [Snapshot({a: dict(current[a]) for a in work_axes}, bands, gaps)]
@@ -789,7 +824,7 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
             cands, _ = evaluate_candidates(ys[axis], tau, measured.rate_hz, bands[axis],
                                            current[axis], alpha, axis in fixed, gaps[axis])
             fixed.discard(axis)
-            # lowest information criterion among the significant candidates
+            # largest AIC gain per added parameter among the significant candidates
             winner = next((c for c in cands if c.significant), None)
             if winner is None:
                 open_axes.discard(axis)
@@ -803,17 +838,18 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
             step = Step(axis, winner.effect, shows, g.value, math.nan, params,
                         winner.fit.terms, winner.p_value,
                         _excess_slope(tau, ys[axis], bands[axis], g.tau_range),
-                        [{'effect': c.effect, 'ic': c.ic, 'delta_q': c.delta_q,
+                        [{'effect': c.effect, 'ic': c.ic, 'aic_gain_per_parameter': c.gain,
+                          'delta_q': c.delta_q,
                           'p_value': c.p_value, 'significant': c.significant}
                          for c in cands],
                         index=len([s for s in steps if s.axis == axis]) + 1,
-                        excursion=g.tau_range)
+                        excursion=g.tau_range, snapshot=len(snapshots) - 1)
             current[axis] = {t: dict(p) for t, p in winner.fit.terms.items()}
             pending.append(step)
         if not pending:
             break
-        model_now = NoiseModel(current, measured.rate_hz)
-        bands = _bands(model_now, work_axes, measured, n_sims, rng)
+        previous = {a: (snapshots[-1].terms[a], bands[a]) for a in work_axes}
+        bands = _bands(current, work_axes, measured, n_sims, rng, previous)
         gaps = {a: measure_gap(ys[a], bands[a], alpha) for a in work_axes}
         for step in pending:
             step.gap_after = gaps[step.axis].value

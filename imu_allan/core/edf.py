@@ -12,8 +12,7 @@ frequency-PSD exponent alpha: +2 white PM (quantization), +1 flicker PM, 0 white
 import math
 
 import numpy as np
-from scipy.special import binom
-from scipy.stats import chi2
+from scipy.special import binom, chdtri
 
 #: The 1-sigma (68.27 %) two-sided confidence level used throughout the package.
 CI_LEVEL = math.erf(1.0 / math.sqrt(2.0))
@@ -93,6 +92,7 @@ def chi2_interval(adev, edf, level=CI_LEVEL):
     edf = np.asarray(edf, dtype=float)
     p = (1.0 - level) / 2.0
     with np.errstate(divide='ignore', invalid='ignore'):
-        low = adev * np.sqrt(edf / chi2.ppf(1.0 - p, edf))
-        high = adev * np.sqrt(edf / chi2.ppf(p, edf))
+        # chdtri(k, q) is the chi-square quantile with upper tail q (chi2.ppf(1 - q, k)).
+        low = adev * np.sqrt(edf / chdtri(edf, p))
+        high = adev * np.sqrt(edf / chdtri(edf, 1.0 - p))
     return low, high

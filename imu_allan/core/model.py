@@ -25,7 +25,7 @@ import os
 
 import yaml
 
-from .units import ALL_TERMS, AXES, TERM_PARAMETERS, sensor_of
+from .units import ALL_TERMS, AXES, sensor_of, TERM_PARAMETERS
 
 
 class ModelError(ValueError):

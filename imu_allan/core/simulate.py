@@ -19,8 +19,6 @@ All arrays are float64 with shape ``(n_samples, n_axes)``; units SI (rad/s, m/s^
 import math
 
 import numpy as np
-import scipy.fft
-import scipy.signal
 
 from .model import NoiseModel
 
@@ -36,6 +34,7 @@ def flicker_noise(rng, n, rate_hz, b):
     Shaped white noise in the frequency domain: E|Z_k|^2 = S(f_k) * m * fs gives the discrete
     series the two-sided PSD S (periodogram convention |Y_k|^2 / (m fs)).
     """
+    import scipy.fft
     if b == 0 or n == 0:
         return np.zeros(n)
     m = scipy.fft.next_fast_len(FLICKER_SPAN * n, real=True)
@@ -70,6 +69,7 @@ def simulate_axis(terms, n_samples, rate_hz, rng):
     if 'rate_ramp' in terms:
         out += terms['rate_ramp']['value'] * dt * np.arange(n_samples)
     if 'gauss_markov' in terms:
+        import scipy.signal
         sigma, tau_c = terms['gauss_markov']['sigma'], terms['gauss_markov']['tau_c']
         phi = math.exp(-dt / tau_c)
         drive = sigma * math.sqrt(1.0 - phi * phi) * rng.standard_normal(n_samples)

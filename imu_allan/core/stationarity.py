@@ -10,8 +10,15 @@ is chunked).  A window is *raw-moving* when, on any axis,
   sqrt(2 / w) (w samples per window: that is the standard deviation of the difference of two
   window means of white noise, so ``step_factor`` = 8 is an 8-sigma test; it catches tilts,
   starts and stops that barely change the in-window spread), or
-* the gyro magnitude of its mean exceeds ``gyro_max`` rad/s (a steady turn; no MEMS bias is
-  that large).
+* the gyro magnitude of its mean exceeds ``gyro_max`` rad/s (a fast steady turn; no MEMS
+  bias is that large), or
+* its mean departs from the *still reference* (an exponential average of the means of still
+  windows over ``reference_s`` seconds) by more than ``gyro_delta_max`` rad/s (gyro vector:
+  slow steady turns, slow ramps that the step test misses) or ``accel_delta_max`` m/s^2
+  (accelerometer vector: slow tilts).  When the data stay quiet (no spread or step alarm) but
+  away from the reference for ``settle_s`` seconds (accelerometer only: a new resting pose) or
+  ``reacquire_s`` seconds (gyro: a persistent shift is taken for a bias change after that long),
+  the reference jumps to the new level.
 
 The noise floor of each axis is the ``floor_quantile`` quantile of the standard deviations of
 the last ``floor_windows`` windows (moving or not), so it follows a real change of the noise
@@ -24,6 +31,8 @@ Each decision therefore waits for the next window: the gate delays samples by on
 import math
 
 import numpy as np
+
+_FLOOR_EVERY = 8
 
 
 class StationarityGate:
@@ -39,6 +48,8 @@ class StationarityGate:
         Columns holding angular rate (used for the ``gyro_max`` test).
     window_s, std_factor, step_factor, gyro_max, hold_s, floor_windows, floor_quantile : float
         See the module docstring.  ``gyro_max`` in rad/s, times in s.
+    gyro_delta_max, accel_delta_max, reference_s, settle_s, reacquire_s : float
+        Still-reference test (rad/s, m/s^2, s); see the module docstring.
     min_floor : float
         Lower bound of the floor (units of the samples) so constant or coarsely quantized
         signals do not divide by zero.
@@ -47,7 +58,8 @@ class StationarityGate:
 
     def __init__(self, rate_hz, n_axes=6, gyro_columns=(0, 1, 2), window_s=0.2,
                  std_factor=3.0, step_factor=8.0, gyro_max=0.1, hold_s=1.0,
-                 floor_windows=256, floor_quantile=0.2, min_floor=1e-9):
+                 floor_windows=256, floor_quantile=0.2, min_floor=1e-9, gyro_delta_max=0.01,
+                 accel_delta_max=0.05, reference_s=30.0, settle_s=2.0, reacquire_s=60.0):
         if not rate_hz or rate_hz <= 0:
             raise ValueError('rate_hz must be > 0')
         if window_s <= 0 or std_factor <= 1 or step_factor <= 0 or gyro_max <= 0:
@@ -57,6 +69,9 @@ class StationarityGate:
         self.rate_hz = float(rate_hz)
         self.n_axes = int(n_axes)
         self.gyro_columns = [c for c in gyro_columns if c < self.n_axes]
+        self.accel_columns = [c for c in range(self.n_axes) if c not in self.gyro_columns]
+        self.gyro_delta_max = float(gyro_delta_max)
+        self.accel_delta_max = float(accel_delta_max)
         self.w = max(4, int(round(window_s * rate_hz)))
         self.std_factor = float(std_factor)
         self.step_factor = float(step_factor)
@@ -74,12 +89,20 @@ class StationarityGate:
         self._ring_i = 0
         self._prev_mean = None
         self._since_raw = 10 ** 9  # windows since the last raw-moving one
+        self._n_windows = 0
+        self._floor_cache = None
+        self._ref = None  # still reference (window means)
+        self._ref_alpha = min(1.0, self.w / (reference_s * rate_hz)) if reference_s > 0 else 1.0
+        self._settle_windows = max(1, int(math.ceil(settle_s * rate_hz / self.w)))
+        self._reacquire_windows = max(1, int(math.ceil(reacquire_s * rate_hz / self.w)))
+        self._deviant = 0  # consecutive quiet windows away from the reference
         self.n_decided = 0
         self.n_excluded = 0
 
     def memory_bytes(self):
         """Bytes held in numpy buffers (constant for the life of the gate)."""
-        return self._part.nbytes + self._held.nbytes + self._ring.nbytes
+        return (self._part.nbytes + self._held.nbytes + self._ring.nbytes
+                + self.n_axes * 8)  # + the reference vector
 
     @property
     def excluded_share(self):
@@ -92,32 +115,54 @@ class StationarityGate:
         return self._part_n + (self.w if self._held_raw is not None else 0)
 
     def _floor(self):
-        filled = self._ring[np.isfinite(self._ring[:, 0])]
-        if filled.shape[0] == 0:
-            return None
-        return np.maximum(np.quantile(filled, self.floor_quantile, axis=0), self.min_floor)
+        # The quantile is refreshed every _FLOOR_EVERY windows (counted from the start, so
+        # still independent of chunking): it moves slowly and costs most of the gate's time.
+        if self._floor_cache is None or self._n_windows % _FLOOR_EVERY == 0:
+            filled = self._ring[np.isfinite(self._ring[:, 0])]
+            if filled.shape[0] == 0:
+                return None
+            self._floor_cache = np.maximum(
+                np.quantile(filled, self.floor_quantile, axis=0), self.min_floor)
+        return self._floor_cache
 
-    def _raw_moving(self, window):
-        mean = window.mean(axis=0)
-        std = window.std(axis=0)
+    def _raw_moving(self, mean, std):
         floor = self._floor()
-        moving = False
+        quiet = True
         if self.gyro_columns and np.linalg.norm(mean[self.gyro_columns]) > self.gyro_max:
-            moving = True
+            quiet = False
         if floor is not None:
             if np.any(std > self.std_factor * floor):
-                moving = True
+                quiet = False
             if self._prev_mean is not None:
                 limit = self.step_factor * floor * math.sqrt(2.0 / self.w)
                 if np.any(np.abs(mean - self._prev_mean) > limit):
-                    moving = True
+                    quiet = False
+        if self._ref is None:
+            self._ref = mean.copy()
+        dev = mean - self._ref
+        gyro_off = bool(self.gyro_columns) and (
+            np.linalg.norm(dev[self.gyro_columns]) > self.gyro_delta_max)
+        accel_off = bool(self.accel_columns) and (
+            np.linalg.norm(dev[self.accel_columns]) > self.accel_delta_max)
+        moving = not quiet or gyro_off or accel_off
+        if quiet and (gyro_off or accel_off):
+            self._deviant += 1
+            needed = self._reacquire_windows if gyro_off else self._settle_windows
+            if self._deviant >= needed:
+                self._ref[:] = mean  # a new resting pose (or a real bias change)
+                self._deviant = 0
+        else:
+            self._deviant = 0
+        if not moving:
+            self._ref += self._ref_alpha * dev
         self._prev_mean = mean
         self._ring[self._ring_i] = std
         self._ring_i = (self._ring_i + 1) % self._ring.shape[0]
+        self._n_windows += 1
         return moving
 
-    def _complete_window(self, window, out_data, out_mask):
-        raw = self._raw_moving(window)
+    def _complete_window(self, window, mean, std, out_data, out_mask):
+        raw = self._raw_moving(mean, std)
         if self._held_raw is not None:
             # Decide the held window now that its successor is known.
             self._since_raw = 0 if self._held_raw else self._since_raw + 1
@@ -140,14 +185,29 @@ class StationarityGate:
             block = block[:, None]
         out_data, out_mask = [], []
         i, n = 0, block.shape[0]
-        while i < n:
-            take = min(self.w - self._part_n, n - i)
-            self._part[self._part_n:self._part_n + take] = block[i:i + take]
+        if self._part_n:
+            take = min(self.w - self._part_n, n)
+            self._part[self._part_n:self._part_n + take] = block[:take]
             self._part_n += take
-            i += take
+            i = take
             if self._part_n == self.w:
-                self._complete_window(self._part, out_data, out_mask)
+                # Same reduction layout as the whole-window path below (same rounding).
+                one = self._part.reshape(1, self.w, self.n_axes)
+                self._complete_window(self._part, one.mean(axis=1)[0], one.std(axis=1)[0],
+                                      out_data, out_mask)
                 self._part_n = 0
+        k = (n - i) // self.w
+        if k:
+            # Whole windows straight from the block: statistics for all of them at once.
+            windows = block[i:i + k * self.w].reshape(k, self.w, self.n_axes)
+            means = windows.mean(axis=1)
+            stds = windows.std(axis=1)
+            for j in range(k):
+                self._complete_window(windows[j], means[j], stds[j], out_data, out_mask)
+            i += k * self.w
+        if i < n:
+            self._part[:n - i] = block[i:]
+            self._part_n = n - i
         if not out_data:
             return np.zeros((0, self.n_axes)), np.zeros(0, bool)
         return np.concatenate(out_data), np.concatenate(out_mask)

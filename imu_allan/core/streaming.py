@@ -47,8 +47,8 @@ import math
 
 import numpy as np
 
-from .allan import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, AllanResult
-from .fit import FitError, fit_noise_model
+from .allan import AllanResult, DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE
+from .fit import fit_noise_model, FitError, FittedModel
 from .health import StampMonitor
 from .stationarity import StationarityGate
 from .units import AXES, IEEE_TERMS, is_gyro
@@ -339,12 +339,12 @@ class StreamingAllan:
             return self.ms, self.strides, st.wacc.sum(axis=0), st.wcnt.sum(axis=0)
         return self.ms, self.strides, st.acc.copy(), st.cnt.copy()
 
-    def result(self, window=False, min_clusters=None):
-        """Allan deviation of everything seen (or of the sliding window) as an AllanResult.
+    def snapshot(self, window=False, min_clusters=None):
+        """The reportable factors now: ``(m, avar (T, A), n_eff (T,))``, or None.
 
-        Only factors whose data span ``min_clusters`` x m samples are included; returns None
-        when no factor qualifies yet.  The EDF uses the span each factor's terms cover
-        (count x stride + 2m - 1 samples) as the record length.
+        Only factors whose data span ``min_clusters`` x m samples are included.  ``n_eff`` is
+        the span each factor's terms cover (count x stride + 2m - 1 samples), used as the
+        record length for the EDF.  AVAR in the samples' unit squared.
         """
         ms, strides, acc, cnt = self.sums(window)
         min_clusters = self.min_clusters if min_clusters is None else int(min_clusters)
@@ -354,7 +354,24 @@ class StreamingAllan:
             return None
         m = ms[sel]
         avar = acc[sel] / (2.0 * (m * m * cnt[sel]).astype(float))[:, None]
-        return AllanResult.from_avar(m, avar, n_eff[sel][:, None], self.rate_hz, self.axes)
+        return m, avar, n_eff[sel]
+
+    def result_from(self, snapshot, columns=None):
+        """An AllanResult (EDF, intervals) of a :meth:`snapshot`, optionally some columns."""
+        if snapshot is None:
+            return None
+        m, avar, n_eff = snapshot
+        columns = range(len(self.axes)) if columns is None else columns
+        columns = list(columns)
+        return AllanResult.from_avar(m, avar[:, columns], n_eff[:, None], self.rate_hz,
+                                     [self.axes[j] for j in columns])
+
+    def result(self, window=False, min_clusters=None):
+        """Allan deviation of everything seen (or of the sliding window) as an AllanResult.
+
+        None when no factor has enough data yet (see :meth:`snapshot`).
+        """
+        return self.result_from(self.snapshot(window, min_clusters))
 
 
 def coefficient_table(fitted, axes=AXES):
@@ -474,6 +491,65 @@ class OnlineAllan:
             return fit_noise_model(result, terms=self.terms)
         except FitError:
             return None
+
+
+class StagedEstimate:
+    """One estimate-and-fit cycle of an :class:`OnlineAllan`, in short steps.
+
+    The sums are frozen when the cycle starts; each :meth:`step` then does one axis's EDF and
+    intervals or one axis's fit (a few tens of ms), so a node can interleave them with taking
+    messages instead of blocking for the whole cycle.  Axes are independent in both, so the
+    final :attr:`result` and :attr:`fitted` equal ``pipeline.result()`` and
+    ``pipeline.fit(...)`` on the frozen data.
+    """
+
+    def __init__(self, pipeline, window=False):
+        self.pipeline = pipeline
+        self.snapshot = pipeline.estimator.snapshot(window)
+        self.result = None
+        self.fitted = None
+        self._parts = {}
+        self._fits = {}
+        n_axes = len(pipeline.axes)
+        self._queue = ([] if self.snapshot is None else
+                       [(kind, j) for j in range(n_axes) for kind in ('result', 'fit')])
+
+    @property
+    def done(self):
+        """True when every step has run."""
+        return not self._queue
+
+    def step(self):
+        """Run the next step; return :attr:`done`."""
+        if not self._queue:
+            return True
+        kind, j = self._queue.pop(0)
+        est = self.pipeline.estimator
+        if kind == 'result':
+            self._parts[j] = est.result_from(self.snapshot, [j])
+        else:
+            fitted = self.pipeline.fit(self._parts[j])
+            if fitted is not None:
+                self._fits.update(fitted.fits)
+        if not self._queue:
+            self._finish()
+        return self.done
+
+    def _finish(self):
+        parts = [self._parts[j] for j in sorted(self._parts)]
+        if not parts:
+            return
+        first = parts[0]
+
+        def stack(name):
+            return np.concatenate([getattr(p, name) for p in parts], axis=1)
+        self.result = AllanResult(first.tau, first.m, stack('avar'), stack('adev'),
+                                  stack('ci_low'), stack('ci_high'), stack('edf'),
+                                  stack('alpha'), tuple(self.pipeline.axes), first.rate_hz,
+                                  first.n_samples)
+        if self._fits:
+            fits = {a: self._fits[a] for a in self.pipeline.axes if a in self._fits}
+            self.fitted = FittedModel(fits, first.rate_hz, self.result)
 
 
 class _TagDelay:

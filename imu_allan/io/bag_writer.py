@@ -126,14 +126,15 @@ def write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', frame_id
     frame_id : str
         Header frame id of every message.
     extra_topics : dict, optional
-        ``{topic: (msgtype, [(stamp_ns, message object), ...])}``: more connections, messages
-        built with the matching rosbags typestore (ROS2_JAZZY, or ROS1_NOETIC for ``ros1``);
-        an empty list makes a topic without messages.
+        More topics: ``{topic: Samples}`` (written as Imu like the main topic) or
+        ``{topic: (msgtype, [(stamp_ns, message object), ...])}`` with messages built with the
+        matching rosbags typestore (ROS2_JAZZY, or ROS1_NOETIC for ``ros1``); an empty list
+        makes a topic without messages.
     compress : bool
         zstd chunk compression (MCAP only).
 
     """
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
     if storage not in STORAGES:
         raise InputError('storage', f'unknown storage {storage!r} (one of {", ".join(STORAGES)})')
     p = _check_new(path)
@@ -154,28 +155,32 @@ def write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', frame_id
             writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         serialize = ts.serialize_cdr
     with writer:
-        conn = writer.add_connection(topic, IMU_TYPE, typestore=ts)
-        extra = []
-        for name, (msgtype, msgs) in extra_topics.items():
+        streams = [(writer.add_connection(topic, IMU_TYPE, typestore=ts), stamp_ns, rows)]
+        for name, value in extra_topics.items():
+            if hasattr(value, 't') and hasattr(value, 'data'):
+                c = writer.add_connection(name, IMU_TYPE, typestore=ts)
+                r, st = encode_imu(value.t, _six_columns(value), frame_id, ros1=ros1)
+                streams.append((c, st, r))
+                continue
+            msgtype, msgs = value
             c = writer.add_connection(name, msgtype, typestore=ts)
-            extra += [(int(s), c, serialize(m, msgtype)) for s, m in msgs]
-        extra.sort(key=lambda x: x[0])
-        _write_merged(writer, conn, rows, stamp_ns, extra)
+            st = np.array([int(x) for x, _ in msgs], dtype=np.int64)
+            streams.append((c, st, [serialize(m, msgtype) for _, m in msgs]))
+        _write_merged(writer, streams)
     return p
 
 
-def _write_merged(writer, conn, rows, stamp_ns, extra):
-    """Write the Imu rows and the extra (stamp_ns, connection, bytes) in receive-time order."""
+def _write_merged(writer, streams):
+    """Write (connection, stamps_ns, rows) streams in receive-time order (ties: stream order)."""
+    stamps = np.concatenate([st for _, st, _ in streams])
+    which = np.concatenate([np.full(st.shape[0], k) for k, (_, st, _) in enumerate(streams)])
+    index = np.concatenate([np.arange(st.shape[0]) for _, st, _ in streams])
+    order = np.lexsort((which, stamps))
     write = writer.write
-    j = 0
-    stamps = stamp_ns.tolist()
-    for i, s in enumerate(stamps):
-        while j < len(extra) and extra[j][0] < s:
-            write(extra[j][1], extra[j][0], extra[j][2])
-            j += 1
-        write(conn, s, rows[i].tobytes())
-    for s, c, raw in extra[j:]:
-        write(c, s, raw)
+    for s, k, i in zip(stamps[order].tolist(), which[order].tolist(), index[order].tolist()):
+        conn, _, rows = streams[k]
+        row = rows[i]
+        write(conn, s, row if isinstance(row, bytes) else row.tobytes())
 
 
 def copy_bag_with_topic(src, dst, topic, samples, frame_id='imu_link', compress=False):
@@ -250,13 +255,13 @@ def copy_bag_with_topic(src, dst, topic, samples, frame_id='imu_link', compress=
 
 
 def _jazzy():
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
     return get_typestore(Stores.ROS2_JAZZY)
 
 
 def _ros2_store_for(ros1_store):
     """Typestore for ROS 1 types written as ROS 2: Jazzy definitions win (Header without seq)."""
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
     store = get_typestore(Stores.EMPTY)
     store.register({**ros1_store.fielddefs, **_jazzy().fielddefs})
     return store

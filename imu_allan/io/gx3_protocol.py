@@ -526,3 +526,41 @@ class TimerUnwrapper:
             self.last_step = value - self.last
         self.last_raw, self.last = raw, value
         return value
+
+
+def matrix_to_quaternion(matrix):
+    """Quaternions ``(n, 4)`` as ``x, y, z, w`` of the device orientation matrices.
+
+    ``matrix`` has shape ``(n, 9)`` (row-major M, as sent) or ``(n, 3, 3)``.  M maps earth to
+    sensor (``v_sensor = M v_earth``), so the sensor's orientation in the earth frame is the
+    rotation ``M^T``; that is what the quaternion describes (w >= 0, unit norm).
+    """
+    m = np.asarray(matrix, dtype=np.float64).reshape(-1, 3, 3)
+    r = np.transpose(m, (0, 2, 1))
+    r00, r01, r02 = r[:, 0, 0], r[:, 0, 1], r[:, 0, 2]
+    r10, r11, r12 = r[:, 1, 0], r[:, 1, 1], r[:, 1, 2]
+    r20, r21, r22 = r[:, 2, 0], r[:, 2, 1], r[:, 2, 2]
+    traces = np.stack([1 + r00 + r11 + r22, 1 + r00 - r11 - r22,
+                       1 - r00 + r11 - r22, 1 - r00 - r11 + r22], axis=1)
+    k = np.argmax(traces, axis=1)
+    s = 0.5 * np.sqrt(np.maximum(traces[np.arange(len(k)), k], 1e-300))
+    q = np.empty((len(k), 4))
+    # Shepperd's method: divide by the largest component for numerical stability.
+    cand = {
+        0: (r21 - r12, r02 - r20, r10 - r01, None),
+        1: (None, r01 + r10, r02 + r20, r21 - r12),
+        2: (r01 + r10, None, r12 + r21, r02 - r20),
+        3: (r02 + r20, r12 + r21, None, r10 - r01),
+    }
+    for case, (a, b, c, d) in cand.items():
+        sel = k == case
+        if not np.any(sel):
+            continue
+        big = s[sel]
+        parts = [a, b, c, d]
+        big_index = 3 if case == 0 else case - 1
+        for j in range(4):
+            q[sel, j] = big if j == big_index else parts[j][sel] / (4.0 * big)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 3] < 0] *= -1.0
+    return q

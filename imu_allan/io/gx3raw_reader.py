@@ -14,12 +14,11 @@ columns ``mag_x, mag_y, mag_z``.
 
 import numpy as np
 
+from ..core.units import AXES, GYRO_AXES, STANDARD_GRAVITY
 from .errors import InputError
-from .gx3_protocol import (decode_records, GAUSS_TO_TESLA, TICKS_PER_SECOND,
-                           TimerUnwrapper)
+from .gx3_protocol import GAUSS_TO_TESLA, TICKS_PER_SECOND, TimerUnwrapper, decode_records
 from .gx3_stream import StreamParser
 from .samples import Samples
-from ..core.units import AXES, GYRO_AXES, STANDARD_GRAVITY
 
 #: Record codes usable as IMU samples, best first: code -> axes it provides.
 SAMPLE_CODES = {

@@ -8,7 +8,7 @@ signatures, the first text lines, the GX3 command bytes 0xCB/0xC2/0xCF).
 
 from pathlib import Path
 
-from .bag_reader import MCAP_MAGIC, ROS1_MAGIC, SQLITE_MAGIC, _bag_kind, read_bag
+from .bag_reader import _bag_kind, MCAP_MAGIC, read_bag, ROS1_MAGIC, SQLITE_MAGIC
 from .csv_samples import read_csv
 from .errors import InputError
 from .thesis_log import looks_like_thesis_log, read_thesis_log

@@ -145,6 +145,7 @@ class TimeSync:
         self.window = window
         self.jump_threshold = jump_threshold
         self.jumps = 0
+        self.epoch = None
         self.reset()
 
     def reset(self):
@@ -154,9 +155,16 @@ class TimeSync:
         self.minima = deque()
 
     def stamps(self, device_s, host_s):
-        """Host-clock stamps (s) for device times ``device_s`` received at ``host_s``."""
+        """Host-clock stamps, integer ns, for device times ``device_s`` received at ``host_s``.
+
+        Internally times are relative to a whole-second epoch of the host clock, so float64
+        keeps sub-nanosecond resolution (absolute epoch seconds would round to 0.24 us).
+        """
         device_s = np.asarray(device_s, dtype=np.float64)
-        lat = np.asarray(host_s, dtype=np.float64) - device_s
+        host_s = np.asarray(host_s, dtype=np.float64)
+        if self.epoch is None:
+            self.epoch = int(math.floor(host_s[0]))
+        lat = (host_s - self.epoch) - device_s
         batch_min = float(lat.min())
         end = float(device_s[-1])
         self.minima.append((end, batch_min))
@@ -173,7 +181,7 @@ class TimeSync:
         offsets = self.offset + np.clip(target - self.offset, -allowed, allowed)
         self.offset = float(offsets[-1])
         self.last_device = end
-        return device_s + offsets
+        return np.round((device_s + offsets) * 1e9).astype(np.int64) + self.epoch * 10**9
 
 
 #: Driver modes -> streamed data command.
@@ -231,7 +239,7 @@ class SessionStats:
         self.setup_failures = 0
         self.timer_resets = 0
         self.rollovers = 0
-        self.other_packets = 0
+        self.internal_errors = 0
 
 
 class Gx3Session:
@@ -310,12 +318,13 @@ class Gx3Session:
                         else:
                             failures += 1
                             self.stats.setup_failures += 1
-                            if failures >= 3:
-                                # The port may be a stale handle of a replaced device.
-                                self.log('warn', f'{self.link.port}: no answer after '
-                                                 f'{failures} attempts, reopening the port')
-                                self.link.close()
-                            self._wait(self.backoff.next())
+                            # Keep reading while backing off: a device that resumes on its
+                            # own (end of a stall) is taken as it comes, nothing is lost.
+                            if self._idle(self.backoff.next()):
+                                needs_setup, failures = False, 0
+                                last_data = time.monotonic()
+                                self.state = 'streaming'
+                                self.log('info', f'{self.link.port}: streaming again')
                             continue
                     got = self._pump()
                     now = time.monotonic()
@@ -337,8 +346,23 @@ class Gx3Session:
                     self._wait(self.poll_interval)
                 except LinkError as exc:
                     self._lost(str(exc))
+                except Exception as exc:  # noqa: B902 - a bug must not end the data stream
+                    self.stats.internal_errors += 1
+                    self._lost(f'{self.link.port}: internal error {type(exc).__name__}: '
+                               f'{exc}')
         finally:
             self._shutdown()
+
+    def _idle(self, seconds):
+        """Wait ``seconds`` while still reading; return True if data records arrived."""
+        end = time.monotonic() + seconds
+        got = 0
+        while not self._stop.is_set() and time.monotonic() < end:
+            got += self._pump()
+            if got:
+                return True
+            self._wait(self.poll_interval)
+        return False
 
     def _open(self):
         try:

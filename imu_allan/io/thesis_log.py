@@ -37,6 +37,43 @@ _DATA_COLON = _line_pattern(':')
 _GRAVITY = re.compile(r'gravity modulus at measure location\s*:?\s*(' + _NUM + ')', re.I)
 
 
+_BLOCK = 20_000  # lines parsed per numpy call; a block with a damaged line is parsed line by line
+_ROW = np.dtype([('v', '<f8', (6,)), ('ns', '<i8')])
+
+
+def _parse_block_fast(block):
+    """Parse a block of well-formed lines with numpy; None if any line is not."""
+    body = [ln for ln in block if ln.strip()]
+    if not body:
+        return np.zeros((0, 6)), np.zeros(0, dtype=np.int64)
+    try:
+        rows = np.loadtxt(body, delimiter=';', dtype=_ROW, ndmin=1)
+    except ValueError:
+        return None
+    if not np.isfinite(rows['v']).all():
+        return None  # 'nan' or 'inf' text: the line-by-line parser counts such lines as damaged
+    return rows['v'], rows['ns']
+
+
+def _parse_block_slow(block, first_lineno):
+    """Parse a block line by line; return ((values, ns), bad line numbers, ':' lines)."""
+    rows, bad, colon = [], [], 0
+    for lineno, ln in enumerate(block, start=first_lineno):
+        mt = _DATA.match(ln)
+        if mt is None:
+            mt = _DATA_COLON.match(ln)
+            if mt is not None:
+                colon += 1
+        if mt is None:
+            if ln.strip():
+                bad.append(lineno)
+            continue
+        rows.append(mt.groups())
+    values = np.array([r[:6] for r in rows], dtype=np.float64).reshape(len(rows), 6)
+    ns = np.array([int(r[6]) for r in rows], dtype=np.int64)
+    return (values, ns), bad, colon
+
+
 def looks_like_thesis_log(text):
     """Return True if a text sample (the start of a file) looks like a thesis log."""
     if _GRAVITY.search(text) or 'gyro rates(x;y;z)' in text:
@@ -82,25 +119,18 @@ def read_thesis_log(path):
         gravity = float(m.group(1))
         if not 9.7 < gravity < 9.9:
             raise InputError(path, f'implausible local gravity {gravity} m/s^2 in the header')
-    rows = []
-    bad_lines = []
-    colon = 0
-    for lineno, ln in enumerate(lines[first:], start=first + 1):
-        mt = _DATA.match(ln)
-        if mt is None:
-            mt = _DATA_COLON.match(ln)
-            if mt is not None:
-                colon += 1
-        if mt is None:
-            if ln.strip():
-                bad_lines.append(lineno)
-            continue
-        rows.append(mt.groups())
-    values = np.array([r[:6] for r in rows], dtype=np.float64)
-    stamp_ns = np.array([int(r[6]) for r in rows], dtype=np.int64)
-    if not np.isfinite(values).all():
-        bad = int(np.nonzero(~np.isfinite(values).all(axis=1))[0][0])
-        raise InputError(path, f'NaN or infinite value in data row {bad + 1}')
+    values, stamp_ns, bad_lines, colon = [], [], [], 0
+    for start in range(first, len(lines), _BLOCK):
+        block = lines[start:start + _BLOCK]
+        parsed = _parse_block_fast(block)
+        if parsed is None:
+            parsed, bad, n_colon = _parse_block_slow(block, start + 1)
+            bad_lines += bad
+            colon += n_colon
+        values.append(parsed[0])
+        stamp_ns.append(parsed[1])
+    values = np.concatenate(values)
+    stamp_ns = np.concatenate(stamp_ns)
     sec = stamp_ns // 1_000_000_000
     t = sec.astype(np.float64) + (stamp_ns - sec * 1_000_000_000).astype(np.float64) * 1e-9
     data = np.empty((values.shape[0], 6))

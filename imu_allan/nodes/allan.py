@@ -1,0 +1,364 @@
+"""allan: live Allan deviation and noise coefficients of an IMU stream, with health diagnostics.
+
+Subscribes ``imu/data_raw`` (sensor_msgs/Imu, sensor-data QoS with a deep queue, overridable)
+and publishes every ``publish_period`` seconds:
+
+* ``imu/allan_coeffs`` (std_msgs/Float64MultiArray): dims ``axis`` (6) x ``term`` (5:
+  quantization, white_noise, bias_instability, rate_random_walk, rate_ramp) x ``stat`` (3:
+  value, ci_low, ci_high; 68.3 %), row-major, data_offset 0, SI units, NaN where a term is not
+  detected;
+* ``imu/allan_deviation`` (std_msgs/Float64MultiArray): dims ``row`` (7: tau, gyro_x .. accel_z)
+  x ``tau`` (T);
+* ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share) and each axis
+  against the noise budget (OK / WARN / ERROR / STALE).
+
+The numerics are :class:`imu_allan.core.streaming.OnlineAllan` (stamp checks, stationarity
+gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
+code, so the numbers agree for the same samples.  Messages are not handled one by one: the
+subscription sits in a callback group the executor never waits on, and a timer takes the queued
+messages in batches (the executor costs about 200 us per message at 1 kHz otherwise).
+"""
+
+import os
+
+# One BLAS thread: the fit's small triangular solves run 10x slower when OpenBLAS spreads them
+# over cores that other processes use (measured here); must precede the first numpy import.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
+import math  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+from ..core import health as hm  # noqa: E402
+from ..core.model import ModelError, NoiseModel  # noqa: E402
+from ..core.streaming import (  # noqa: E402
+    coefficient_table,
+    deviation_table,
+    OnlineAllan,
+    StagedEstimate,
+)
+from ..core.units import AXES, TERM_PARAMETERS  # noqa: E402
+from ..io.errors import InputError  # noqa: E402
+from ..io.imu_adapter import imus_to_arrays  # noqa: E402
+from .node_utils import (  # noqa: E402
+    descriptor,
+    diagnostic_status,
+    float_range,
+    handle_help,
+    int_range,
+    run_node,
+)
+
+DESCRIPTION = ('Live Allan deviation and noise coefficients (with 68.3 % intervals) of '
+               'imu/data_raw: publishes imu/allan_coeffs, imu/allan_deviation and '
+               '/diagnostics against a noise budget. Bounded memory; moving spans left out.')
+
+#: name, default, description, range (None: no range), read-only
+PARAMETERS = [
+    ('rate_hz', 100.0, 'configured sample rate of imu/data_raw, Hz (tau0 = 1/rate_hz)',
+     (0.1, 10000.0), False),
+    ('publish_period', 10.0, 'seconds between publications (each cycle computes intervals '
+                             'and fits one axis at a time between message drains)',
+     (0.1, 3600.0), False),
+    ('window_s', 0.0, 'sliding window, s: publish the estimate of the last window_s seconds '
+                      '(0 = the whole run)', (0.0, 1.0e7), False),
+    ('max_tau', 10000.0, 'longest averaging time tracked, s (fixes the memory)',
+     (0.001, 1.0e7), False),
+    ('points_per_decade', 10, 'averaging times per decade', (1, 100), False),
+    ('stride_base', 256, 'averaging factors up to this are exact; longer ones use every '
+                         's-th overlapping term (docs/online.md)', (1, 10_000_000), False),
+    ('min_clusters', 10, 'publish an averaging time once the data span min_clusters x tau',
+     (2, 10000), False),
+    ('gate', True, 'leave spans where the IMU moves out of the estimate', None, False),
+    ('gate_window_s', 0.2, 'stationarity gate window, s', (0.005, 60.0), False),
+    ('gate_std_factor', 3.0, 'motion if a window std exceeds this x the noise floor',
+     (1.1, 1000.0), False),
+    ('gate_step_factor', 8.0, 'motion if a window mean jumps by this many sigmas',
+     (0.5, 1000.0), False),
+    ('gate_gyro_max', 0.1, 'motion if the mean angular rate exceeds this, rad/s',
+     (1.0e-6, 100.0), False),
+    ('gate_hold_s', 1.0, 'seconds left out after motion (settling)', (0.0, 600.0), False),
+    ('gap_factor', 1.5, 'a stamp spacing above this many sample intervals is a gap (the '
+                        'phase restarts)', (1.01, 1000.0), False),
+    ('terms', '', 'comma-separated terms to fit (empty: automatic among the five IEEE '
+                  'terms)', None, False),
+    ('budget_file', '', 'noise budget YAML (empty: the packaged 3DM-GX3-25 datasheet '
+                        'budget)', None, False),
+    ('model_file', '', 'noise model YAML for a model-vs-data discrepancy check (optional)',
+     None, False),
+    ('timeout_s', 2.0, 'ERROR on /diagnostics after this many seconds without samples',
+     (0.01, 3600.0), False),
+    ('rate_tolerance', 0.1, 'WARN when the measured rate differs by more than this fraction',
+     (0.0, 10.0), False),
+    ('hardware_id', '', 'hardware_id of the diagnostic statuses', None, False),
+    ('drain_period', 0.05, 'seconds between taking the queued messages (read-only)',
+     (0.001, 1.0), True),
+    ('queue_depth', 5000, 'subscription queue depth, messages (read-only; >= rate x '
+                          'drain_period x a margin)', (10, 1_000_000), True),
+]
+_DEFAULTS = {name: default for name, default, *_ in PARAMETERS}
+#: Longest stretch of publish-cycle work done in one drain callback, s (a step may overrun it).
+STEP_BUDGET_S = 0.02
+# Parameters whose change restarts the estimate.
+_RESTART = {'rate_hz', 'window_s', 'max_tau', 'points_per_decade', 'stride_base',
+            'min_clusters', 'gate', 'gate_window_s', 'gate_std_factor', 'gate_step_factor',
+            'gate_gyro_max', 'gate_hold_s', 'gap_factor'}
+
+
+def parse_terms(text):
+    """Parse the ``terms`` parameter: None (automatic) or a list of known term names."""
+    names = [t.strip() for t in str(text).split(',') if t.strip()]
+    unknown = [t for t in names if t not in TERM_PARAMETERS]
+    if unknown:
+        raise InputError('terms', f'unknown noise term(s) {", ".join(unknown)} '
+                                  f'(known: {", ".join(TERM_PARAMETERS)})')
+    return names or None
+
+
+def pipeline_options(p):
+    """:class:`OnlineAllan` keyword arguments from a parameter dictionary."""
+    gate_options = {'window_s': p['gate_window_s'], 'std_factor': p['gate_std_factor'],
+                    'step_factor': p['gate_step_factor'], 'gyro_max': p['gate_gyro_max'],
+                    'hold_s': p['gate_hold_s']}
+    return {'rate_hz': p['rate_hz'], 'gate': p['gate'], 'gap_factor': p['gap_factor'],
+            'terms': parse_terms(p['terms']), 'gate_options': gate_options,
+            'max_tau': p['max_tau'], 'points_per_decade': p['points_per_decade'],
+            'stride_base': p['stride_base'], 'min_clusters': p['min_clusters'],
+            'window_s': p['window_s']}
+
+
+def check_parameters(p):
+    """Cross-field checks on a full parameter dictionary; raise InputError with the reason."""
+    if p['max_tau'] * p['rate_hz'] < 1.0:
+        raise InputError('max_tau', 'shorter than one sample interval')
+    if p['window_s'] and p['window_s'] * p['rate_hz'] < 2 * p['min_clusters']:
+        raise InputError('window_s', f'too short: needs at least {2 * p["min_clusters"]} '
+                                     f'samples')
+    if p['gate_window_s'] * p['rate_hz'] < 4:
+        raise InputError('gate_window_s', 'must span at least 4 samples')
+    parse_terms(p['terms'])
+    hm.NoiseBudget.from_yaml(p['budget_file'] or None)
+    if p['model_file']:
+        try:
+            NoiseModel.from_yaml(p['model_file'])
+        except ModelError as exc:
+            raise InputError('model_file', str(exc)) from None
+
+
+def multiarray(table, labels):
+    """A row-major ``std_msgs/Float64MultiArray`` of a numpy array with dimension labels."""
+    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+    msg = Float64MultiArray()
+    stride = int(table.size)
+    for label, size in zip(labels, table.shape):
+        msg.layout.dim.append(MultiArrayDimension(label=label, size=int(size), stride=stride))
+        stride = stride // int(size) if size else 0
+    msg.layout.data_offset = 0
+    msg.data = table.astype(float).ravel().tolist()
+    return msg
+
+
+def main(args=None):
+    """Entry point ``allan``."""
+    handle_help('allan', DESCRIPTION, [(n, d, t) for n, d, t, *_ in PARAMETERS])
+    from rclpy.exceptions import InvalidParameterValueException
+    try:
+        run_node(AllanNode, args)
+    except (InputError, InvalidParameterValueException) as exc:
+        # Bad parameters: one line naming the parameter, no traceback, exit status 2.
+        print(f'allan: {exc}', file=sys.stderr)
+        sys.exit(2)
+
+
+def _make_node_class():
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rcl_interfaces.msg import SetParametersResult
+    from rclpy.callback_groups import CallbackGroup
+    from rclpy.node import Node
+    from rclpy.qos import (
+        qos_profile_sensor_data,
+        QoSDurabilityPolicy,
+        QoSHistoryPolicy,
+        QoSProfile,
+    )
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+    from sensor_msgs.msg import Imu
+    from std_msgs.msg import Float64MultiArray
+
+    class PolledGroup(CallbackGroup):
+        """A callback group the executor never runs: its subscription is drained by a timer."""
+
+        def can_execute(self, entity):
+            return False
+
+        def beginning_execution(self, entity):
+            return False
+
+        def ending_execution(self, entity):
+            pass
+
+    class Node_(Node):
+        def __init__(self):
+            super().__init__('allan')
+            for name, default, text, rng, read_only in PARAMETERS:
+                kwargs = {}
+                if rng is not None and isinstance(default, float):
+                    kwargs['floating_point_range'] = float_range(*rng)
+                elif rng is not None and isinstance(default, int):
+                    kwargs['integer_range'] = int_range(*rng)
+                self.declare_parameter(name, default,
+                                       descriptor(text, read_only=read_only, **kwargs))
+            self.params = {name: self.get_parameter(name).value for name in _DEFAULTS}
+            check_parameters(self.params)  # InputError: main() prints it, exit status 2
+            self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
+            self.model_file = self.params['model_file']
+            self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
+            self.add_on_set_parameters_callback(self._on_set)
+            self.add_post_set_parameters_callback(self._post_set)
+
+            depth = int(self.params['queue_depth'])
+            qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=depth,
+                             reliability=qos_profile_sensor_data.reliability,
+                             durability=QoSDurabilityPolicy.VOLATILE)
+            self._sub = self.create_subscription(
+                Imu, 'imu/data_raw', lambda msg: None, qos, callback_group=PolledGroup(),
+                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            self._max_batch = depth
+            self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
+            self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
+            self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+            self._last_arrival = None
+            self._cycle = None
+            self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
+                               'cycle_wall_s': math.nan}
+            self._drain_timer = self.create_timer(self.params['drain_period'], self.drain)
+            self._publish_timer = self.create_timer(self.params['publish_period'],
+                                                    self.publish)
+            self.get_logger().info(
+                f'waiting for imu/data_raw at {self.params["rate_hz"]:g} Hz; publishing every '
+                f'{self.params["publish_period"]:g} s; budget {self.budget.source}; estimator '
+                f'memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
+
+        # -- parameters ------------------------------------------------------------------
+
+        def _on_set(self, params):
+            new = dict(self.params)
+            for param in params:
+                if param.name in new:
+                    new[param.name] = param.value
+            try:
+                check_parameters(new)
+            except InputError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+            return SetParametersResult(successful=True)
+
+        def _post_set(self, params):
+            changed = {p.name for p in params if p.name in self.params}
+            for param in params:
+                if param.name in self.params:
+                    self.params[param.name] = param.value
+            if changed & _RESTART or 'terms' in changed:
+                if changed & _RESTART:
+                    self.get_logger().info('estimator settings changed: estimate restarted')
+                    self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
+                else:
+                    self.pipeline.terms = parse_terms(self.params['terms'])
+            if 'budget_file' in changed:
+                self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
+            if 'model_file' in changed:
+                self.model_file = self.params['model_file']
+            if 'publish_period' in changed:
+                self._publish_timer.cancel()
+                self.destroy_timer(self._publish_timer)
+                self._publish_timer = self.create_timer(self.params['publish_period'],
+                                                        self.publish)
+
+        # -- work ------------------------------------------------------------------------
+
+        def drain(self):
+            """Take every queued message, feed them in one batch, advance a publish cycle."""
+            sub = self._sub
+            msgs = []
+            with sub.handle:
+                for _ in range(self._max_batch):
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                    if taken is None:
+                        break
+                    msgs.append(taken[0])
+            if msgs:
+                self._last_arrival = time.monotonic()
+                t, data = imus_to_arrays(msgs)
+                self.pipeline.feed(t, data)
+            if self._cycle is not None:
+                self._advance_cycle()
+
+        def publish(self):
+            """Start a publish cycle: freeze the sums; the steps run between drains."""
+            if self._cycle is not None:
+                return  # the previous cycle is still running (publish_period very short)
+            self._cycle = StagedEstimate(self.pipeline, window=self.params['window_s'] > 0)
+            self._cycle_cpu = 0.0
+            self._cycle_max_step = 0.0
+            self._cycle_wall = time.monotonic()
+            self._advance_cycle()
+
+        def _advance_cycle(self):
+            """Run cycle steps for up to STEP_BUDGET_S, then publish once the cycle is done."""
+            start = time.perf_counter()
+            cycle = self._cycle
+            while not cycle.done and time.perf_counter() - start < STEP_BUDGET_S:
+                t0 = time.perf_counter()
+                cycle.step()
+                self._cycle_max_step = max(self._cycle_max_step, time.perf_counter() - t0)
+            if cycle.done:
+                result, fitted = cycle.result, cycle.fitted
+                if result is not None:
+                    self._pub_dev.publish(multiarray(deviation_table(result, AXES),
+                                                     ('row', 'tau')))
+                table = coefficient_table(fitted, AXES) if fitted is not None else None
+                if table is not None:
+                    self._pub_coeffs.publish(multiarray(table, ('axis', 'term', 'stat')))
+                self._cycle = None
+                self._cycle_cpu += time.perf_counter() - start
+                self.last_cycle = {'cycle_total_s': self._cycle_cpu,
+                                   'cycle_max_step_s': self._cycle_max_step,
+                                   'cycle_wall_s': time.monotonic() - self._cycle_wall}
+                self._pub_diag.publish(self._diagnostics(result, table))
+            else:
+                self._cycle_cpu += time.perf_counter() - start
+
+        def _diagnostics(self, result, table):
+            prefix = f'{self.get_name()}: '
+            silence = (time.monotonic() - self._last_arrival
+                       if self._last_arrival is not None else math.inf)
+            p = self.pipeline
+            stream = hm.stream_health(
+                p.monitor, p.monitor.take_recent(), silence, self.params['timeout_s'],
+                self.params['rate_tolerance'], p.excluded_share, name=prefix + 'IMU stream')
+            stream.values.update({
+                'samples_used': p.estimator.n_used,
+                'samples_offered': p.estimator.n_offered,
+                'averaging_times': 0 if result is None else int(result.tau.size),
+                'longest_tau_s': math.nan if result is None else float(result.tau[-1]),
+                'estimator_memory_bytes': p.memory_bytes(),
+                'window_s': self.params['window_s'],
+                'budget_file': self.budget.source,
+                'model_file': self.model_file or '(none)',
+                **self.last_cycle,
+            })
+            records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
+            array = DiagnosticArray()
+            array.header.stamp = self.get_clock().now().to_msg()
+            hw = self.params['hardware_id']
+            for rec in records:
+                array.status.append(diagnostic_status(rec.name, rec.level, rec.message, hw,
+                                                      rec.values))
+            return array
+
+    return Node_
+
+
+def AllanNode():  # noqa: N802 - a factory named like the class it builds
+    """Build the node (rclpy imported lazily so ``--help`` needs no ROS)."""
+    return _make_node_class()()
+

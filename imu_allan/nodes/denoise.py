@@ -1,0 +1,230 @@
+"""denoise: wavelet (or median) denoising of imu/data_raw, republished as imu/data_denoised.
+
+Subscribes ``imu/data_raw`` (sensor-data QoS, deep queue, taken in batches by a timer) and
+publishes ``imu/data_denoised`` (sensor_msgs/Imu): the same messages (header stamps, frame,
+orientation, covariances untouched) with denoised angular velocity and linear acceleration,
+``latency_s`` later at most (``--help`` and docs/online.md give the latency of each setting).
+
+The numerics are :class:`imu_allan.core.denoise.BlockDenoiser`: overlapping blocks, each
+denoised by the batch :func:`imu_allan.core.denoise.denoise`.  With ``noise_source: allan`` the
+per-sample white-noise level comes from the white-noise coefficients on ``imu/allan_coeffs``
+(sigma = N sqrt(rate)); then the output equals the batch denoiser of the whole record with that
+noise level.  With ``mad`` each block estimates its own noise level per wavelet level.
+"""
+
+import os
+
+# One BLAS thread (see nodes/allan.py); must precede the first numpy import.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
+from collections import deque  # noqa: E402
+import sys  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from ..core.denoise import BlockDenoiser, check_options  # noqa: E402
+from ..core.units import AXES, IEEE_TERMS  # noqa: E402
+from ..io.errors import InputError  # noqa: E402
+from ..io.imu_adapter import imus_to_arrays  # noqa: E402
+from .node_utils import descriptor, float_range, handle_help, int_range, run_node  # noqa: E402
+
+DESCRIPTION = ('Wavelet (PyWavelets) or median denoising of imu/data_raw on overlapping blocks '
+               'with bounded latency; publishes imu/data_denoised with the original stamps.')
+
+#: name, default, description, range (None: no range), read-only
+PARAMETERS = [
+    ('rate_hz', 100.0, 'sample rate of imu/data_raw, Hz (block sizes, noise conversion)',
+     (0.1, 10000.0), False),
+    ('method', 'wavelet', 'wavelet or median', None, False),
+    ('wavelet', 'sym8', 'PyWavelets discrete wavelet (sym8 as in the thesis; haar, db4, ...)',
+     None, False),
+    ('level', 4, 'decomposition levels; latency about (filter length - 1) x 2^level samples '
+                 '(sym8: 240 samples at level 4, 61440 at level 12)', (1, 20), False),
+    ('rule', 'universal', 'threshold rule: universal, minimax or sure', None, False),
+    ('mode', 'soft', 'soft or hard thresholding', None, False),
+    ('noise_source', 'mad', 'mad (per block and level) or allan (white-noise coefficient '
+                            'from imu/allan_coeffs)', None, False),
+    ('median_window', 21, 'median filter window, samples', (1, 100001), False),
+    ('hop_s', 0.1, 'output step, s (rounded up to 2^level samples)', (0.0001, 60.0), False),
+    ('drain_period', 0.02, 'seconds between taking the queued messages (read-only)',
+     (0.001, 1.0), True),
+    ('queue_depth', 5000, 'subscription queue depth (read-only)', (10, 1_000_000), True),
+]
+_DEFAULTS = {name: default for name, default, *_ in PARAMETERS}
+_DENOISER = {'rate_hz', 'method', 'wavelet', 'level', 'rule', 'mode', 'median_window', 'hop_s',
+             'noise_source'}
+
+
+def check_parameters(p):
+    """Validate a full parameter dictionary; raise InputError with the reason."""
+    try:
+        check_options(p['method'], p['wavelet'], p['level'], p['rule'], p['mode'],
+                      p['median_window'])
+    except ValueError as exc:
+        text = str(exc)
+        where = next((k for k in ('median_window', 'method', 'wavelet', 'level', 'rule', 'mode')
+                      if k in text), 'parameters')
+        raise InputError(where, text) from None
+    if p['noise_source'] not in ('mad', 'allan'):
+        raise InputError('noise_source', 'must be mad or allan')
+
+
+def make_denoiser(p):
+    """A :class:`BlockDenoiser` for six axes from a parameter dictionary."""
+    return BlockDenoiser(p['rate_hz'], len(AXES), hop_s=p['hop_s'], method=p['method'],
+                         wavelet=p['wavelet'], level=p['level'], rule=p['rule'],
+                         mode=p['mode'], median_window=p['median_window'])
+
+
+def white_noise_from_coeffs(data, layout_sizes):
+    """White-noise coefficient N per axis (6,) from an ``imu/allan_coeffs`` payload, or None."""
+    if tuple(layout_sizes) != (len(AXES), len(IEEE_TERMS), 3):
+        return None
+    table = np.asarray(data, dtype=float).reshape(layout_sizes)
+    n = table[:, IEEE_TERMS.index('white_noise'), 0]
+    return n if np.all(np.isfinite(n)) and np.all(n > 0) else None
+
+
+def main(args=None):
+    """Entry point ``denoise``."""
+    handle_help('denoise', DESCRIPTION, [(n, d, t) for n, d, t, *_ in PARAMETERS])
+    from rclpy.exceptions import InvalidParameterValueException
+    try:
+        run_node(DenoiseNode, args)
+    except (InputError, InvalidParameterValueException) as exc:
+        # Bad parameters: one line naming the parameter, no traceback, exit status 2.
+        print(f'denoise: {exc}', file=sys.stderr)
+        sys.exit(2)
+
+
+def _make_node_class():
+    from rcl_interfaces.msg import SetParametersResult
+    from rclpy.callback_groups import CallbackGroup
+    from rclpy.node import Node
+    from rclpy.qos import (
+        qos_profile_sensor_data,
+        QoSDurabilityPolicy,
+        QoSHistoryPolicy,
+        QoSProfile,
+    )
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+    from sensor_msgs.msg import Imu
+    from std_msgs.msg import Float64MultiArray
+
+    class PolledGroup(CallbackGroup):
+        """A callback group the executor never runs: its subscription is drained by a timer."""
+
+        def can_execute(self, entity):
+            return False
+
+        def beginning_execution(self, entity):
+            return False
+
+        def ending_execution(self, entity):
+            pass
+
+    class Node_(Node):
+        def __init__(self):
+            super().__init__('denoise')
+            for name, default, text, rng, read_only in PARAMETERS:
+                kwargs = {}
+                if rng is not None and isinstance(default, float):
+                    kwargs['floating_point_range'] = float_range(*rng)
+                elif rng is not None and isinstance(default, int):
+                    kwargs['integer_range'] = int_range(*rng)
+                self.declare_parameter(name, default,
+                                       descriptor(text, read_only=read_only, **kwargs))
+            self.params = {name: self.get_parameter(name).value for name in _DEFAULTS}
+            check_parameters(self.params)
+            self.denoiser = make_denoiser(self.params)
+            self._pending = deque()  # messages waiting for their denoised values
+            self._noise = None
+            self.add_on_set_parameters_callback(self._on_set)
+            self.add_post_set_parameters_callback(self._post_set)
+            depth = int(self.params['queue_depth'])
+            qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=depth,
+                             reliability=qos_profile_sensor_data.reliability,
+                             durability=QoSDurabilityPolicy.VOLATILE)
+            overrides = QoSOverridingOptions.with_default_policies()
+            self._sub = self.create_subscription(
+                Imu, 'imu/data_raw', lambda msg: None, qos, callback_group=PolledGroup(),
+                qos_overriding_options=overrides)
+            self._max_batch = depth
+            self._pub = self.create_publisher(
+                Imu, 'imu/data_denoised', qos_profile_sensor_data,
+                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            self._coeff_sub = self.create_subscription(
+                Float64MultiArray, 'imu/allan_coeffs', self._on_coeffs, 10)
+            self._log_latency()
+            self._timer = self.create_timer(self.params['drain_period'], self.drain)
+
+        def _log_latency(self):
+            d = self.denoiser
+            self.get_logger().info(
+                f'{self.params["method"]} denoising, latency up to {d.latency_samples} samples '
+                f'({d.latency_s:.3g} s at {self.params["rate_hz"]:g} Hz)')
+
+        def _on_set(self, params):
+            new = dict(self.params)
+            for param in params:
+                if param.name in new:
+                    new[param.name] = param.value
+            try:
+                check_parameters(new)
+            except InputError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+            return SetParametersResult(successful=True)
+
+        def _post_set(self, params):
+            changed = {p.name for p in params if p.name in self.params}
+            for param in params:
+                if param.name in self.params:
+                    self.params[param.name] = param.value
+            if changed & _DENOISER:
+                # Finish the samples in flight with the old settings, then switch.
+                self._publish_rows(self.denoiser.flush())
+                self.denoiser = make_denoiser(self.params)
+                self._apply_noise()
+                self._log_latency()
+
+        def _on_coeffs(self, msg):
+            sizes = [d.size for d in msg.layout.dim]
+            self._noise = white_noise_from_coeffs(msg.data, sizes)
+            self._apply_noise()
+
+        def _apply_noise(self):
+            if self.params['noise_source'] == 'allan' and self._noise is not None:
+                self.denoiser.set_noise(noise_density=self._noise)
+            else:
+                self.denoiser.set_noise()
+
+        def drain(self):
+            """Take the queued messages, denoise, publish what is ready."""
+            sub = self._sub
+            msgs = []
+            with sub.handle:
+                for _ in range(self._max_batch):
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                    if taken is None:
+                        break
+                    msgs.append(taken[0])
+            if not msgs:
+                return
+            _, data = imus_to_arrays(msgs)
+            self._pending.extend(msgs)
+            self._publish_rows(self.denoiser.push(data))
+
+        def _publish_rows(self, rows):
+            for row in rows:
+                msg = self._pending.popleft()
+                w, a = msg.angular_velocity, msg.linear_acceleration
+                w.x, w.y, w.z, a.x, a.y, a.z = (float(v) for v in row)
+                self._pub.publish(msg)
+
+    return Node_
+
+
+def DenoiseNode():  # noqa: N802 - a factory named like the class it builds
+    """Build the node (rclpy imported lazily so ``--help`` needs no ROS)."""
+    return _make_node_class()()
+

@@ -1,0 +1,49 @@
+"""Shared test fixtures: paths, the built install tree, per-process ROS domain ids."""
+
+import os
+from pathlib import Path
+import subprocess
+import sys
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / 'shared' / 'data'
+EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim')
+
+
+@pytest.fixture(scope='session')
+def shared_data():
+    """The third-party test data folder (tests skip when it is absent)."""
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f'{SHARED_DATA} not present (shared test data)')
+    return SHARED_DATA
+
+
+def executable(name):
+    """Path of a built executable, found the way ``ros2 run imu_allan NAME`` finds it."""
+    from ament_index_python.packages import get_package_prefix
+    prefix = get_package_prefix('imu_allan')
+    path = os.path.join(prefix, 'lib', 'imu_allan', name)
+    if not (os.path.isfile(path) and os.access(path, os.X_OK)):
+        raise FileNotFoundError(f'No executable found: {path}')
+    return path
+
+
+def run_command(name, *args, timeout=120, env=None, **kwargs):
+    """Run a built executable and capture its output (text)."""
+    return subprocess.run([executable(name), *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout, env=env, **kwargs)
+
+
+def ros_env(domain=None):
+    """Environment for a DDS subprocess with its own ROS_DOMAIN_ID."""
+    env = dict(os.environ)
+    env['ROS_DOMAIN_ID'] = str(domain if domain is not None else os.getpid() % 100 + 100)
+    env.setdefault('PYTHONUNBUFFERED', '1')
+    return env
+
+
+def python():
+    """The interpreter running the tests (the venv's)."""
+    return sys.executable

@@ -1,0 +1,126 @@
+"""Overlapping Allan deviation, its averaging-time grid and its confidence intervals.
+
+Oracles: NBS14 10-point data set (allantools' Stable32-checked test, anchors 10.4), the
+Greenhall-Riley EDF values of anchors 10.2, and allantools itself on random data.
+"""
+
+import math
+
+import allantools
+import numpy as np
+import pytest
+
+from imu_allan import allan_deviation
+from imu_allan.core.allan import avar_fast, avar_reference, identify_noise, tau_grid
+from imu_allan.core.edf import chi2_interval, edf_oadev
+
+NBS14_FREQ = [892, 809, 823, 798, 671, 644, 883, 903, 677]
+
+
+def test_nbs14_overlapping_adev_to_1e4():
+    result = allan_deviation(NBS14_FREQ, 1.0, taus=[1.0, 2.0])
+    np.testing.assert_allclose(result.adev[:, 0], [91.22945, 85.95287], rtol=1e-4)
+
+
+def test_nbs14_from_phase_matches():
+    # The same data given as phase (anchors 10.4): differencing it gives the frequencies.
+    phase = [0, 103.11111, 123.22222, 157.33333, 166.44444, 48.55555, -96.33333, -2.22222,
+             111.88889, 0]
+    freq = np.diff(phase) + np.mean(NBS14_FREQ)
+    result = allan_deviation(freq, 1.0, taus=[1.0, 2.0])
+    np.testing.assert_allclose(result.adev[:, 0], [91.22945, 85.95287], rtol=1e-4)
+
+
+def test_fast_path_equals_reference():
+    rng = np.random.default_rng(5)
+    data = rng.standard_normal((50_000, 3)) * [1e-3, 2e-3, 3e-2] + [0.0, 0.1, 9.81]
+    ms = tau_grid(50_000, 20, 4)
+    np.testing.assert_allclose(avar_fast(data, ms), avar_reference(data, ms), rtol=1e-10)
+
+
+def test_agrees_with_allantools_oadev():
+    rng = np.random.default_rng(6)
+    y = rng.standard_normal(20_000) * 0.01 + np.cumsum(rng.standard_normal(20_000)) * 1e-4
+    taus = np.array([0.01, 0.05, 0.3, 1.0, 7.0, 20.0])
+    ours = allan_deviation(y, 100.0, taus=taus)
+    _, theirs, _, _ = allantools.oadev(y, rate=100.0, data_type='freq', taus=taus)
+    np.testing.assert_allclose(ours.adev[:, 0], theirs, rtol=1e-8)
+
+
+def test_offset_does_not_change_adev():
+    # The mean is removed before integration: a 1 g offset must not cost precision.
+    rng = np.random.default_rng(7)
+    y = rng.standard_normal(100_000) * 1e-3
+    a = allan_deviation(y, 100.0).adev
+    b = allan_deviation(y + 9.80665, 100.0).adev
+    np.testing.assert_allclose(a, b, rtol=1e-9)
+
+
+def test_tau_grid_log_spacing_and_cluster_guard():
+    ms = tau_grid(100_000, points_per_decade=10, min_clusters=10)
+    assert ms[0] == 1 and ms[-1] == 10_000
+    assert np.all(np.diff(ms) > 0)
+    ratios = ms[1:] / ms[:-1]
+    assert ratios[-10:].max() < 10 ** 0.11  # ~10 per decade once integers are dense enough
+    dense = tau_grid(100_000, points_per_decade=30, min_clusters=10)
+    assert dense.size > 2 * ms.size
+    assert tau_grid(9, 10, 10).size == 0  # not even one cluster of 10: no averaging time
+
+
+def test_result_shapes_and_axes():
+    data = np.random.default_rng(1).standard_normal((10_000, 6))
+    r = allan_deviation(data, 200.0)
+    t = r.tau.size
+    assert r.adev.shape == r.ci_low.shape == r.ci_high.shape == r.edf.shape == (t, 6)
+    assert r.axes[0] == 'gyro_x' and r.axes[-1] == 'accel_z'
+    np.testing.assert_allclose(r.tau, r.m / 200.0)
+    assert np.all(r.ci_low < r.adev) and np.all(r.adev < r.ci_high)
+
+
+@pytest.mark.parametrize('alpha,n,m,expected', [
+    (0, 1000, 1, 781.25), (0, 1000, 10, 134.93), (0, 1000, 100, 12.80),
+    (0, 100000, 1000, 147.75), (-1, 100000, 1000, 115.54), (-2, 100000, 1000, 91.14),
+    (2, 1000, 10, 506.66)])
+def test_greenhall_edf_oracle_values(alpha, n, m, expected):
+    # Where Greenhall & Riley use a fitted table (J > 100) we sum exactly: 0.1 % apart.
+    assert edf_oadev(alpha, m, n) == pytest.approx(expected, rel=1e-3)
+
+
+def test_edf_matches_allantools_where_both_are_exact():
+    for alpha in (1, 0, -1, -2):
+        for m in (1, 3, 10, 30):
+            theirs = allantools.edf_greenhall(alpha=alpha, d=2, m=m, N=5000,
+                                              overlapping=True, modified=False)
+            assert edf_oadev(alpha, m, 5000) == pytest.approx(theirs, rel=1e-9)
+
+
+def test_chi2_interval_for_edf_100():
+    low, high = chi2_interval(1.0, 100.0)
+    assert low == pytest.approx(0.93619, abs=2e-5)
+    assert high == pytest.approx(1.07892, abs=2e-5)
+
+
+def test_noise_identification_picks_the_dominant_term():
+    tau = np.logspace(-2, 4, 30)  # white up to 100 s, flicker 100-1000 s, random walk after
+    avar = 1e-6 / tau + 1e-8 + 1e-11 * tau
+    alpha = identify_noise(tau, avar[:, None])[:, 0]
+    assert alpha[0] == 0 and alpha[-1] == -2
+    assert -1 in alpha
+
+
+def test_interval_width_shrinks_with_data():
+    rng = np.random.default_rng(2)
+    short = allan_deviation(rng.standard_normal(10_000), 100.0, taus=[1.0])
+    long = allan_deviation(rng.standard_normal(100_000), 100.0, taus=[1.0])
+    width = lambda r: (r.ci_high - r.ci_low)[0, 0] / r.adev[0, 0]  # noqa: E731
+    assert width(long) < width(short) / 2.5  # ~ sqrt(10) narrower
+
+
+def test_white_noise_adev_level_is_unbiased():
+    # density 0.0025 at 400 Hz, 1 h (anchors pitfall 1): the stride-1 estimator gives N at 1 s.
+    rng = np.random.default_rng(3)
+    n = 400 * 3600
+    y = 0.0025 * math.sqrt(400.0) * rng.standard_normal(n)
+    r = allan_deviation(y, 400.0, taus=[1.0])
+    assert r.ci_low[0, 0] < 0.0025 < r.ci_high[0, 0]
+    assert r.adev[0, 0] == pytest.approx(0.0025, rel=0.02)

@@ -1,0 +1,14 @@
+"""Lint as ROS packages do (ament_flake8 + ament_pep257 rules, via ruff; see ruff.toml)."""
+
+from pathlib import Path
+import subprocess
+import sys
+
+from conftest import REPO
+
+
+def test_ruff_flake8_and_pep257_rules():
+    ruff = Path(sys.executable).parent / 'ruff'
+    proc = subprocess.run([str(ruff), 'check', '--no-cache', 'imu_allan', 'test', 'setup.py',
+                           'scripts', 'bench'], cwd=REPO, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
