@@ -20,10 +20,11 @@ import time
 
 import numpy as np
 
-EXTRA = os.environ.get('BENCH_DRIVER_ARGS', '').split()
-
 from imu_allan.io import gx3_protocol as p
 from imu_allan.io.gx3_stream import StreamParser
+
+#: Extra driver arguments (e.g. "-p read_period:=0.01") for experiments.
+EXTRA = os.environ.get('BENCH_DRIVER_ARGS', '').split()
 
 
 def bench_parser(n=100_000):

@@ -40,7 +40,9 @@ def test_round_trip_six_axes_two_hours(name, model, seed):
     time by construction (test_interval_coverage checks that rate over 50 seeds), so here every
     term must lie within three interval half-widths (all of up to 12 pass with probability
     0.9973^12 = 97 % if the intervals are honest; two half-widths would pass only 57 %) and at
-    least half of them inside the 68.3 % interval itself.
+    least a third of them inside the 68.3 % interval itself (with the measured ~65 % coverage,
+    fewer than 4 of 12 happens with probability 0.5 %; "at least half" would fail 10 % of
+    seeds for honest intervals).
     """
     fitted = _round_trip(model, seed)
     inside = total = 0
@@ -59,7 +61,7 @@ def test_round_trip_six_axes_two_hours(name, model, seed):
             assert abs(value - params['value']) <= 3.0 * half, (axis, term, value, lo, hi)
             inside += lo <= params['value'] <= hi
             total += 1
-    assert inside >= total / 2, f'{name}: only {inside} of {total} inside their 68.3 % intervals'
+    assert inside >= total / 3, f'{name}: only {inside} of {total} inside their 68.3 % intervals'
 
 
 def test_interval_coverage_over_50_seeds():

@@ -10,7 +10,7 @@ import yaml
 
 from imu_allan.io import gx3_protocol as p
 from imu_allan.io.errors import InputError
-from imu_allan.io.gx3_stream import StreamParser, parse_bytes
+from imu_allan.io.gx3_stream import parse_bytes, StreamParser
 from imu_allan.io.gx3raw_reader import read_gx3raw
 
 DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..', 'shared', 'data',

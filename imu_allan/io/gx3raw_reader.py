@@ -16,7 +16,7 @@ import numpy as np
 
 from ..core.units import AXES, GYRO_AXES, STANDARD_GRAVITY
 from .errors import InputError
-from .gx3_protocol import GAUSS_TO_TESLA, TICKS_PER_SECOND, TimerUnwrapper, decode_records
+from .gx3_protocol import decode_records, GAUSS_TO_TESLA, TICKS_PER_SECOND, TimerUnwrapper
 from .gx3_stream import StreamParser
 from .samples import Samples
 

@@ -164,6 +164,10 @@ class TimeSync:
         host_s = np.asarray(host_s, dtype=np.float64)
         if self.epoch is None:
             self.epoch = int(math.floor(host_s[0]))
+        if self.last_device is not None and device_s[0] < self.last_device:
+            # The device time went back (timer reset): the old minima mean nothing now.
+            self.reset()
+            self.jumps += 1
         lat = (host_s - self.epoch) - device_s
         batch_min = float(lat.min())
         end = float(device_s[-1])
@@ -171,8 +175,7 @@ class TimeSync:
         while self.minima and self.minima[0][0] < end - self.window:
             self.minima.popleft()
         target = min(m for _, m in self.minima)
-        if self.offset is None or abs(target - self.offset) > self.jump_threshold \
-                or self.last_device is None or device_s[0] < self.last_device:
+        if self.offset is None or abs(target - self.offset) > self.jump_threshold:
             if self.offset is not None:
                 self.jumps += 1
             self.offset = target
