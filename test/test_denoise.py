@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from imu_allan.core.allan import allan_deviation
-from imu_allan.core.denoise import BlockDenoiser, block_geometry, denoise, sure_threshold
+from imu_allan.core.denoise import block_geometry, BlockDenoiser, denoise, sure_threshold
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulate import simulate
 
@@ -110,3 +110,24 @@ def test_sym8_12_levels_drop_white_noise_tenfold_keep_long_tau():
     long = slice(1, None)
     assert np.all(after.adev[long] >= before.ci_low[long])
     assert np.all(after.adev[long] <= before.ci_high[long])
+
+
+def test_noise_from_allan_coeffs_equals_whole_record_batch(signal):
+    """noise_source=allan: the stream equals the whole-record batch with sigma = N sqrt(fs).
+
+    N comes from an imu/allan_coeffs payload; the threshold's n is the block length.
+    """
+    from imu_allan.nodes.denoise import white_noise_from_coeffs
+    table = np.full((6, 5, 3), np.nan)
+    table[:, 1] = (0.1, 0.09, 0.11)  # white_noise row of every axis
+    n = white_noise_from_coeffs(table.ravel().tolist(), (6, 5, 3))
+    np.testing.assert_array_equal(n, np.full(6, 0.1))
+    assert white_noise_from_coeffs([0.0] * 10, (2, 5)) is None
+    table[2, 1, 0] = np.nan
+    assert white_noise_from_coeffs(table.ravel(), (6, 5, 3)) is None  # not detected everywhere
+    bd = BlockDenoiser(RATE, 3, wavelet='sym8', level=4)
+    bd.set_noise(noise_density=n[:3])
+    out = _stream(bd, signal, seed=6)
+    full = denoise(signal, RATE, wavelet='sym8', level=4, sigma=0.1 * np.sqrt(RATE),
+                   n_ref=bd.block_len)
+    np.testing.assert_allclose(out, full[:out.shape[0]], rtol=0, atol=1e-12)

@@ -132,3 +132,17 @@ def test_bad_start_is_a_model_error():
         run_discrepancy(x, RATE, axes=['gyro_x'], model=NoiseModel({'accel_x': BASE}))
     with pytest.raises(ValueError, match='too short'):
         run_discrepancy(x[:40], RATE)
+
+
+def test_model_file_with_a_wrong_value_is_recalibrated_not_extended():
+    """A datasheet white noise 20 % low is a wrong value, not a missing effect."""
+    x = simulate(NoiseModel({'gyro_x': BASE}, RATE), 2 * N, RATE, seed=8)
+    start = NoiseModel({'gyro_x': {'white_noise': {'value': 0.8e-3},
+                                   'bias_instability': {'value': 3e-4}}})
+    result = run_discrepancy(x, RATE, axes=['gyro_x'], model=start, n_sims=1, seed=2)
+    assert result.initial_gaps['gyro_x'].value > 5.0  # 20 % off with EDF ~ 1e4 is glaring
+    assert result.effects('gyro_x') == ['recalibration']
+    step = result.steps[0]
+    lo, hi = step.parameters['white_noise']['value']['ci95']
+    assert lo <= 1e-3 <= hi
+    assert result.final_gaps['gyro_x'].consistent

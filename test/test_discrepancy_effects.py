@@ -16,12 +16,23 @@ measured rates).
 """
 
 import pytest
+from test_discrepancy_cases import (
+    effect_suite,
+    EFFECTS,
+    make_truth,
+    missing_base_suite,
+    N_SIMS,
+    null_suite,
+    records_of,
+    run_case,
+    SETUPS,
+    summarize,
+    summary_table,
+)
 
 from imu_allan.core.discrepancy import run_discrepancy
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulate import simulate
-from test_discrepancy_cases import (effect_suite, missing_base_suite, N_SIMS, null_suite,
-                                    records_of, run_case, summarize, summary_table)
 
 
 @pytest.fixture(scope='module')
@@ -75,6 +86,19 @@ def test_no_effect_adds_nothing(effect_records, null_records):
     # and the gap of the untouched start model is about 1 (not inflated, not collapsed)
     gaps = sorted(r['gap_after'] for r in nulls)
     assert 0.5 < gaps[len(gaps) // 2] < 1.2
+
+
+def test_single_axis_runs_name_each_effect():
+    """Each of the five effects alone on a single axis (one seed per rate): >= 9 of 10 named."""
+    named = []
+    for rate, minutes in SETUPS:
+        for k, effect in enumerate(EFFECTS):
+            truth = make_truth([[effect]], rate, minutes)
+            n = int(round(minutes * 60.0 * rate))
+            data = simulate(truth, n, rate, seed=300 + k, axes=['gyro_x'])
+            result = run_discrepancy(data, rate, axes=['gyro_x'], n_sims=N_SIMS, seed=k)
+            named.append((effect, result.effects('gyro_x')))
+    assert sum(found[:1] == [effect] for effect, found in named) >= 9, named
 
 
 PAIRS = (('quantization', 'rate_random_walk'), ('gauss_markov', 'rate_ramp'),

@@ -348,9 +348,10 @@ def test_corrupt_dropped_and_junk(node, procs, tmp_path):
 
     The checksum, resync and dropped-packet counters match what the simulator did.
     """
+    raw_file = tmp_path / 'stream.gx3raw'
     run = Run(node, procs, tmp_path,
               ['--seed', '21', '--corrupt-rate', '0.04', '--drop-rate', '0.04',
-               '--garbage-rate', '0.04'], {'rate_hz': 200})
+               '--garbage-rate', '0.04'], {'rate_hz': 200, 'record_raw': str(raw_file)})
     run.spin_until(lambda: len(run.raw) >= 500 and run.diags
                    and int(run.last_diag()['published']) >= 450, 40)
     diag = run.last_diag()
@@ -373,6 +374,16 @@ def test_corrupt_dropped_and_junk(node, procs, tmp_path):
     junk_bytes = sum(int(r['timer']) for r in rows[first:pos[-1] + 1]
                      if r['status'] == 'garbage')
     assert int(diag['rejected_bytes']) >= junk_bytes
+    # The recorded raw stream reads back (analyze --format gx3raw) to the same samples.
+    from imu_allan.io.gx3raw_reader import read_gx3raw
+    samples = read_gx3raw(str(raw_file))
+    gyro = [(m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z)
+            for m in run.raw]
+    recorded = [tuple(row) for row in samples.data[:, :3].tolist()]
+    start = recorded.index(gyro[0])
+    assert recorded[start:start + len(gyro)] == gyro
+    assert samples.data[start, 3] == run.raw[0].linear_acceleration.x
+    assert any('bad checksums' in w for w in samples.warnings)
     # Dropped records make timer gaps; the stamps keep the device spacing across them.
     timers = np.array([int(rows[i]['timer']) for i in pos], dtype=np.int64)
     spacing = np.diff([stamp_ns(m) for m in run.raw]) * 1e-9

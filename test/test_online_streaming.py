@@ -6,7 +6,7 @@ import pytest
 from imu_allan.core.allan import allan_deviation
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulate import simulate
-from imu_allan.core.streaming import OnlineAllan, StreamingAllan, factor_grid, online_allan
+from imu_allan.core.streaming import factor_grid, online_allan, OnlineAllan, StreamingAllan
 
 RATE = 100.0
 

@@ -81,12 +81,16 @@ def report_dict(result, source):
     return _clean(out)
 
 
-def _fmt_params(step):
+def _fmt_params(parameters, prefix=''):
+    """``name=value [ci] unit`` for a step's parameters (nested per term for recalibration)."""
     parts = []
-    for name, entry in step.parameters.items():
-        if isinstance(entry, dict) and 'value' in entry:
+    for name, entry in parameters.items():
+        if isinstance(entry, dict) and 'ci' in entry:
             lo, hi = entry['ci']
-            parts.append(f'{name}={entry["value"]:.4g} [{lo:.3g}, {hi:.3g}] {entry["unit"]}')
+            parts.append(f'{prefix}{name}={entry["value"]:.4g} [{lo:.3g}, {hi:.3g}] '
+                         f'{entry["unit"]}')
+        elif isinstance(entry, dict):
+            parts.append(_fmt_params(entry, f'{name}.'))
     return ', '.join(parts)
 
 
@@ -105,7 +109,7 @@ def summary_text(result, source):
             band = (f'{step.tau_range[0]:.3g}-{step.tau_range[1]:.3g} s'
                     if step.tau_range else 'n/a')
             lines.append(f'      + {step.effect:17s} tau {band:>16s}  gap {step.gap_before:.2f}'
-                         f' -> {step.gap_after:.2f}  {_fmt_params(step)}')
+                         f' -> {step.gap_after:.2f}  {_fmt_params(step.parameters)}')
         if not g1.consistent and g1.tau_range:
             lines.append(f'      unexplained between {g1.tau_range[0]:.3g} and '
                          f'{g1.tau_range[1]:.3g} s')
@@ -274,6 +278,7 @@ def main(argv=None):
         return _fail(f'{args.input}: {exc.strerror or exc}')
 
     source = samples.source or args.input
+    result.notes.extend(samples.warnings)
     report = report_dict(result, source)
     if args.out:
         try:

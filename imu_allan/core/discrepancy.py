@@ -824,8 +824,12 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
             cands, _ = evaluate_candidates(ys[axis], tau, measured.rate_hz, bands[axis],
                                            current[axis], alpha, axis in fixed, gaps[axis])
             fixed.discard(axis)
-            # largest AIC gain per added parameter among the significant candidates
-            winner = next((c for c in cands if c.significant), None)
+            # largest AIC gain per added parameter among the significant new effects; a pure
+            # recalibration of a model file's own terms only when no new effect is needed
+            winner = next((c for c in cands if c.significant and c.effect != 'recalibration'),
+                          None)
+            if winner is None:
+                winner = next((c for c in cands if c.significant), None)
             if winner is None:
                 open_axes.discard(axis)
                 continue
@@ -909,7 +913,8 @@ def gap_summary(model, result, alpha=ALPHA):
         if not gap.consistent:
             cands, _ = evaluate_candidates(y, tau, result.rate_hz, band, axis_terms, alpha,
                                            fixed=True, gap=gap)
-            winner = next((c for c in cands if c.significant), None)
+            winner = next((c for c in cands if c.significant and c.effect != 'recalibration'),
+                          None) or next((c for c in cands if c.significant), None)
             if winner is not None:
                 effect = winner.effect
         out[axis] = {'gap': gap.value, 'effect': effect, 'consistent': gap.consistent,

@@ -28,7 +28,7 @@ import numpy as np
 import yaml
 
 from ..io.errors import InputError
-from .units import AXES, IEEE_TERMS, conventional, sensor_of, si_unit
+from .units import AXES, conventional, IEEE_TERMS, sensor_of, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}

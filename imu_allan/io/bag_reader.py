@@ -307,6 +307,7 @@ def _lz4_decompress(data):
 
 
 _DECOMPRESS = {'': bytes, 'zstd': _zstd_decompress, 'lz4': _lz4_decompress}
+_MCAP_OPS = frozenset(range(0x01, 0x11))  # record opcodes of MCAP v0 (0x80-0xFF: private)
 
 
 class _McapScan:
@@ -326,6 +327,7 @@ class _McapScan:
         self.collectors = {}
         self.warnings = []
         self.complete = False
+        self.chunk_offsets = []
 
     def _wanted(self, cid):
         ch = self.channels.get(cid)
@@ -346,6 +348,7 @@ class _McapScan:
         try:
             buf = memoryview(mm)
             try:
+                self._read_summary(buf, size)
                 self._walk(buf, 8, size, top=True)
             except (struct.error, ValueError, IndexError, KeyError) as err:
                 self.warnings.append(f'malformed MCAP record ({_one_line(err)}): '
@@ -361,6 +364,49 @@ class _McapScan:
             except BufferError:
                 pass  # a numpy view still refers to it; the GC closes it later
 
+    def _read_summary(self, buf, size):
+        """Pre-read schemas, channels and chunk offsets from the summary, if the footer is intact.
+
+        With them a damaged first chunk (which holds the channel definitions) or a damaged
+        record header does not cost the rest of the file: the walk resumes at the next chunk.
+        """
+        self.chunk_offsets = []
+        if size < 8 + 37 + 37:
+            return
+        foot = size - 37
+        try:
+            if buf[foot] != 0x02 or bytes(buf[size - 8:size]) != MCAP_MAGIC:
+                return
+            (start,) = struct.unpack_from('<Q', buf, foot + 9)
+            pos = start
+            while 8 < start <= pos < foot:
+                op = buf[pos]
+                (length,) = struct.unpack_from('<Q', buf, pos + 1)
+                if op == 0x03:
+                    (sid,) = struct.unpack_from('<H', buf, pos + 9)
+                    self.schemas.setdefault(sid, self._string(buf, pos + 11)[0])
+                elif op == 0x04:
+                    cid, sid = struct.unpack_from('<HH', buf, pos + 9)
+                    topic, p = self._string(buf, pos + 13)
+                    self.channels.setdefault(
+                        cid, (topic, self.schemas.get(sid, ''), self._string(buf, p)[0]))
+                elif op == 0x08:
+                    self.chunk_offsets.append(struct.unpack_from('<Q', buf, pos + 9 + 16)[0])
+                pos += 9 + length
+        except (struct.error, IndexError, ValueError):
+            pass  # a damaged summary only means no help for the walk
+        self.chunk_offsets.sort()
+
+    def _resync(self, pos, end, problem):
+        """Position of the next indexed chunk after a damaged record, or None (with a warning)."""
+        nxt = next((o for o in getattr(self, 'chunk_offsets', ()) if pos < o < end), None)
+        if nxt is None:
+            self.warnings.append(f'file {problem} at byte {pos} of {end}: rest skipped')
+        else:
+            self.warnings.append(f'damaged record at byte {pos} ({problem}): skipped to the '
+                                 f'next chunk at byte {nxt}')
+        return nxt
+
     def _walk(self, buf, pos, end, top):
         u8 = np.frombuffer(buf, dtype=np.uint8, count=end) if self.collect else None
         unpack_q = struct.Struct('<Q').unpack_from
@@ -374,12 +420,17 @@ class _McapScan:
             op = buf[pos]
             (length,) = unpack_q(buf, pos + 1)
             rec_end = pos + 9 + length
-            if rec_end > end:
-                if top and op == 0x06:
+            if rec_end > end or (top and op not in _MCAP_OPS):
+                if top and op == 0x06 and not any(pos < o < end for o in self.chunk_offsets):
                     self._partial_chunk(buf, pos, end)
-                else:
+                    return
+                if not top:
                     self._truncated(pos, end, where)
-                return
+                    return
+                pos = self._resync(pos, end, 'truncated' if rec_end > end else 'damaged')
+                if pos is None:
+                    return
+                continue
             if op == 0x05:
                 if length < 22:
                     self.warnings.append(f'bad message record at byte {pos}: rest of {where} '
@@ -1500,14 +1551,14 @@ class _Ros1Scan:
                 if end - start != usize:
                     raise ValueError('chunk size mismatch')
                 raw = None
-            if comp == 'bz2':
+            elif comp == 'bz2':
                 import bz2
                 raw = bz2.decompress(buf[start:end])
             elif comp == 'lz4':
                 raw = _lz4_decompress(buf[start:end])
             else:
                 raise ValueError(f'unknown compression {comp!r}')
-            if len(raw) != usize:
+            if raw is not None and len(raw) != usize:
                 raise ValueError('chunk size mismatch')
         except Exception as err:  # any decoding failure means this chunk is unreadable
             self.warnings.append(f'corrupt chunk at byte {pos} skipped ({err})')

@@ -161,10 +161,10 @@ def multiarray(table, labels):
 def main(args=None):
     """Entry point ``allan``."""
     handle_help('allan', DESCRIPTION, [(n, d, t) for n, d, t, *_ in PARAMETERS])
-    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.exceptions import ParameterException
     try:
         run_node(AllanNode, args)
-    except (InputError, InvalidParameterValueException) as exc:
+    except (InputError, ParameterException) as exc:
         # Bad parameters: one line naming the parameter, no traceback, exit status 2.
         print(f'allan: {exc}', file=sys.stderr)
         sys.exit(2)

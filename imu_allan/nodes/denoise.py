@@ -88,10 +88,10 @@ def white_noise_from_coeffs(data, layout_sizes):
 def main(args=None):
     """Entry point ``denoise``."""
     handle_help('denoise', DESCRIPTION, [(n, d, t) for n, d, t, *_ in PARAMETERS])
-    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.exceptions import ParameterException
     try:
         run_node(DenoiseNode, args)
-    except (InputError, InvalidParameterValueException) as exc:
+    except (InputError, ParameterException) as exc:
         # Bad parameters: one line naming the parameter, no traceback, exit status 2.
         print(f'denoise: {exc}', file=sys.stderr)
         sys.exit(2)
