@@ -126,6 +126,12 @@ def test_out_dir_has_every_report_file_and_nothing_half_written(sim_csv, tmp_pat
     worst = max(report['axes'][a]['terms']['white_noise']['value']
                 for a in ('gyro_x', 'gyro_y', 'gyro_z'))
     assert kalibr['gyroscope_noise_density'] == pytest.approx(worst, rel=1e-6)
+    # Kalibr refuses zeros: the undetected random walks are written as 95 % upper limits
+    for key in ('gyroscope_noise_density', 'gyroscope_random_walk',
+                'accelerometer_noise_density', 'accelerometer_random_walk'):
+        assert kalibr[key] > 0
+    assert 'upper limit, not detected' in (out / 'imu.yaml').read_text()
+    assert 'gyroscope_random_walk' in report['kalibr']['upper_limits']
     rows = (out / 'allan_results.csv').read_text().splitlines()
     assert rows[0].startswith('term,unit_gyro,unit_accel,gyro_x,gyro_y,gyro_z,accel_x')
     assert [r.split(',')[0] for r in rows[1:]] == ['quantization', 'white_noise',

@@ -166,3 +166,18 @@ def test_pitfall_random_walk_fitted_jointly_not_over_whole_curve():
                        ['white_noise', 'rate_random_walk'])
         errors.append(fit.terms['rate_random_walk']['value'] / truth['rate_random_walk'] - 1)
     assert abs(np.mean(errors)) < 0.06
+
+
+def test_upper_limit_of_an_undetected_random_walk_covers_the_truth():
+    """The 95 % profile upper limit of K sits above a weak true K in at least 9 of 10 seeds."""
+    from imu_allan.core.fit import upper_limit
+    truth = {'white_noise': 1e-3, 'bias_instability': 5e-5, 'rate_random_walk': 2e-6}
+    model = NoiseModel({'gyro_x': truth})
+    above = 0
+    for seed in range(10):
+        r = allan_deviation(simulate(model, 360_000, 100.0, seed=600 + seed), 100.0)
+        limit = upper_limit(r.tau, r.avar[:, 0], r.edf[:, 0], r.alpha[:, 0], 100.0,
+                            list(truth), 'rate_random_walk')
+        assert math.isfinite(limit) and limit > 0
+        above += limit >= truth['rate_random_walk']
+    assert above >= 9

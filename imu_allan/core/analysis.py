@@ -17,7 +17,7 @@ from .allan import (
     DEFAULT_POINTS_PER_DECADE,
     tau_grid,
 )
-from .fit import fit_noise_model, FitError, FittedModel
+from .fit import fit_noise_model, FitError, FittedModel, upper_limit
 from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
 from .units import is_gyro
 
@@ -61,6 +61,7 @@ class Analysis:
     warnings: list = field(default_factory=list)
     data: np.ndarray = None
     t: np.ndarray = None
+    upper_limits: dict = field(default_factory=dict)
 
 
 def _validate(samples):
@@ -161,6 +162,7 @@ def analyze_samples(samples, options=None):
         fit = fit_noise_model(result, terms=options.terms)
     except FitError as exc:
         raise InputError(where, str(exc)) from None
+    upper = _kalibr_upper_limits(result, fit)
     static, motion = motion_verdict(samples.data, samples.axes, rate)
     if not static:
         moving = [a for a, d in motion.items() if d['moving']]
@@ -169,4 +171,19 @@ def analyze_samples(samples, options=None):
     return Analysis(source=where, axes=tuple(samples.axes), n_samples=n, rate_hz=rate,
                     duration_s=n / rate, timing=timing, outliers=outliers, result=result,
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
-                    t=samples.t)
+                    t=samples.t, upper_limits=upper)
+
+
+def _kalibr_upper_limits(result, fit):
+    """95 % upper limits of N and K on axes where the fit did not detect them (for Kalibr)."""
+    limits = {}
+    for axis in fit.axes:
+        j = result.axis_index(axis)
+        selected = list(fit.model.terms.get(axis, {}))
+        for term in ('white_noise', 'rate_random_walk'):
+            if term not in selected and selected:
+                value = upper_limit(result.tau, result.avar[:, j], result.edf[:, j],
+                                    result.alpha[:, j], result.rate_hz, selected + [term], term)
+                if np.isfinite(value):
+                    limits.setdefault(axis, {})[term] = float(value)
+    return limits

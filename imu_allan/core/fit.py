@@ -94,21 +94,24 @@ class _Problem:
         cov = self.corr * sd[:, None] * sd[None, :]
         return np.linalg.cholesky(cov)
 
-    def solve(self, shapes, iterations=_IRLS_ITERATIONS):
-        """IRLS GLS-NNLS; return (coefficients, chi2, whitened design, whitened residual)."""
+    def solve(self, shapes, iterations=_IRLS_ITERATIONS, offset=0.0):
+        """IRLS GLS-NNLS; return (coefficients, chi2, whitened design).
+
+        ``offset`` is a fixed model part (AVAR per tau) added to ``shapes @ coef``.
+        """
         model = self.avar.copy()
         coef = np.zeros(shapes.shape[1])
+        target = self.avar - offset
         for _ in range(iterations):
-            low = solve_triangular(self.chol(model), np.column_stack([shapes, self.avar]),
+            low = solve_triangular(self.chol(model), np.column_stack([shapes, target]),
                                    lower=True, check_finite=False)
             g, y = low[:, :-1], low[:, -1]
             scale = np.linalg.norm(g, axis=0)
             scale[scale == 0] = 1.0
             coef = nnls(g / scale, y, maxiter=50 * shapes.shape[1])[0] / scale
-            new = shapes @ coef
             # keep weights finite where the model vanishes (e.g. a term pinned at zero)
-            model = np.maximum(new, 1e-3 * self.avar)
-        low = solve_triangular(self.chol(model), np.column_stack([shapes, self.avar]),
+            model = np.maximum(shapes @ coef + offset, 1e-3 * self.avar)
+        low = solve_triangular(self.chol(model), np.column_stack([shapes, target]),
                                lower=True, check_finite=False)
         g, y = low[:, :-1], low[:, -1]
         resid = y - g @ coef
@@ -233,6 +236,38 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None):
             if bic < best_bic:
                 best, best_bic = fit, bic
     return best if best is not None else AxisFit(n_points=problem.tau.size)
+
+
+def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
+    """Largest coefficient of an undetected ``term`` the data allow (profile likelihood).
+
+    The other ``terms`` are refitted for each trial value; the limit is where chi^2 exceeds
+    its minimum by ``delta_chi2`` (4: one-sided ~97.7 %, two-sided 95 %).  Used to give Kalibr,
+    which refuses zeros, an honest bound instead of nothing.  Returns NaN if not bounded.
+    """
+    problem = _Problem(np.asarray(tau, float), np.asarray(avar, float), np.asarray(edf, float),
+                       np.asarray(alpha), rate_hz)
+    others = [t for t in terms if t != term and t in IEEE_TERMS]
+    if problem.tau.size < 2 or not others:
+        return math.nan
+    base = _shape_columns(problem, others, {})
+    extra = _terms.linear_shape(term, problem.tau, rate_hz)
+
+    def chi2(log_c):
+        return problem.solve(base, offset=math.exp(log_c) * extra)[1]
+
+    chi2_min = problem.solve(np.column_stack([base, extra]))[1]
+    hi = math.log(float(np.max(problem.avar / extra)))
+    if chi2(hi) - chi2_min <= delta_chi2:
+        return math.nan
+    lo = hi - 60.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if chi2(mid) - chi2_min <= delta_chi2:
+            lo = mid
+        else:
+            hi = mid
+    return math.sqrt(math.exp(lo))
 
 
 class FittedModel:

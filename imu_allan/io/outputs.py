@@ -24,11 +24,12 @@ def write_kalibr_yaml(path, analysis, topic='/imu/data_raw'):
              '# *_noise_density = white noise N (rad/s/sqrt(Hz), m/s^2/sqrt(Hz));',
              '# *_random_walk = bias random walk K (rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz));',
              '# the worst (largest) axis of each sensor, as Kalibr users expect.',
-             '# Kalibr needs all four > 0: a term the data did not support is written as',
-             '# null here; replace it with a datasheet value before use.']
+             '# Kalibr needs all four > 0: where the data do not show a term, its 95 % upper',
+             '# limit is written (marked below); null means not even a limit was found.']
     for key, axes in per_axis.items():
-        text = ', '.join(f'{a} {v:.6g}' if math.isfinite(v) else f'{a} not detected'
-                         for a, v in axes.items())
+        text = ', '.join(f'{a} {v:.6g}' + (' (upper limit, not detected)' if bound else '')
+                         if math.isfinite(v) else f'{a} not detected'
+                         for a, (v, bound) in axes.items())
         lines.append(f'# {key} per axis: {text}')
     lines.append(f'rostopic: {topic}')
     lines.append(f'update_rate: {values["update_rate"]:.6g}')

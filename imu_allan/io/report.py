@@ -22,17 +22,26 @@ def kalibr_values(analysis):
     """Kalibr ``imu.yaml`` values: continuous-time, the worst axis per sensor.
 
     ``*_noise_density`` is the white-noise coefficient N; ``*_random_walk`` is the rate random
-    walk K (bias random walk); the per-axis values are returned too, for comments.
+    walk K (bias random walk).  Where the data do not show a term, its 95 % upper limit is used
+    (Kalibr refuses zeros) and listed in ``upper_limits``.  Returns ``(values, per_axis)``;
+    per-axis entries are ``(value, is_upper_limit)``.
     """
-    out = {'update_rate': float(analysis.rate_hz)}
+    out = {'update_rate': float(analysis.rate_hz), 'upper_limits': []}
     per_axis = {}
     for sensor, prefix in (('gyro', 'gyroscope'), ('accel', 'accelerometer')):
         axes = [a for a in analysis.axes if is_gyro(a) == (sensor == 'gyro')]
         for key, term in (('noise_density', 'white_noise'), ('random_walk', 'rate_random_walk')):
-            values = {a: analysis.fit.value(a, term) for a in axes}
+            values = {}
+            for a in axes:
+                value = analysis.fit.value(a, term)
+                bound = analysis.upper_limits.get(a, {}).get(term, math.nan)
+                values[a] = (value, False) if math.isfinite(value) else (bound, True)
             per_axis[f'{prefix}_{key}'] = values
-            finite = [v for v in values.values() if math.isfinite(v)]
-            out[f'{prefix}_{key}'] = max(finite) if finite else None
+            finite = [(v, b) for v, b in values.values() if math.isfinite(v)]
+            name = f'{prefix}_{key}'
+            out[name] = max(finite)[0] if finite else None
+            if finite and max(finite)[1]:
+                out['upper_limits'].append(name)
     return out, per_axis
 
 
@@ -103,7 +112,8 @@ def console_summary(analysis):
                                  f'[{_fmt(e["ci"][0]):>10}, {_fmt(e["ci"][1]):>10}] '
                                  f'{e["unit"]:>17}')
     kalibr, per_axis = kalibr_values(analysis)
-    kal = ', '.join(f'{k} {_fmt(v)}' for k, v in kalibr.items() if k != 'update_rate')
+    kal = ', '.join(f'{k} {_fmt(v)}' + (' (upper limit)' if k in kalibr['upper_limits'] else '')
+                    for k, v in kalibr.items() if k not in ('update_rate', 'upper_limits'))
     lines.append(f'Kalibr (continuous-time, worst axis): {kal}')
     lines.append('verdict: ' + ('static' if analysis.static else 'NOT static (moving)'))
     if analysis.outliers.total:
