@@ -117,3 +117,12 @@ def test_denoise_bad_parameter_one_line_exit_2():
     assert out.returncode == 2
     assert out.stderr.strip() == ("denoise: wavelet: unknown discrete wavelet 'sym99' "
                                   '(e.g. haar, db4, sym8)')
+
+
+def test_denoise_help_without_ros():
+    """``denoise --help`` answers without ROS and states the latency rule."""
+    out = subprocess.run([executable('denoise'), '--help'], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0
+    for name in ('wavelet', 'level', 'rule', 'noise_source', 'median_window', 'latency'):
+        assert name in out.stdout

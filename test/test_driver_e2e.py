@@ -445,3 +445,25 @@ def test_disconnect_and_reconnect(node, procs, tmp_path):
     assert int(diag['reconnects']) == 1 and diag['state'] == 'streaming'
     assert diag['dropped_packets'] == '0' and diag['checksum_failures'] == '0'
     assert all(np.diff([stamp_ns(m) for m in run.raw]) > 0)
+
+
+def test_baud_switch_to_reach_500_hz(node, procs, tmp_path):
+    """The device powers up at 115200 baud; the driver asked for 460800 switches it (0xD9).
+
+    At the wrong rate the simulator cannot read the host and sends garbage (as a UART
+    would), so data only flow if the driver really switched the device and itself.
+    """
+    run = Run(node, procs, tmp_path, ['--seed', '51'], {'rate_hz': 500, 'baud': 460800})
+    run.spin_until(lambda: len(run.raw) >= 600 and run.diags
+                   and int(run.last_diag()['published']) >= 600, 40)
+    diag = run.last_diag()
+    rows = run.stop()
+    pos = match(run.raw, rows)
+    check_values(run.raw, rows, pos)
+    assert lost_between(rows, pos, pos[0], pos[-1]) == []
+    replies = [r['code'] for r in rows if r['status'] == 'reply']
+    assert '0xD9' in replies and replies.index('0xD9') < replies.index('0xC4')
+    assert diag['baud'] == '460800' and diag['rate_device_hz'] == '500'
+    assert diag['dropped_packets'] == '0'
+    timers = np.array([int(rows[i]['timer']) for i in pos], dtype=np.int64)
+    assert set(np.diff(timers).tolist()) == {125}

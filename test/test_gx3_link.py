@@ -173,14 +173,14 @@ def sim(tmp_path):
     """Start gx3_sim with extra args; yield (serial port, truth path) factory."""
     started = []
 
-    def start(*args):
+    def start(*args, baud=115200):
         truth = str(tmp_path / f'truth{len(started)}.csv')
         proc = subprocess.Popen([sys.executable, '-m', 'imu_allan.cli.gx3_sim',
                                  '--record-truth', truth, '--seed', '3'] + list(args),
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         started.append(proc)
         path = proc.stdout.readline().decode().strip()
-        port = serial.Serial(path, 115200, timeout=0.05)
+        port = serial.Serial(path, baud, timeout=0.05)
         return proc, port, truth
 
     yield start
@@ -217,8 +217,13 @@ def test_sim_answers_commands(sim):
         assert p.decode_sampling_reply(reply).decimation == got
     assert p.decode_sampling_reply(exchange(port, p.cmd_read_sampling_settings(), 19)) \
         .decimation == 4
+    assert p.decode_comm_reply(exchange(port, p.cmd_comm_settings(9600), 10))[1] == 115200
+    # Baud change: the reply comes at the old rate, then only the new rate works.
     assert p.decode_comm_reply(exchange(port, p.cmd_comm_settings(921600), 10))[1] == 921600
-    assert p.decode_comm_reply(exchange(port, p.cmd_comm_settings(9600), 10))[1] == 921600
+    with pytest.raises(AssertionError, match='no reply'):
+        exchange(port, p.cmd_firmware_version(), 7, timeout=0.5)
+    port.baudrate = 921600
+    assert p.decode_comm_reply(exchange(port, p.cmd_comm_settings(0, 0), 10))[1] == 921600
     assert p.decode_timer_reply(exchange(port, p.cmd_timer(1, 2**32 - 5), 7)) == 2**32 - 5
     reply = exchange(port, b'\xCD\xC1\x29\x27\x10', 19)
     assert p.checksum_ok(reply) and reply[0] == 0xCD
@@ -236,7 +241,7 @@ def read_truth(path):
 def test_sim_faults_match_truth(sim):
     """500 Hz with corrupt, dropped and junk records: a parser's counters equal the truth."""
     proc, port, truth = sim('--corrupt-rate', '0.05', '--drop-rate', '0.05',
-                            '--garbage-rate', '0.05', '--baud', '460800')
+                            '--garbage-rate', '0.05', '--baud', '460800', baud=460800)
     port.write(p.cmd_sampling_settings(p.SamplingSettings(decimation=2))
                + p.cmd_continuous(0xC2))
     parser = StreamParser()

@@ -12,7 +12,10 @@ the 0xC4 reply precedes the first record; the device powers up in Active mode (o
 with ``--stream``); polled data commands are answered at once; 0xCD replies after at most
 ``--max-bias-delay`` seconds.  Records are paced per record: one whose bytes cannot leave
 before the next record is due (baud too low for the rate) is not sent, as a UART overrun
-would lose it; its timer value is skipped, so the host sees a gap.
+would lose it; its timer value is skipped, so the host sees a gap.  The pty's settings are
+shared by both ends, so the simulator sees the baud rate the host opened the port at: at a
+rate other than the device's it ignores what the host sends and the host receives garbage,
+as with a real UART (``--ignore-host-baud`` turns this off).
 
 Values on the wire, in device units: angular rate rad/s (noise only), acceleration g (noise
 plus 1 g along ``--gravity-axis``; the real unit reads about -1 g on z when level, the
@@ -39,6 +42,7 @@ import select
 import signal
 import struct
 import sys
+import termios
 import time
 import tty
 
@@ -59,6 +63,10 @@ TRUTH_COLUMNS = ('index', 'status', 'code', 'timer', 'accel_x', 'accel_y', 'acce
                  'gyro_x', 'gyro_y', 'gyro_z', 'mag_x', 'mag_y', 'mag_z', 'm11', 'm12', 'm13',
                  'm21', 'm22', 'm23', 'm31', 'm32', 'm33', 'euler_roll', 'euler_pitch',
                  'euler_yaw')
+#: termios speed constants of the baud rates the device supports.
+BAUD_CONSTANTS = {b: getattr(termios, f'B{b}') for b in p.BAUD_RATES}
+#: What a receiver at the wrong baud rate makes of the bytes (a fixed scramble).
+GARBLE = bytes((b * 77 + 13) % 256 for b in range(256))
 ID_STRINGS = {0: '6223', 1: '6223.01234', 2: '3DM-GX3-25', 3: '5g 300d/s', 4: 'SIMULATED'}
 
 
@@ -93,6 +101,8 @@ def build_parser():
     ap.add_argument('--duration', type=float, default=None, help='exit after this many s')
     ap.add_argument('--firmware', type=int, default=1130, help='firmware number (1130)')
     ap.add_argument('--serial', default=ID_STRINGS[1], help='serial number string')
+    ap.add_argument('--ignore-host-baud', action='store_true',
+                    help='talk to the host whatever baud rate it opened the port at')
     ap.add_argument('--max-bias-delay', type=float, default=0.2,
                     help='cap on the 0xCD gyro-bias capture delay, s (default 0.2)')
     ap.add_argument('--corrupt-rate', type=float, default=0.0,
@@ -430,6 +440,13 @@ class Terminal:
                 return b''
             raise
 
+    def host_speed(self):
+        """The termios output speed constant the host set (None if unknown)."""
+        try:
+            return termios.tcgetattr(self.master)[5]
+        except termios.error:
+            return None
+
     def write(self, data):
         """Write what fits; return the number of bytes written (0 when nobody reads)."""
         try:
@@ -522,12 +539,30 @@ class Simulator:
         if start - now > self.device.period + 1e-3:
             return 'overrun'
         self.line_free_at = start + len(data) * p.BITS_PER_BYTE / self.device.baud
-        written = self.term.write(data)
+        written = self.write(data)
         return 'ok' if written == len(data) else 'unread'
+
+    def baud_matches(self):
+        """True when the host opened the port at the device's baud rate (or did not say).
+
+        A pty carries no real baud rate, but its settings are shared by both ends, so the
+        simulator sees the speed the host configured and behaves like a UART at another
+        rate: it cannot read the host, and the host receives garbage.
+        """
+        if self.args.ignore_host_baud:
+            return True
+        speed = self.term.host_speed()
+        return speed is None or speed == BAUD_CONSTANTS.get(self.device.baud)
+
+    def write(self, data):
+        """Write to the host (garbled when the baud rates differ)."""
+        if not self.baud_matches():
+            data = data.translate(GARBLE)
+        return self.term.write(data)
 
     def send_reply(self, reply, now):
         """Send a command reply (and apply a pending baud change after it)."""
-        self.term.write(reply)
+        self.write(reply)
         timed = reply[0] in (p.SET_CONTINUOUS, p.TIMER)
         self.truth.row('reply', reply[0], p.timer_of(reply) if timed else 0)
         pending = self.device.pending_baud
@@ -549,7 +584,7 @@ class Simulator:
             if garbage:
                 junk = bytes(self.rng.choice(np.frombuffer(JUNK_BYTES, np.uint8),
                                              int(self.rng.integers(1, 33))))
-                self.term.write(junk)
+                self.write(junk)
                 self.truth.row('garbage', 0, len(junk))
             # Not both on one record: a damaged record right after junk looks like junk to
             # any framer, which would make the expected counters ambiguous.
@@ -615,6 +650,8 @@ class Simulator:
             ready, _, _ = select.select([self.term.master], [], [], wait)
             now = time.monotonic()
             data = self.term.read() if ready else b''
+            if data and not self.baud_matches():
+                data = b''      # framing errors: the device cannot read a wrong baud rate
             for reply in self.device.feed(data, now) + self.device.delayed_due(now):
                 self.send_reply(reply, now)
             self.stream_records(now)

@@ -3,9 +3,10 @@
 Estimator
 ---------
 The overlapping Allan variance at averaging factor m (tau = m tau0) is a mean of squared second
-differences of the phase x (cumulative sum of the rate samples):
+differences of the phase x (here the cumulative sum of the rate samples, in sample units, so
+tau0 cancels):
 
-    AVAR(m) = sum_k (x_{k+2m} - 2 x_{k+m} + x_k)^2 / (2 m^2 tau0^2 ... )   (see allan.py)
+    AVAR(m) = sum_k (x_{k+2m} - 2 x_{k+m} + x_k)^2 / (2 m^2 K),   K terms   (as in allan.py)
 
 Each new phase point x_j completes exactly one new term per factor m (k = j - 2m), which needs
 only the phase 2m points back.  :class:`StreamingAllan` keeps, per *stride level* s = 1, 2, 4,

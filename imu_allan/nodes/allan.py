@@ -19,28 +19,14 @@ subscription sits in a callback group the executor never waits on, and a timer t
 messages in batches (the executor costs about 200 us per message at 1 kHz otherwise).
 """
 
+import math
 import os
+import sys
+import time
 
-# One BLAS thread: the fit's small triangular solves run 10x slower when OpenBLAS spreads them
-# over cores that other processes use (measured here); must precede the first numpy import.
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-
-import math  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-
-from ..core import health as hm  # noqa: E402
-from ..core.model import ModelError, NoiseModel  # noqa: E402
-from ..core.streaming import (  # noqa: E402
-    coefficient_table,
-    deviation_table,
-    OnlineAllan,
-    StagedEstimate,
-)
-from ..core.units import AXES, TERM_PARAMETERS  # noqa: E402
-from ..io.errors import InputError  # noqa: E402
-from ..io.imu_adapter import imus_to_arrays  # noqa: E402
-from .node_utils import (  # noqa: E402
+from ..core.units import AXES, TERM_PARAMETERS
+from ..io.errors import InputError
+from .node_utils import (
     descriptor,
     diagnostic_status,
     float_range,
@@ -48,6 +34,11 @@ from .node_utils import (  # noqa: E402
     int_range,
     run_node,
 )
+
+# One BLAS thread: the fit's small triangular solves ran 15x slower when OpenBLAS spread them
+# over cores other processes use (measured here).  numpy is first imported after this line:
+# the numerics are imported lazily (which also keeps ``--help`` fast).
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 DESCRIPTION = ('Live Allan deviation and noise coefficients (with 68.3 % intervals) of '
                'imu/data_raw: publishes imu/allan_coeffs, imu/allan_deviation and '
@@ -136,8 +127,10 @@ def check_parameters(p):
                                      f'samples')
     if p['gate_window_s'] * p['rate_hz'] < 4:
         raise InputError('gate_window_s', 'must span at least 4 samples')
+    from ..core.health import NoiseBudget
+    from ..core.model import ModelError, NoiseModel
     parse_terms(p['terms'])
-    hm.NoiseBudget.from_yaml(p['budget_file'] or None)
+    NoiseBudget.from_yaml(p['budget_file'] or None)
     if p['model_file']:
         try:
             NoiseModel.from_yaml(p['model_file'])
@@ -184,6 +177,10 @@ def _make_node_class():
     from rclpy.qos_overriding_options import QoSOverridingOptions
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray
+
+    from ..core import health as hm
+    from ..core.streaming import coefficient_table, deviation_table, OnlineAllan, StagedEstimate
+    from ..io.imu_adapter import imus_to_arrays
 
     class PolledGroup(CallbackGroup):
         """A callback group the executor never runs: its subscription is drained by a timer."""

@@ -12,21 +12,16 @@ per-sample white-noise level comes from the white-noise coefficients on ``imu/al
 noise level.  With ``mad`` each block estimates its own noise level per wavelet level.
 """
 
+from collections import deque
 import os
+import sys
 
-# One BLAS thread (see nodes/allan.py); must precede the first numpy import.
+from ..core.units import AXES, IEEE_TERMS
+from ..io.errors import InputError
+from .node_utils import descriptor, float_range, handle_help, int_range, run_node
+
+# One BLAS thread (see nodes/allan.py); numpy is imported lazily, after this line.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-
-from collections import deque  # noqa: E402
-import sys  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from ..core.denoise import BlockDenoiser, check_options  # noqa: E402
-from ..core.units import AXES, IEEE_TERMS  # noqa: E402
-from ..io.errors import InputError  # noqa: E402
-from ..io.imu_adapter import imus_to_arrays  # noqa: E402
-from .node_utils import descriptor, float_range, handle_help, int_range, run_node  # noqa: E402
 
 DESCRIPTION = ('Wavelet (PyWavelets) or median denoising of imu/data_raw on overlapping blocks '
                'with bounded latency; publishes imu/data_denoised with the original stamps.')
@@ -57,6 +52,7 @@ _DENOISER = {'rate_hz', 'method', 'wavelet', 'level', 'rule', 'mode', 'median_wi
 
 def check_parameters(p):
     """Validate a full parameter dictionary; raise InputError with the reason."""
+    from ..core.denoise import check_options
     try:
         check_options(p['method'], p['wavelet'], p['level'], p['rule'], p['mode'],
                       p['median_window'])
@@ -71,6 +67,7 @@ def check_parameters(p):
 
 def make_denoiser(p):
     """A :class:`BlockDenoiser` for six axes from a parameter dictionary."""
+    from ..core.denoise import BlockDenoiser
     return BlockDenoiser(p['rate_hz'], len(AXES), hop_s=p['hop_s'], method=p['method'],
                          wavelet=p['wavelet'], level=p['level'], rule=p['rule'],
                          mode=p['mode'], median_window=p['median_window'])
@@ -78,6 +75,7 @@ def make_denoiser(p):
 
 def white_noise_from_coeffs(data, layout_sizes):
     """White-noise coefficient N per axis (6,) from an ``imu/allan_coeffs`` payload, or None."""
+    import numpy as np
     if tuple(layout_sizes) != (len(AXES), len(IEEE_TERMS), 3):
         return None
     table = np.asarray(data, dtype=float).reshape(layout_sizes)
@@ -110,6 +108,8 @@ def _make_node_class():
     from rclpy.qos_overriding_options import QoSOverridingOptions
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray
+
+    from ..io.imu_adapter import imus_to_arrays
 
     class PolledGroup(CallbackGroup):
         """A callback group the executor never runs: its subscription is drained by a timer."""
