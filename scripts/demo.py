@@ -123,19 +123,24 @@ def watch(seconds):
 
 
 def table(data):
-    """imu/allan_coeffs (axis x term x stat) as text, SI and conventional units."""
+    """imu/allan_coeffs (axis x term x stat) as text: conventional units, 68.3 % intervals."""
     def get(a, t, s):
         return data[(a * len(TERMS) + t) * 3 + s]
-    lines = [f'{"axis":8} {"white noise N (SI)":>22} {"conventional":>14} '
-             f'{"bias instability B (SI)":>24} {"conventional":>12}']
+
+    def fmt(a, t, scale):
+        value, low, high = (get(a, t, s) * scale for s in range(3))
+        if math.isnan(value):
+            return f'{"not yet (needs longer data)":>30}'
+        return f'{value:9.4g} [{low:8.4g}, {high:8.4g}]'.rjust(30)
+
+    lines = ['noise coefficients from imu/allan_coeffs (continuous-time, 68.3 % intervals):',
+             f'{"axis":8} {"white noise N":>30} {"":11} {"bias instability B":>30}']
     for a, axis in enumerate(AXES):
-        n, b = get(a, 1, 0), get(a, 2, 0)
         gyro = axis.startswith('gyro')
-        n_conv = n * (60.0 * 180.0 / math.pi if gyro else 60.0)
-        b_conv = b * (3600.0 * 180.0 / math.pi if gyro else 3600.0)
+        n_scale = 60.0 * 180.0 / math.pi if gyro else 60.0  # SI -> deg/sqrt(h), m/s/sqrt(h)
+        b_scale = 3600.0 * 180.0 / math.pi if gyro else 3600.0  # SI -> deg/h, m/s/h
         n_unit, b_unit = ('deg/sqrt(h)', 'deg/h') if gyro else ('m/s/sqrt(h)', 'm/s/h')
-        lines.append(f'{axis:8} {n:22.4g} {n_conv:10.4g} {n_unit:>11}'
-                     f' {b:21.4g} {b_conv:10.4g} {b_unit}')
+        lines.append(f'{axis:8} {fmt(a, 1, n_scale)} {n_unit:11} {fmt(a, 2, b_scale)} {b_unit}')
     return '\n'.join(lines)
 
 
@@ -167,8 +172,9 @@ def offline_part(env):
 
 def main():
     """Run both parts."""
+    # this process subscribes too, so it needs the same domain as the nodes it starts
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(120, 200)))
     env = dict(os.environ)
-    env.setdefault('ROS_DOMAIN_ID', str(random.randint(120, 200)))
     OUT.mkdir(exist_ok=True)
     live_part(env)
     offline_part(env)

@@ -146,3 +146,11 @@ def test_model_file_with_a_wrong_value_is_recalibrated_not_extended():
     lo, hi = step.parameters['white_noise']['value']['ci95']
     assert lo <= 1e-3 <= hi
     assert result.final_gaps['gyro_x'].consistent
+
+
+def test_constant_axis_is_skipped_with_a_note():
+    x = simulate(NoiseModel({'gyro_x': BASE}, RATE), N, RATE, seed=1)
+    data = np.column_stack([x[:, 0], np.full(N, 0.25)])
+    result = run_discrepancy(data, RATE, axes=['gyro_x', 'gyro_y'], n_sims=0)
+    assert result.axes == ['gyro_x']
+    assert any('gyro_y' in note and 'constant' in note for note in result.notes)

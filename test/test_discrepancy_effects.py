@@ -129,7 +129,8 @@ def test_thesis_scenario():
     the thesis's two-term model the workflow must add a rate random walk on at least 5 of 6
     axes, recover K within its 95 % interval and end consistent.
     """
-    model = thesis_gx3_25_model()
+    thesis = thesis_gx3_25_model()
+    model = thesis
     k_true = {}
     for axis in model.axes:
         k = 4e-5 if axis.startswith('gyro') else 1.7e-4
@@ -137,12 +138,13 @@ def test_thesis_scenario():
         k_true[axis] = k
     rate = 100.0
     data = simulate(model, int(3600 * rate), rate, seed=2024)
-    result = run_discrepancy(data, rate, axes=model.axes,
-                             terms=['white_noise', 'bias_instability'], n_sims=N_SIMS, seed=3)
+    # the thesis's model file as given (its coefficients, no fit): what an engineer would start
+    # from after reading the thesis
+    result = run_discrepancy(data, rate, axes=model.axes, model=thesis, n_sims=N_SIMS, seed=3)
     hits = covered = 0
     for axis in model.axes:
         steps = [s for s in result.steps if s.axis == axis]
-        assert result.initial_gaps[axis].value > 1.0
+        assert not result.initial_gaps[axis].consistent
         if steps and steps[0].effect == 'rate_random_walk':
             hits += 1
             lo, hi = steps[0].parameters['value']['ci95']

@@ -233,6 +233,25 @@ def counter_bounds(rows, first, diag, statuses, gaps=False):
     return count(rows, first, lo_end, statuses), count(rows, first, hi_end, statuses)
 
 
+def set_parameters(run, values):
+    """Set driver parameters one by one through its set_parameters service."""
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+    client = run.node.create_client(SetParameters, '/driver/set_parameters')
+    try:
+        assert client.wait_for_service(timeout_sec=10)
+        results = []
+        for name, value in values.items():
+            request = SetParameters.Request(
+                parameters=[Parameter(name, value=value).to_parameter_msg()])
+            future = client.call_async(request)
+            run.spin_until(future.done, 10)
+            results.append(future.result().results[0])
+        return results
+    finally:
+        run.node.destroy_client(client)
+
+
 # ------------------------------------------------------------------------------ no ROS needed
 
 def test_help_and_bad_arguments():
@@ -328,6 +347,15 @@ def test_mag_and_orientation_mode(node, procs, tmp_path):
               mag=True, orientation=True)
     run.spin_until(lambda: len(run.raw) >= 150 and len(run.mag) >= 150
                    and len(run.data) >= 150, 30)
+    # Run-time parameters: a covariance can change (validated), the port setup cannot.
+    results = set_parameters(run, {'angular_velocity_stddev': 0.02, 'orientation_stddev': -1.0,
+                                   'rate_hz': 50.0})
+    assert [r.successful for r in results] == [True, False, False]
+    assert 'orientation_stddev' in results[1].reason
+    run.spin_until(lambda: run.raw[-1].angular_velocity_covariance[0] == pytest.approx(4e-4),
+                   20)
+    assert run.raw[-1].angular_velocity_covariance[0] == pytest.approx(4e-4)
+    assert run.data[-1].orientation_covariance[0] == pytest.approx(0.01)
     rows = run.stop()
     pos = match(run.raw, rows)
     check_values(run.raw, rows, pos)

@@ -291,13 +291,17 @@ def main(argv=None):
             write_plots(result, args.out)
         except OSError as exc:
             return _fail(f'{args.out}: cannot write ({exc.strerror or exc})')
-    if args.json:
-        json.dump(report, sys.stdout, indent=2)
-        sys.stdout.write('\n')
-    else:
-        print(summary_text(result, source))
-        if args.out:
-            print(f'report and plots written to {args.out}')
+    try:
+        if args.json:
+            json.dump(report, sys.stdout, indent=2)
+            sys.stdout.write('\n')
+        else:
+            print(summary_text(result, source))
+            if args.out:
+                print(f'report and plots written to {args.out}')
+        sys.stdout.flush()
+    except BrokenPipeError:  # e.g. piped into head: not an error worth a traceback
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
 
 

@@ -153,7 +153,10 @@ def analyze_samples(samples, options=None):
                         m_max=int(options.tau_max * rate)) / rate
     if options.online:
         from .streaming import online_allan
-        result = online_allan(data, rate, axes=samples.axes)
+        result = online_allan(data, rate, t=samples.t, axes=samples.axes)
+        if result is None:
+            raise InputError(where, 'too short for the online estimator\'s shortest '
+                                    'averaging time after the motion gate')
     else:
         result = allan_deviation(data, rate, taus=taus,
                                  points_per_decade=options.points_per_decade,

@@ -720,7 +720,8 @@ def _bands(current, axes, measured, n_sims, rng, previous=None):
 def start_model(measured, axes, terms, alpha=ALPHA):
     """Fit only ``terms`` to every axis (the ``--terms`` start), in the gap's own metric."""
     out = {}
-    for j, axis in enumerate(axes):
+    for axis in axes:
+        j = list(measured.axes).index(axis)
         y = np.log(measured.adev[:, j])
         band = _measured_band(measured, j)
         fit = fit_terms(FitProblem(y, measured.tau, measured.rate_hz, band), list(terms))
@@ -781,6 +782,13 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
         raise ValueError(f'only {measured.tau.size} averaging times: the record is too short '
                          'for a discrepancy analysis')
     notes = []
+    dead = [a for j, a in enumerate(axes_all)
+            if not np.all(np.isfinite(measured.adev[:, j]) & (measured.adev[:, j] > 0))]
+    if dead:  # a constant (stuck or absent) channel has no noise to compare
+        notes.append(f'{", ".join(dead)}: Allan deviation is zero (constant signal): skipped')
+        axes_all = [a for a in axes_all if a not in dead]
+        if not axes_all:
+            raise ValueError('every axis is constant: no noise to analyse')
     if model is not None:
         if isinstance(model, dict):
             model = NoiseModel.from_dict(model)
@@ -804,7 +812,7 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
         initial = start_model(measured, work_axes, terms, alpha)
         start = 'terms:' + ','.join(terms)
         fixed = set()
-    cols = [axes_all.index(a) for a in work_axes]
+    cols = [list(measured.axes).index(a) for a in work_axes]
     ys = {a: np.log(measured.adev[:, j]) for a, j in zip(work_axes, cols)}
     tau = measured.tau
     rng = np.random.default_rng(seed)
