@@ -94,10 +94,10 @@ def _denoised_analysis(samples, analysis, options):
     return den, analyze_samples(den, options)
 
 
-def _write_denoised_bag(path, fmt, samples, denoised_samples, topic, out_dir):
-    """rosbag2 (MCAP) with imu/data_denoised next to the original topics."""
+def _write_denoised_bag(path, fmt, samples, denoised_samples, folder):
+    """rosbag2 (MCAP) ``folder/denoised_bag`` with imu/data_denoised beside the original topics."""
     from ..io.bag_writer import copy_bag_with_topic, write_imu_bag
-    dst = Path(out_dir) / 'denoised_bag'
+    dst = Path(folder) / 'denoised_bag'
     if fmt in ('rosbag2', 'ros1'):
         copy_bag_with_topic(path, dst, 'imu/data_denoised', denoised_samples)
     else:
@@ -136,12 +136,16 @@ def run_one(path, args, options, progress=None):
         out_dir = Path(args.out)
         if len(args.inputs) > 1:
             out_dir = out_dir / Path(str(path).rstrip('/')).name.replace('.', '_')
+        extra = None
         if args.denoise:
             from ..io.readers import detect_format
             real_fmt = detect_format(path) if fmt == 'auto' else fmt
-            report['denoised_bag'] = str(_write_denoised_bag(
-                path, real_fmt, samples, den_samples, args.topic, out_dir))
-        report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report)
+            report['denoised_bag'] = str(out_dir / 'denoised_bag')
+
+            def extra(staging):
+                _write_denoised_bag(path, real_fmt, samples, den_samples, staging)
+        report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
+                                            extra=extra)
     return report, console_summary(analysis)
 
 

@@ -155,7 +155,7 @@ def analyze_samples(samples, options=None):
         from .streaming import online_allan
         result = online_allan(data, rate, t=samples.t, axes=samples.axes)
         if result is None:
-            raise InputError(where, 'too short for the online estimator\'s shortest '
+            raise InputError(where, "too short for the online estimator's shortest "
                                     'averaging time after the motion gate')
     else:
         result = allan_deviation(data, rate, taus=taus,

@@ -65,12 +65,18 @@ def _cell(value):
     return f'{value:.6e}' if math.isfinite(value) else ''
 
 
-def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/imu/data_raw'):
-    """Write every report file into ``out_dir`` atomically; returns the list of file names."""
+def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/imu/data_raw',
+                  extra=None):
+    """Write every report file into ``out_dir`` atomically; returns the list of file names.
+
+    ``extra(staging_dir)`` may write more files (e.g. a bag) into the staging folder first.
+    """
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f'.{out_dir.name}.', dir=out_dir.parent))
     try:
+        if extra is not None:
+            extra(staging)
         report = report if report is not None else analysis_to_json(analysis)
         (staging / 'report.json').write_text(json.dumps(report, indent=1), encoding='utf-8')
         write_kalibr_yaml(staging / 'imu.yaml', analysis, topic)
@@ -81,7 +87,10 @@ def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/im
         out_dir.mkdir(exist_ok=True)
         names = sorted(os.listdir(staging))
         for name in names:
-            os.replace(staging / name, out_dir / name)
+            target = out_dir / name
+            if target.is_dir():  # a bag folder from an earlier run: replaced whole
+                shutil.rmtree(target)
+            os.replace(staging / name, target)
         return names
     finally:
         shutil.rmtree(staging, ignore_errors=True)

@@ -171,10 +171,15 @@ class TimeSync:
         lat = (host_s - self.epoch) - device_s
         batch_min = float(lat.min())
         end = float(device_s[-1])
-        self.minima.append((end, batch_min))
-        while self.minima and self.minima[0][0] < end - self.window:
-            self.minima.popleft()
-        target = min(m for _, m in self.minima)
+        # Sliding-window minimum (monotonic deque: values increase from left to right), O(1)
+        # per batch however many batches the window holds.
+        minima = self.minima
+        while minima and minima[-1][1] >= batch_min:
+            minima.pop()
+        minima.append((end, batch_min))
+        while minima[0][0] < end - self.window:
+            minima.popleft()
+        target = minima[0][1]
         if self.offset is None or abs(target - self.offset) > self.jump_threshold:
             if self.offset is not None:
                 self.jumps += 1
