@@ -145,3 +145,38 @@ def test_out_dir_has_every_report_file_and_nothing_half_written(sim_csv, tmp_pat
     assert proc.returncode == 2
     assert not out2.exists()
     assert not [p for p in tmp_path.iterdir() if p.name.startswith('.report2')]
+
+
+def _stderr_on_a_terminal(*args):
+    """Run analyze with stderr on a real pseudo-terminal; return what the terminal got."""
+    import os
+    import pty
+    import subprocess
+
+    from conftest import executable
+    master, slave = pty.openpty()
+    try:
+        proc = subprocess.run([executable('analyze'), *map(str, args)], stdout=subprocess.PIPE,
+                              stderr=slave, timeout=120)
+    finally:
+        os.close(slave)
+    seen = b''
+    while True:
+        try:
+            chunk = os.read(master, 65536)
+        except OSError:  # EIO once the terminal is drained and closed
+            break
+        if not chunk:
+            break
+        seen += chunk
+    os.close(master)
+    assert proc.returncode == 0
+    return seen.decode(errors='replace')
+
+
+def test_progress_bar_only_on_a_terminal(sim_csv):
+    bar = _stderr_on_a_terminal(sim_csv)
+    assert '[' in bar and '#' in bar and 'reading' in bar
+    assert '2/2' in bar and '[########################]' in bar  # ends full
+    assert _stderr_on_a_terminal(sim_csv, '--quiet') == ''
+    assert run_command('analyze', sim_csv).stderr == ''  # not a terminal: no bar

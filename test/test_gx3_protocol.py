@@ -4,6 +4,7 @@ import os
 import random
 import struct
 
+from conftest import SHARED_DATA
 import numpy as np
 import pytest
 import yaml
@@ -13,8 +14,7 @@ from imu_allan.io.errors import InputError
 from imu_allan.io.gx3_stream import parse_bytes, StreamParser
 from imu_allan.io.gx3raw_reader import read_gx3raw
 
-DATA = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', '..', 'shared', 'data',
-                    'gx3_25_captures')
+DATA = str(SHARED_DATA / 'gx3_25_captures')
 needs_data = pytest.mark.skipif(not os.path.isdir(DATA),
                                 reason=f'real GX3-25 captures not found at {DATA}')
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
 
-from imu_allan.io.bag_reader import _decode_rows
 from imu_allan.io.bag_writer import encode_imu
 from imu_allan.io.imu_adapter import imu_to_row, imus_to_arrays
+from imu_allan.io.imu_layout import decode_rows as _decode_rows
 
 IMU = 'sensor_msgs/msg/Imu'
 JAZZY = get_typestore(Stores.ROS2_JAZZY)

@@ -1,9 +1,9 @@
 """Bag reading and writing: real bags, topics, damaged input, fast == generic, round trips."""
 
 import os
-from pathlib import Path
 import shutil
 
+from conftest import SHARED_DATA
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
@@ -13,9 +13,9 @@ from imu_allan.io.bag_writer import copy_bag_with_topic, write_imu_bag
 from imu_allan.io.errors import InputError
 from imu_allan.io.samples import Samples
 
-DATA = Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data' / 'bags'
+DATA = SHARED_DATA / 'bags'
 needs_data = pytest.mark.skipif(not DATA.is_dir(),
-                                reason=f'real test bags not found in {DATA.resolve()}')
+                                reason=f'real test bags not found in {DATA}')
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 JACKAL = ('test2.bag', 'jackal_test2_sqlite3', 'jackal_test2_mcap',
           'jackal_test2_mcap/jackal_test2_mcap.mcap',

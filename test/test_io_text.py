@@ -1,7 +1,7 @@
 """CSV samples, thesis logs and the read_samples dispatcher."""
 
-from pathlib import Path
 
+from conftest import SHARED_DATA
 import numpy as np
 import pytest
 
@@ -13,7 +13,7 @@ from imu_allan.io.readers import detect_format, read_samples
 from imu_allan.io.samples import Samples
 from imu_allan.io.thesis_log import read_thesis_log
 
-DATA = Path(__file__).resolve().parents[1] / '..' / 'shared' / 'data'
+DATA = SHARED_DATA
 
 # ------------------------------------------------------------------------------------ CSV
 

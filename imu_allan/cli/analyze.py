@@ -185,7 +185,8 @@ def main(argv=None):
         raise InputError('--export-samples', 'takes exactly one INPUT')
     quiet = args.quiet or args.json or not sys.stderr.isatty()
     if len(args.inputs) == 1:
-        progress = Progress(args.inputs[0], 4 + bool(args.denoise), enabled=not quiet)
+        steps = 2 + bool(args.denoise) + bool(args.out)  # read, estimate+fit, [denoise], [write]
+        progress = Progress(args.inputs[0], steps, enabled=not quiet)
         try:
             report, text = run_one(args.inputs[0], args, options, progress)
         finally:

@@ -20,25 +20,18 @@ messages in batches (the executor costs about 200 us per message at 1 kHz otherw
 """
 
 import math
-import os
-import sys
 import time
 
 from ..core.units import AXES, TERM_PARAMETERS
 from ..io.errors import InputError
-from .node_utils import (
-    descriptor,
+from .node_utils import (  # noqa: E402
+    declare_parameter_table,
     diagnostic_status,
-    float_range,
-    handle_help,
-    int_range,
-    run_node,
+    node_main,
+    polled_subscription,
+    take_batch,
+    validate_on_set,
 )
-
-# One BLAS thread: the fit's small triangular solves ran 15x slower when OpenBLAS spread them
-# over cores other processes use (measured here).  numpy is first imported after this line:
-# the numerics are imported lazily (which also keeps ``--help`` fast).
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 DESCRIPTION = ('Live Allan deviation and noise coefficients (with 68.3 % intervals) of '
                'imu/data_raw: publishes imu/allan_coeffs, imu/allan_deviation and '
@@ -153,28 +146,12 @@ def multiarray(table, labels):
 
 def main(args=None):
     """Entry point ``allan``."""
-    handle_help('allan', DESCRIPTION, [(n, d, t) for n, d, t, *_ in PARAMETERS])
-    from rclpy.exceptions import ParameterException
-    try:
-        run_node(AllanNode, args)
-    except (InputError, ParameterException) as exc:
-        # Bad parameters: one line naming the parameter, no traceback, exit status 2.
-        print(f'allan: {exc}', file=sys.stderr)
-        sys.exit(2)
+    node_main('allan', DESCRIPTION, PARAMETERS, AllanNode, args)
 
 
 def _make_node_class():
     from diagnostic_msgs.msg import DiagnosticArray
-    from rcl_interfaces.msg import SetParametersResult
-    from rclpy.callback_groups import CallbackGroup
     from rclpy.node import Node
-    from rclpy.qos import (
-        qos_profile_sensor_data,
-        QoSDurabilityPolicy,
-        QoSHistoryPolicy,
-        QoSProfile,
-    )
-    from rclpy.qos_overriding_options import QoSOverridingOptions
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray
 
@@ -182,44 +159,20 @@ def _make_node_class():
     from ..core.streaming import coefficient_table, deviation_table, OnlineAllan, StagedEstimate
     from ..io.imu_adapter import imus_to_arrays
 
-    class PolledGroup(CallbackGroup):
-        """A callback group the executor never runs: its subscription is drained by a timer."""
-
-        def can_execute(self, entity):
-            return False
-
-        def beginning_execution(self, entity):
-            return False
-
-        def ending_execution(self, entity):
-            pass
-
     class Node_(Node):
         def __init__(self):
             super().__init__('allan')
-            for name, default, text, rng, read_only in PARAMETERS:
-                kwargs = {}
-                if rng is not None and isinstance(default, float):
-                    kwargs['floating_point_range'] = float_range(*rng)
-                elif rng is not None and isinstance(default, int):
-                    kwargs['integer_range'] = int_range(*rng)
-                self.declare_parameter(name, default,
-                                       descriptor(text, read_only=read_only, **kwargs))
-            self.params = {name: self.get_parameter(name).value for name in _DEFAULTS}
+            self.params = declare_parameter_table(self, PARAMETERS)
             check_parameters(self.params)  # InputError: main() prints it, exit status 2
             self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
             self.model_file = self.params['model_file']
             self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
-            self.add_on_set_parameters_callback(self._on_set)
+            self.add_on_set_parameters_callback(validate_on_set(self.params,
+                                                                check_parameters))
             self.add_post_set_parameters_callback(self._post_set)
 
             depth = int(self.params['queue_depth'])
-            qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=depth,
-                             reliability=qos_profile_sensor_data.reliability,
-                             durability=QoSDurabilityPolicy.VOLATILE)
-            self._sub = self.create_subscription(
-                Imu, 'imu/data_raw', lambda msg: None, qos, callback_group=PolledGroup(),
-                qos_overriding_options=QoSOverridingOptions.with_default_policies())
+            self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth)
             self._max_batch = depth
             self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
             self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
@@ -237,17 +190,6 @@ def _make_node_class():
                 f'memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
 
         # -- parameters ------------------------------------------------------------------
-
-        def _on_set(self, params):
-            new = dict(self.params)
-            for param in params:
-                if param.name in new:
-                    new[param.name] = param.value
-            try:
-                check_parameters(new)
-            except InputError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
-            return SetParametersResult(successful=True)
 
         def _post_set(self, params):
             changed = {p.name for p in params if p.name in self.params}
@@ -274,14 +216,7 @@ def _make_node_class():
 
         def drain(self):
             """Take every queued message, feed them in one batch, advance a publish cycle."""
-            sub = self._sub
-            msgs = []
-            with sub.handle:
-                for _ in range(self._max_batch):
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                    if taken is None:
-                        break
-                    msgs.append(taken[0])
+            msgs = take_batch(self._sub, self._max_batch)
             if msgs:
                 self._last_arrival = time.monotonic()
                 t, data = imus_to_arrays(msgs)

@@ -13,15 +13,16 @@ noise level.  With ``mad`` each block estimates its own noise level per wavelet 
 """
 
 from collections import deque
-import os
-import sys
 
 from ..core.units import AXES, IEEE_TERMS
 from ..io.errors import InputError
-from .node_utils import descriptor, float_range, handle_help, int_range, run_node
-
-# One BLAS thread (see nodes/allan.py); numpy is imported lazily, after this line.
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+from .node_utils import (
+    declare_parameter_table,
+    node_main,
+    polled_subscription,
+    take_batch,
+    validate_on_set,
+)
 
 DESCRIPTION = ('Wavelet (PyWavelets) or median denoising of imu/data_raw on overlapping blocks '
                'with bounded latency; publishes imu/data_denoised with the original stamps.')
@@ -85,25 +86,13 @@ def white_noise_from_coeffs(data, layout_sizes):
 
 def main(args=None):
     """Entry point ``denoise``."""
-    handle_help('denoise', DESCRIPTION, [(n, d, t) for n, d, t, *_ in PARAMETERS])
-    from rclpy.exceptions import ParameterException
-    try:
-        run_node(DenoiseNode, args)
-    except (InputError, ParameterException) as exc:
-        # Bad parameters: one line naming the parameter, no traceback, exit status 2.
-        print(f'denoise: {exc}', file=sys.stderr)
-        sys.exit(2)
+    node_main('denoise', DESCRIPTION, PARAMETERS, DenoiseNode, args)
 
 
 def _make_node_class():
-    from rcl_interfaces.msg import SetParametersResult
-    from rclpy.callback_groups import CallbackGroup
     from rclpy.node import Node
     from rclpy.qos import (
         qos_profile_sensor_data,
-        QoSDurabilityPolicy,
-        QoSHistoryPolicy,
-        QoSProfile,
     )
     from rclpy.qos_overriding_options import QoSOverridingOptions
     from sensor_msgs.msg import Imu
@@ -111,44 +100,19 @@ def _make_node_class():
 
     from ..io.imu_adapter import imus_to_arrays
 
-    class PolledGroup(CallbackGroup):
-        """A callback group the executor never runs: its subscription is drained by a timer."""
-
-        def can_execute(self, entity):
-            return False
-
-        def beginning_execution(self, entity):
-            return False
-
-        def ending_execution(self, entity):
-            pass
-
     class Node_(Node):
         def __init__(self):
             super().__init__('denoise')
-            for name, default, text, rng, read_only in PARAMETERS:
-                kwargs = {}
-                if rng is not None and isinstance(default, float):
-                    kwargs['floating_point_range'] = float_range(*rng)
-                elif rng is not None and isinstance(default, int):
-                    kwargs['integer_range'] = int_range(*rng)
-                self.declare_parameter(name, default,
-                                       descriptor(text, read_only=read_only, **kwargs))
-            self.params = {name: self.get_parameter(name).value for name in _DEFAULTS}
+            self.params = declare_parameter_table(self, PARAMETERS)
             check_parameters(self.params)
             self.denoiser = make_denoiser(self.params)
             self._pending = deque()  # messages waiting for their denoised values
             self._noise = None
-            self.add_on_set_parameters_callback(self._on_set)
+            self.add_on_set_parameters_callback(validate_on_set(self.params,
+                                                                check_parameters))
             self.add_post_set_parameters_callback(self._post_set)
             depth = int(self.params['queue_depth'])
-            qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=depth,
-                             reliability=qos_profile_sensor_data.reliability,
-                             durability=QoSDurabilityPolicy.VOLATILE)
-            overrides = QoSOverridingOptions.with_default_policies()
-            self._sub = self.create_subscription(
-                Imu, 'imu/data_raw', lambda msg: None, qos, callback_group=PolledGroup(),
-                qos_overriding_options=overrides)
+            self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth)
             self._max_batch = depth
             self._pub = self.create_publisher(
                 Imu, 'imu/data_denoised', qos_profile_sensor_data,
@@ -163,17 +127,6 @@ def _make_node_class():
             self.get_logger().info(
                 f'{self.params["method"]} denoising, latency up to {d.latency_samples} samples '
                 f'({d.latency_s:.3g} s at {self.params["rate_hz"]:g} Hz)')
-
-        def _on_set(self, params):
-            new = dict(self.params)
-            for param in params:
-                if param.name in new:
-                    new[param.name] = param.value
-            try:
-                check_parameters(new)
-            except InputError as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
-            return SetParametersResult(successful=True)
 
         def _post_set(self, params):
             changed = {p.name for p in params if p.name in self.params}
@@ -200,14 +153,7 @@ def _make_node_class():
 
         def drain(self):
             """Take the queued messages, denoise, publish what is ready."""
-            sub = self._sub
-            msgs = []
-            with sub.handle:
-                for _ in range(self._max_batch):
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                    if taken is None:
-                        break
-                    msgs.append(taken[0])
+            msgs = take_batch(self._sub, self._max_batch)
             if not msgs:
                 return
             _, data = imus_to_arrays(msgs)

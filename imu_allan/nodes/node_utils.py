@@ -82,3 +82,107 @@ def run_node(node_factory, args=None):
                 close()
             node.destroy_node()
         rclpy.try_shutdown()
+
+
+def node_main(executable, description, parameters, factory, args=None):
+    """Entry point of a node: ``--help`` without ROS, then spin; bad parameters exit 2.
+
+    ``parameters`` is the node's table of ``(name, default, description, ...)``; ``factory``
+    builds the node.  A refused parameter prints one line naming it (no traceback).
+    """
+    from ..io.errors import InputError
+    handle_help(executable, description, [(n, d, t) for n, d, t, *_ in parameters])
+    from rclpy.exceptions import ParameterException
+    try:
+        run_node(factory, args)
+    except (InputError, ParameterException) as exc:
+        print(f'{executable}: {exc}', file=sys.stderr)
+        sys.exit(2)
+
+
+def declare_parameter_table(node, parameters):
+    """Declare ``(name, default, description, range, read_only)`` rows with descriptors.
+
+    Ranges become ``FloatingPointRange``/``IntegerRange`` by the default's type; returns the
+    values as a dict.
+    """
+    values = {}
+    for name, default, text, rng, read_only in parameters:
+        kwargs = {}
+        if rng is not None and isinstance(default, float):
+            kwargs['floating_point_range'] = float_range(*rng)
+        elif rng is not None and isinstance(default, int) and not isinstance(default, bool):
+            kwargs['integer_range'] = int_range(*rng)
+        node.declare_parameter(name, default, descriptor(text, read_only=read_only, **kwargs))
+        values[name] = node.get_parameter(name).value
+    return values
+
+
+def validate_on_set(params, check):
+    """An on-set-parameters callback that runs ``check(candidate dict)`` before accepting.
+
+    ``check`` raises InputError with the reason; ``params`` is the node's current dict.
+    """
+    from rcl_interfaces.msg import SetParametersResult
+
+    from ..io.errors import InputError
+
+    def on_set(changes):
+        candidate = dict(params)
+        candidate.update({p.name: p.value for p in changes if p.name in candidate})
+        try:
+            check(candidate)
+        except InputError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+    return on_set
+
+
+def polled_subscription(node, msg_type, topic, depth, overrides=True):
+    """A deep sensor-data subscription that the executor never waits on.
+
+    Messages queue in the middleware and a timer takes them in batches with
+    :func:`take_batch`: at 1 kHz this costs a few percent of a core where one executor callback
+    per message costs ~20 % (design.md, environment facts).
+    """
+    from rclpy.callback_groups import CallbackGroup
+    from rclpy.qos import (
+        qos_profile_sensor_data,
+        QoSDurabilityPolicy,
+        QoSHistoryPolicy,
+        QoSProfile,
+    )
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+
+    class PolledGroup(CallbackGroup):
+        """A callback group the executor never runs."""
+
+        def can_execute(self, entity):
+            return False
+
+        def beginning_execution(self, entity):
+            return False
+
+        def ending_execution(self, entity):
+            pass
+
+    qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=int(depth),
+                     reliability=qos_profile_sensor_data.reliability,
+                     durability=QoSDurabilityPolicy.VOLATILE)
+    kwargs = {}
+    if overrides:
+        kwargs['qos_overriding_options'] = QoSOverridingOptions.with_default_policies()
+    return node.create_subscription(msg_type, topic, lambda _msg: None, qos,
+                                    callback_group=PolledGroup(), **kwargs)
+
+
+def take_batch(sub, max_batch):
+    """Take up to ``max_batch`` queued messages from a polled subscription."""
+    msgs = []
+    with sub.handle:
+        for _ in range(max_batch):
+            taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            if taken is None:
+                break
+            msgs.append(taken[0])
+    return msgs
