@@ -45,7 +45,7 @@ from .samples import Samples
 from .sqlite_pages import SQLITE_MAGIC, SqlitePages, Unsupported
 
 
-def _bag_kind(path):
+def bag_kind(path):
     """Classify a path: ('ros1'|'mcap'|'sqlite3'|'dir', storage files) or raise InputError."""
     p = Path(path)
     if not p.exists():
@@ -56,7 +56,7 @@ def _bag_kind(path):
             return 'dir', p
         files = sorted(x for x in p.iterdir() if x.suffix in ('.mcap', '.db3'))
         if len(files) == 1:
-            return _bag_kind(files[0])
+            return bag_kind(files[0])
         raise InputError(path, 'not a rosbag2 folder (no metadata.yaml)')
     try:
         with open(p, 'rb') as f:
@@ -92,7 +92,7 @@ def _dir_storage(p):
     return storage, files, compressed
 
 
-def _any_reader(paths, where):
+def any_reader(paths, where):
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import get_typestore, Stores
     try:
@@ -110,9 +110,9 @@ def bag_topics(path):
     Uses the bag's index through rosbags; a damaged MCAP or ROS 1 file is scanned instead
     (counting the readable messages).
     """
-    kind, p = _bag_kind(path)
+    kind, p = bag_kind(path)
     try:
-        reader = _any_reader([p], path)
+        reader = any_reader([p], path)
     except InputError:
         scan = None
         if kind == 'mcap' or (kind == 'dir' and _dir_storage(p)[0] == 'mcap'):
@@ -164,7 +164,7 @@ def read_bag(path, topic=None, fast=True):
 
     """
     where = str(path)
-    kind, p = _bag_kind(path)
+    kind, p = bag_kind(path)
     warnings = []
     if kind == 'dir':
         storage, files, compressed = _dir_storage(p)
@@ -193,9 +193,9 @@ def read_bag(path, topic=None, fast=True):
 
 def _read_generic(where, p, topic):
     """Read through ``AnyReader`` and the per-message deserializer (the reference path)."""
-    kind = _bag_kind(p)[0]
+    kind = bag_kind(p)[0]
     try:
-        reader = _any_reader([p], where)
+        reader = any_reader([p], where)
     except InputError:
         # rosbags cannot open damaged files (no MCAP footer, no ROS 1 index, malformed SQLite):
         # read what is left with the direct readers, deserializing message by message.
@@ -453,7 +453,7 @@ def _add_blobs(coll, stamps, blobs):
 
 def _read_ros1_fast(where, p, topic):
     """Fast path for ROS 1 bags: raw records from rosbags, ROS 1 layout decoded in bulk."""
-    reader = _any_reader([p], where)
+    reader = any_reader([p], where)
     warnings = []
     try:
         topics = {}

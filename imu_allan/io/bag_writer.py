@@ -208,12 +208,12 @@ def copy_bag_with_topic(src, dst, topic, samples, frame_id='imu_link', compress=
     """
     from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
-    from .bag_reader import _any_reader, _bag_kind
+    from .bag_reader import any_reader, bag_kind
 
-    _bag_kind(src)  # raises InputError for a missing path or a non-bag
+    bag_kind(src)  # raises InputError for a missing path or a non-bag
     p = _check_new(dst)
     rows, stamp_ns = encode_imu(samples.t, _six_columns(samples), frame_id)
-    reader = _any_reader([_bag_kind(src)[1]], str(src))
+    reader = any_reader([bag_kind(src)[1]], str(src))
     try:
         if any(c.topic == topic for c in reader.connections):
             raise InputError(src, f'topic {topic} already exists in the bag')

@@ -8,7 +8,7 @@ signatures, the first text lines, the GX3 command bytes 0xCB/0xC2/0xCF).
 
 from pathlib import Path
 
-from .bag_reader import _bag_kind, MCAP_MAGIC, read_bag, ROS1_MAGIC, SQLITE_MAGIC
+from .bag_reader import bag_kind, MCAP_MAGIC, read_bag, ROS1_MAGIC, SQLITE_MAGIC
 from .csv_samples import read_csv
 from .errors import InputError
 from .thesis_log import looks_like_thesis_log, read_thesis_log
@@ -92,7 +92,7 @@ def read_samples(path, fmt='auto', topic=None, fast=True):
     elif not Path(path).exists():
         raise InputError(path, 'no such file or directory')
     if fmt in ('rosbag2', 'ros1'):
-        kind = _bag_kind(path)[0]
+        kind = bag_kind(path)[0]
         if fmt == 'ros1' and kind != 'ros1':
             raise InputError(path, 'not a ROS 1 bag')
         if fmt == 'rosbag2' and kind == 'ros1':
