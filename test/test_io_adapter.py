@@ -84,3 +84,25 @@ def test_bulk_decoder_rejects_big_endian_cdr():
     raw = JAZZY.serialize_cdr(msg, IMU, little_endian=False)
     ok, _, _ = _decode_rows(np.frombuffer(raw, np.uint8).reshape(1, -1), ros1=False)
     assert not ok[0]
+
+
+def test_cdr_to_arrays_equals_the_message_adapter_on_rclpy_bytes():
+    """Bulk decoding of raw bytes (the allan node's intake) equals the per-message adapter."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import Imu
+
+    from imu_allan.io.imu_adapter import cdr_to_arrays, imus_to_arrays
+    rng = np.random.default_rng(12)
+    msgs = []
+    for i, frame in enumerate(['imu_link', 'a', 'imu', 'base_imu_frame_0', 'imu_link'] * 7):
+        m = Imu()
+        m.header.frame_id = frame
+        m.header.stamp.sec, m.header.stamp.nanosec = 1_700_000_000 + i, 123_456_789 * (i % 3)
+        (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z,
+         m.linear_acceleration.x, m.linear_acceleration.y,
+         m.linear_acceleration.z) = rng.normal(size=6).tolist()
+        msgs.append(m)
+    t_ref, d_ref = imus_to_arrays(msgs)
+    t, d = cdr_to_arrays([serialize_message(m) for m in msgs])
+    np.testing.assert_array_equal(t, t_ref)
+    np.testing.assert_array_equal(d, d_ref)

@@ -157,7 +157,7 @@ def _make_node_class():
 
     from ..core import health as hm
     from ..core.streaming import coefficient_table, deviation_table, OnlineAllan, StagedEstimate
-    from ..io.imu_adapter import imus_to_arrays
+    from ..io.imu_adapter import cdr_to_arrays
 
     class Node_(Node):
         def __init__(self):
@@ -172,7 +172,7 @@ def _make_node_class():
             self.add_post_set_parameters_callback(self._post_set)
 
             depth = int(self.params['queue_depth'])
-            self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth)
+            self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth, raw=True)
             self._max_batch = depth
             self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
             self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
@@ -219,7 +219,7 @@ def _make_node_class():
             msgs = take_batch(self._sub, self._max_batch)
             if msgs:
                 self._last_arrival = time.monotonic()
-                t, data = imus_to_arrays(msgs)
+                t, data = cdr_to_arrays(msgs)
                 self.pipeline.feed(t, data)
             if self._cycle is not None:
                 self._advance_cycle()

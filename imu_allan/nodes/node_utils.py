@@ -138,12 +138,13 @@ def validate_on_set(params, check):
     return on_set
 
 
-def polled_subscription(node, msg_type, topic, depth, overrides=True):
+def polled_subscription(node, msg_type, topic, depth, overrides=True, raw=False):
     """A deep sensor-data subscription that the executor never waits on.
 
     Messages queue in the middleware and a timer takes them in batches with
     :func:`take_batch`: at 1 kHz this costs a few percent of a core where one executor callback
-    per message costs ~20 % (design.md, environment facts).
+    per message costs ~20 % (design.md, environment facts).  With ``raw`` the batch holds the
+    serialized bytes (decode them with :func:`imu_allan.io.imu_adapter.cdr_to_arrays`).
     """
     from rclpy.callback_groups import CallbackGroup
     from rclpy.qos import (
@@ -173,7 +174,7 @@ def polled_subscription(node, msg_type, topic, depth, overrides=True):
     if overrides:
         kwargs['qos_overriding_options'] = QoSOverridingOptions.with_default_policies()
     return node.create_subscription(msg_type, topic, lambda _msg: None, qos,
-                                    callback_group=PolledGroup(), **kwargs)
+                                    callback_group=PolledGroup(), raw=raw, **kwargs)
 
 
 def take_batch(sub, max_batch):
