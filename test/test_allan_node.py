@@ -181,13 +181,16 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
         client = node.create_client(SetParameters, '/allan/set_parameters')
         assert client.wait_for_service(timeout_sec=10)
 
-        def set_budget(path):
+        def set_path(name, path):
             request = SetParameters.Request()
-            request.parameters = [Parameter(name='budget_file', value=ParameterValue(
+            request.parameters = [Parameter(name=name, value=ParameterValue(
                 type=ParameterType.PARAMETER_STRING, string_value=str(path)))]
             future = client.call_async(request)
             assert _spin_until(executor, future.done, 10)
             return future.result().results[0]
+
+        def set_budget(path):
+            return set_path('budget_file', path)
 
         refused = set_budget(tmp_path / 'missing.yaml')
         assert not refused.successful and 'missing.yaml' in refused.reason
@@ -199,6 +202,35 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
             return fresh and all(status(fresh[-1], f'{a} noise').level == b'\x02'
                                  for a in AXES)
         assert _spin_until(executor, tightened, 15), 'levels did not change to ERROR'
+
+        # 4. The discrepancy hook (issue 5): with a model file, /diagnostics carries the gap
+        #    per axis and the effect that fits the excess.  The true model is consistent; a
+        #    model without bias instability is not, and bias instability is named.
+        true_file, white_file = tmp_path / 'true.yaml', tmp_path / 'white.yaml'
+        MODEL.to_yaml(true_file)
+        NoiseModel({a: {'white_noise': MODEL.terms[a]['white_noise']}
+                     for a in AXES}).to_yaml(white_file)
+
+        def discrepancy_after(path):
+            assert set_path('model_file', path).successful
+            since = time.monotonic()
+
+            def ready():
+                fresh = [m for when, m in diags if when > since + 0.01]
+                return fresh and any(x.name.endswith('gyro_x model discrepancy')
+                                     for x in fresh[-1].status)
+            assert _spin_until(executor, ready, 15), 'no discrepancy status published'
+            last = [m for when, m in diags if when > since + 0.01][-1]
+            return [status(last, f'{a} model discrepancy') for a in AXES]
+
+        consistent = discrepancy_after(true_file)
+        assert sum(s.level == b'\x00' for s in consistent) >= 5, [s.message for s in consistent]
+        assert all(math.isfinite(float(values(s)['gap'])) for s in consistent)
+        missing = discrepancy_after(white_file)
+        assert all(s.level == b'\x01' for s in missing), [s.message for s in missing]
+        named = [values(s)['effect'] for s in missing]
+        assert named.count('bias_instability') >= 5, named
+        assert all(float(values(s)['gap']) > 2 for s in missing)
     finally:
         executor.shutdown()
         node.destroy_node()

@@ -324,3 +324,35 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
         level = WARN
         problems.append(f'{100 * excluded_share:.0f} % of samples excluded as motion')
     return Health(name, level, '; '.join(problems) if problems else 'ok', values)
+
+
+def discrepancy_health(model, result, axes=AXES, prefix=''):
+    """Model-vs-data check for the allan node's ``model_file``: one :class:`Health` per axis.
+
+    Uses :func:`imu_allan.core.discrepancy.gap_summary` (analytic band, milliseconds per axis):
+    OK when the measured curve is consistent with the model, WARN with the gap (about 1 means
+    consistent, see docs/discrepancy.md) and the effect that fits the excess otherwise, STALE
+    while there is no estimate or the model has no terms for the axis.
+    """
+    from .discrepancy import gap_summary
+    summary = gap_summary(model, result) if result is not None else {}
+    out = []
+    for axis in axes:
+        name = f'{prefix}{axis} model discrepancy'
+        entry = summary.get(axis)
+        if entry is None:
+            out.append(Health(name, STALE, 'no estimate yet, or no model terms for this axis',
+                              {}))
+            continue
+        band = entry.get('tau_range_s')
+        values = {'gap': float(entry['gap']), 'p_value': float(entry['p_value']),
+                  'effect': entry['effect'] or 'none',
+                  'tau_range_s': f'{band[0]:.4g}-{band[1]:.4g}' if band else '-'}
+        if entry['consistent']:
+            out.append(Health(name, OK, f'consistent with the model (gap {entry["gap"]:.2f})',
+                              values))
+        else:
+            effect = entry['effect'] or 'an unnamed effect'
+            out.append(Health(name, WARN, f'gap {entry["gap"]:.2f}: data leave the model band'
+                                          f' ({effect})', values))
+    return out

@@ -156,6 +156,7 @@ def _make_node_class():
     from std_msgs.msg import Float64MultiArray
 
     from ..core import health as hm
+    from ..core.model import NoiseModel
     from ..core.streaming import coefficient_table, deviation_table, OnlineAllan, StagedEstimate
     from ..io.imu_adapter import cdr_to_arrays
 
@@ -165,7 +166,7 @@ def _make_node_class():
             self.params = declare_parameter_table(self, PARAMETERS)
             check_parameters(self.params)  # InputError: main() prints it, exit status 2
             self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
-            self.model_file = self.params['model_file']
+            self._load_model()
             self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
             self.add_on_set_parameters_callback(validate_on_set(self.params,
                                                                 check_parameters))
@@ -205,7 +206,7 @@ def _make_node_class():
             if 'budget_file' in changed:
                 self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
             if 'model_file' in changed:
-                self.model_file = self.params['model_file']
+                self._load_model()
             if 'publish_period' in changed:
                 self._publish_timer.cancel()
                 self.destroy_timer(self._publish_timer)
@@ -259,6 +260,11 @@ def _make_node_class():
             else:
                 self._cycle_cpu += time.perf_counter() - start
 
+        def _load_model(self):
+            """The reference noise model for the discrepancy check (validated on set)."""
+            self.model_file = self.params['model_file']
+            self.model = NoiseModel.from_yaml(self.model_file) if self.model_file else None
+
         def _diagnostics(self, result, table):
             prefix = f'{self.get_name()}: '
             silence = (time.monotonic() - self._last_arrival
@@ -279,6 +285,8 @@ def _make_node_class():
                 **self.last_cycle,
             })
             records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
+            if self.model is not None:  # issue 5's online hook: gap and effect per axis
+                records += hm.discrepancy_health(self.model, result, AXES, prefix)
             array = DiagnosticArray()
             array.header.stamp = self.get_clock().now().to_msg()
             hw = self.params['hardware_id']
