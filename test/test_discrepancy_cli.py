@@ -158,3 +158,5 @@ def test_real_moving_robot_bag(shared_data, tmp_path):
     assert {s['effect'] for s in report['steps']} <= known
     for axis, gap in report['gap'].items():
         assert gap['final'] <= gap['initial'], axis
+    # and it says that the IMU moved, so the named effects describe the motion
+    assert any('not static' in note for note in report['notes'])

@@ -279,6 +279,12 @@ def main(argv=None):
 
     source = samples.source or args.input
     result.notes.extend(samples.warnings)
+    from imu_allan.core.analysis import motion_verdict
+    static, motion = motion_verdict(samples.data, samples.axes, result.measured.rate_hz)
+    if not static:  # the same check as analyze: effects found on a moving IMU describe motion
+        moving = ', '.join(a for a, d in motion.items() if d['moving'])
+        result.notes.append(f'the IMU was not static ({moving} moved): the effects named '
+                            f'describe the motion, not the sensor noise')
     report = report_dict(result, source)
     if args.out:
         try:
