@@ -47,3 +47,14 @@ def ros_env(domain=None):
 def python():
     """The interpreter running the tests (the venv's)."""
     return sys.executable
+
+
+def spin_until(executor, predicate, timeout):
+    """Spin an rclpy executor until ``predicate()`` is true; False after ``timeout`` s."""
+    import time
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.05)
+        if predicate():
+            return True
+    return False

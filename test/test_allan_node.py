@@ -11,7 +11,7 @@ import os
 import subprocess
 import time
 
-from conftest import executable, ros_env
+from conftest import executable, ros_env, spin_until
 import numpy as np
 import pytest
 
@@ -45,15 +45,6 @@ def _decode_coeffs(msg):
     assert [d.stride for d in dims] == [90, 15, 3]
     assert msg.layout.data_offset == 0
     return np.asarray(msg.data, dtype=float).reshape(6, 5, 3)
-
-
-def _spin_until(executor, predicate, timeout):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.05)
-        if predicate():
-            return True
-    return False
 
 
 @pytest.fixture(scope='module')
@@ -121,7 +112,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
         qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=40000,
                          reliability=QoSReliabilityPolicy.RELIABLE)
         pub = node.create_publisher(Imu, 'imu/data_raw', qos)
-        assert _spin_until(executor, lambda: pub.get_subscription_count() > 0, 30), \
+        assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 30), \
             'allan node did not subscribe'
         for i in range(0, N, 500):
             for msg in msgs[i:i + 500]:
@@ -137,9 +128,9 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
         def complete():
             return any(values(status(m, 'IMU stream')).get('samples_total') == str(N)
                        for _, m in diags)
-        assert _spin_until(executor, complete, 60), 'node never reported all samples'
+        assert spin_until(executor, complete, 60), 'node never reported all samples'
         seen_complete = time.monotonic()
-        assert _spin_until(executor, lambda: coeffs and coeffs[-1][0] > seen_complete + 0.01
+        assert spin_until(executor, lambda: coeffs and coeffs[-1][0] > seen_complete + 0.01
                            and diags[-1][0] > seen_complete + 0.01, 30)
         table = _decode_coeffs(coeffs[-1][1])
 
@@ -186,7 +177,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
             request.parameters = [Parameter(name=name, value=ParameterValue(
                 type=ParameterType.PARAMETER_STRING, string_value=str(path)))]
             future = client.call_async(request)
-            assert _spin_until(executor, future.done, 10)
+            assert spin_until(executor, future.done, 10)
             return future.result().results[0]
 
         def set_budget(path):
@@ -201,7 +192,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
             fresh = [m for when, m in diags if when > changed + 0.01]
             return fresh and all(status(fresh[-1], f'{a} noise').level == b'\x02'
                                  for a in AXES)
-        assert _spin_until(executor, tightened, 15), 'levels did not change to ERROR'
+        assert spin_until(executor, tightened, 15), 'levels did not change to ERROR'
 
         # 4. The discrepancy hook (issue 5): with a model file, /diagnostics carries the gap
         #    per axis and the effect that fits the excess.  The true model is consistent; a
@@ -219,7 +210,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
                 fresh = [m for when, m in diags if when > since + 0.01]
                 return fresh and any(x.name.endswith('gyro_x model discrepancy')
                                      for x in fresh[-1].status)
-            assert _spin_until(executor, ready, 15), 'no discrepancy status published'
+            assert spin_until(executor, ready, 15), 'no discrepancy status published'
             last = [m for when, m in diags if when > since + 0.01][-1]
             return [status(last, f'{a} model discrepancy') for a in AXES]
 

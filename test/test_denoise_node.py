@@ -3,9 +3,8 @@
 import math
 import os
 import subprocess
-import time
 
-from conftest import executable, ros_env
+from conftest import executable, ros_env, spin_until
 import numpy as np
 import pytest
 
@@ -20,15 +19,6 @@ rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 DOMAIN = os.getpid() % 100 + 100
 RATE = 100.0
 N = 6000
-
-
-def _spin_until(executor, predicate, timeout):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.05)
-        if predicate():
-            return True
-    return False
 
 
 def test_denoise_node_stream():
@@ -75,8 +65,8 @@ def test_denoise_node_stream():
                          reliability=QoSReliabilityPolicy.RELIABLE)
         node.create_subscription(Imu, 'imu/data_denoised', received.append, qos)
         pub = node.create_publisher(Imu, 'imu/data_raw', qos)
-        assert _spin_until(executor, lambda: pub.get_subscription_count() > 0, 30)
-        assert _spin_until(executor, lambda: node.count_publishers('imu/data_denoised') > 0,
+        assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 30)
+        assert spin_until(executor, lambda: node.count_publishers('imu/data_denoised') > 0,
                            30)
         for i in range(0, N, 500):
             for msg in msgs[i:i + 500]:
@@ -84,9 +74,9 @@ def test_denoise_node_stream():
             executor.spin_once(timeout_sec=0.01)
         reference = make_denoiser(dict(_DEFAULTS))
         expected = reference.push(data_in)
-        assert _spin_until(executor, lambda: len(received) >= expected.shape[0], 60), \
+        assert spin_until(executor, lambda: len(received) >= expected.shape[0], 60), \
             f'{len(received)} of {expected.shape[0]} denoised messages'
-        _spin_until(executor, lambda: False, 0.5)  # nothing more may come
+        spin_until(executor, lambda: False, 0.5)  # nothing more may come
     finally:
         executor.shutdown()
         node.destroy_node()
