@@ -31,7 +31,7 @@ build: $(STAMP)
 		--build-base build --install-base install --event-handlers console_cohesion- summary-
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check imu_allan test scripts setup.py
+	$(VENV)/bin/ruff check imu_allan test scripts bench launch setup.py
 
 test: build
 	$(RUN_ENV) $(VPY) -m pytest -q $(TESTS) $(PYTEST_ARGS)

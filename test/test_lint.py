@@ -9,6 +9,7 @@ from conftest import REPO
 
 def test_ruff_flake8_and_pep257_rules():
     ruff = Path(sys.executable).parent / 'ruff'
-    proc = subprocess.run([str(ruff), 'check', '--no-cache', 'imu_allan', 'test', 'setup.py',
-                           'scripts', 'bench'], cwd=REPO, capture_output=True, text=True)
+    paths = ['imu_allan', 'test', 'scripts', 'bench', 'launch', 'setup.py']
+    proc = subprocess.run([str(ruff), 'check', '--no-cache', *paths], cwd=REPO,
+                          capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
