@@ -30,7 +30,7 @@ import numpy as np
 from ..io import gx3_protocol as p
 from ..io.errors import InputError
 from ..io.serial_link import check_rate, Gx3Session, MODES
-from .node_utils import descriptor, diagnostic_status, float_range, handle_help, run_node
+from .node_utils import descriptor, diagnostic_status, float_range, node_main
 
 DESCRIPTION = ('Reads a LORD MicroStrain 3DM-GX3-25 over a serial port (single-byte '
                'protocol) and publishes imu/data_raw, imu/data (orientation modes), imu/mag '
@@ -379,19 +379,7 @@ def _node_class():
 
 def main(args=None):
     """Entry point of ``driver``."""
-    handle_help('driver', DESCRIPTION, [(n, d, t) for n, d, t, _ in PARAMETERS])
-    try:
-        run_node(lambda: _node_class()(), args=args)
-    except InputError as exc:
-        print(f'driver: {exc}', file=sys.stderr)
-        return 2
-    except Exception as exc:  # rclpy parameter exceptions: one line, no traceback
-        name = type(exc).__name__
-        if 'Parameter' not in name:
-            raise
-        print(f'driver: {str(exc).splitlines()[0]}', file=sys.stderr)
-        return 2
-    return 0
+    node_main('driver', DESCRIPTION, PARAMETERS, lambda: _node_class()(), args)
 
 
 if __name__ == '__main__':

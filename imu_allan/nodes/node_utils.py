@@ -96,7 +96,8 @@ def node_main(executable, description, parameters, factory, args=None):
     try:
         run_node(factory, args)
     except (InputError, ParameterException) as exc:
-        print(f'{executable}: {exc}', file=sys.stderr)
+        lines = str(exc).splitlines() or [type(exc).__name__]
+        print(f'{executable}: {lines[0]}', file=sys.stderr)  # one line, no traceback
         sys.exit(2)
 
 
