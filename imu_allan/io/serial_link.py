@@ -296,8 +296,13 @@ class Gx3Session:
         self.thread = threading.Thread(target=self.run, name='gx3_session', daemon=True)
         self.thread.start()
 
-    def stop(self, timeout=2.0):
-        """Ask the loop to end, stop continuous mode and close the port."""
+    def stop(self, timeout=5.0):
+        """Ask the loop to end, stop continuous mode and close the port.
+
+        The loop sends the stop command on its way out; the timeout is generous because the
+        process exits (ending this daemon thread) once it returns, and a device left streaming
+        would keep sending into a closed port (seen under load with 2 s).
+        """
         self._stop.set()
         if self.thread is not None:
             self.thread.join(timeout)
