@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 from imu_allan import simulate, thesis_gx3_25_model
-from imu_allan.io.bag_writer import write_imu_bag
-from imu_allan.io.samples import Samples
+from imu_allan.formats.bag_writer import write_imu_bag
+from imu_allan.formats.samples import Samples
 
 
 def _analyze_exe():

@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from imu_allan.io import gx3_protocol as p
-from imu_allan.io.gx3_stream import StreamParser
+from imu_allan.device import gx3_protocol as p
+from imu_allan.device.gx3_stream import StreamParser
 
 #: Extra driver arguments (e.g. "-p read_period:=0.01") for experiments.
 EXTRA = os.environ.get('BENCH_DRIVER_ARGS', '').split()

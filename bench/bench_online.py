@@ -29,8 +29,9 @@ import numpy as np  # noqa: E402
 
 from imu_allan.core.allan import allan_deviation  # noqa: E402
 from imu_allan.core.model import NoiseModel, thesis_gx3_25_model  # noqa: E402
+from imu_allan.core.online import OnlineAllan  # noqa: E402
 from imu_allan.core.simulate import simulate  # noqa: E402
-from imu_allan.core.streaming import OnlineAllan, StreamingAllan  # noqa: E402
+from imu_allan.core.streaming import StreamingAllan  # noqa: E402
 
 
 def bench_estimator():

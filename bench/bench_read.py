@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from imu_allan.io.bag_reader import read_bag
-from imu_allan.io.bag_writer import write_imu_bag
-from imu_allan.io.samples import Samples
+from imu_allan.formats.bag_reader import read_bag
+from imu_allan.formats.bag_writer import write_imu_bag
+from imu_allan.formats.samples import Samples
 
 
 def _timed(fn, repeat=1):

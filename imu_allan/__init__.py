@@ -6,26 +6,36 @@ The ROS-free Python API (SI units, continuous-time coefficients)::
     result = imu_allan.allan_deviation(data, rate_hz)      # (n, A) -> tau, adev, ci_low/high
     model = imu_allan.fit_noise_model(result)              # terms with 68.3 % intervals
     sim = imu_allan.simulate(model.model, n, rate_hz, seed=1)
+    samples = imu_allan.read_samples('my_bag/')            # any supported recording
 
 Names are loaded on first use (PEP 562) so that commands answering ``--help`` or rejecting bad
-input do not pay for importing scipy.
+input do not pay for importing scipy.  Importing the package changes nothing in the process
+environment (the commands and nodes set their BLAS threading themselves).
 """
 
 import importlib
-import os
 
-# The fits solve many small (< 100 x 100) systems: BLAS threads only add overhead there, and on
-# a 2-core robot computer they were measured to make them 15x slower.  A default, not a rule.
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+__version__ = '0.1.0'
 
 _API = {
+    # Allan deviation, EDF and intervals
     'allan_deviation': 'core.allan', 'AllanResult': 'core.allan',
+    'edf_oadev': 'core.edf', 'chi2_interval': 'core.edf', 'CI_LEVEL': 'core.edf',
+    # noise terms, fit, models, simulation
     'fit_noise_model': 'core.fit', 'FittedModel': 'core.fit',
     'NoiseModel': 'core.model', 'thesis_gx3_25_model': 'core.model',
     'simulate': 'core.simulate',
-    'AXES': 'core.units', 'IEEE_TERMS': 'core.units',
+    # streaming and online estimation
+    'StreamingAllan': 'core.streaming', 'OnlineAllan': 'core.online',
+    'online_allan': 'core.online',
+    # denoising, discrepancy workflow
+    'denoise': 'core.denoise', 'run_discrepancy': 'core.discrepancy',
+    # recordings
+    'read_samples': 'formats.readers', 'Samples': 'formats.samples',
+    # names and units
+    'AXES': 'core.units', 'IEEE_TERMS': 'core.units', 'InputError': 'errors',
 }
-__all__ = sorted(_API)
+__all__ = sorted(_API) + ['__version__']
 
 
 def __getattr__(name):

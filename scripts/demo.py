@@ -149,8 +149,8 @@ def offline_part(env):
     import numpy as np
 
     from imu_allan import simulate, thesis_gx3_25_model
-    from imu_allan.io.bag_writer import write_imu_bag
-    from imu_allan.io.samples import Samples
+    from imu_allan.formats.bag_writer import write_imu_bag
+    from imu_allan.formats.samples import Samples
 
     analyze = executable('analyze')
     if analyze is None:

@@ -12,12 +12,10 @@ from pathlib import Path
 import sys
 
 from ..core.units import ALL_TERMS, IEEE_TERMS
-from ..io.errors import InputError
+from ..errors import InputError
+from ..formats import FORMATS
 from .common import ArgumentParser, EXIT_BAD_INPUT, guarded
 from .progress import Progress
-
-# Kept here (not imported from io.readers) so that --help and argument errors need no scipy.
-FORMATS = ('auto', 'rosbag2', 'ros1', 'csv', 'thesis', 'gx3raw')
 
 
 def build_parser():
@@ -87,7 +85,7 @@ def _options(args):
 def _denoised_analysis(samples, analysis, options):
     from ..core.analysis import analyze_samples
     from ..core.denoise import denoise
-    from ..io.samples import Samples
+    from ..formats.samples import Samples
     clean = denoise(analysis.data, analysis.rate_hz)
     den = Samples(t=samples.t, data=clean, axes=samples.axes,
                   source=samples.source + ' (denoised)')
@@ -96,7 +94,7 @@ def _denoised_analysis(samples, analysis, options):
 
 def _write_denoised_bag(path, fmt, samples, denoised_samples, folder):
     """rosbag2 (MCAP) ``folder/denoised_bag`` with imu/data_denoised beside the original topics."""
-    from ..io.bag_writer import copy_bag_with_topic, write_imu_bag
+    from ..formats.bag_writer import copy_bag_with_topic, write_imu_bag
     dst = Path(folder) / 'denoised_bag'
     if fmt in ('rosbag2', 'ros1'):
         copy_bag_with_topic(path, dst, 'imu/data_denoised', denoised_samples)
@@ -109,14 +107,14 @@ def _write_denoised_bag(path, fmt, samples, denoised_samples, folder):
 def run_one(path, args, options, progress=None):
     """Analyse one input; return ``(report dict, console text)``; raise InputError."""
     from ..core.analysis import analyze_samples
-    from ..io.readers import read_samples
-    from ..io.report import analysis_to_json, console_summary
+    from ..formats.readers import read_samples
+    from ..report.json_report import analysis_to_json, console_summary
     step = progress.step if progress else (lambda _name: None)
     step('reading')
     fmt = args.format
     samples = read_samples(path, fmt=fmt, topic=args.topic)
     if args.export_samples:
-        from ..io.csv_samples import write_csv
+        from ..formats.csv_samples import write_csv
         write_csv(args.export_samples, samples)
     step('Allan deviation and fit')
     analysis = analyze_samples(samples, options)
@@ -132,13 +130,13 @@ def run_one(path, args, options, progress=None):
             for j, a in enumerate(denoised.axes)}
     if args.out:
         step('writing report')
-        from ..io.outputs import write_out_dir
+        from ..report.outputs import write_out_dir
         out_dir = Path(args.out)
         if len(args.inputs) > 1:
             out_dir = out_dir / Path(str(path).rstrip('/')).name.replace('.', '_')
         extra = None
         if args.denoise:
-            from ..io.readers import detect_format
+            from ..formats.readers import detect_format
             real_fmt = detect_format(path) if fmt == 'auto' else fmt
             report['denoised_bag'] = str(out_dir / 'denoised_bag')
 

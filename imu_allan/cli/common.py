@@ -5,13 +5,22 @@ import functools
 import sys
 
 from ..core.model import ModelError
-from ..io.errors import InputError
+from ..errors import InputError
 
 EXIT_BAD_INPUT = 2
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse with a one-line error (``prog: error: ...``) and exit status 2."""
+    """argparse with a one-line error (``prog: error: ...``), exit status 2, no abbreviations.
+
+    Prefix matching is off: with it, ``--export all`` was silently taken as
+    ``--export-samples all`` (a 200 MB CSV named ``all``).
+    """
+
+    def __init__(self, *args, **kwargs):
+        """Build the parser (``allow_abbrev`` is always False)."""
+        kwargs['allow_abbrev'] = False
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         """Print one line and exit 2 (argparse prints the usage too, which we leave out)."""

@@ -5,13 +5,12 @@ Usage::
     discrepancy INPUT [--model MODEL.yaml | --terms white_noise,bias_instability]
                 [--json] [--out DIR] [--topic T] [--format FMT] [--sims K] [--seed S]
 
-Reads the recording through :func:`imu_allan.io.readers.read_samples`, runs the workflow of
+Reads the recording through :func:`imu_allan.formats.readers.read_samples`, runs the workflow of
 :mod:`imu_allan.core.discrepancy` and prints a summary (or the JSON report with ``--json``).
 ``--out DIR`` writes ``report.json``, ``final_model.yaml`` and PNG plots.  Bad input: one line
 on stderr naming the file and the problem, exit status 2.
 """
 
-import argparse
 import json
 import math
 import os
@@ -19,19 +18,13 @@ import sys
 
 import numpy as np
 
-FORMATS = ('auto', 'rosbag2', 'ros1', 'csv', 'thesis', 'gx3raw')
-
-
-class _Parser(argparse.ArgumentParser):
-    """Argument errors as one line and exit status 2 (argparse's own status, no usage dump)."""
-
-    def error(self, message):
-        self.exit(2, f'discrepancy: {message}\n')
+from ..formats import FORMATS
+from .common import ArgumentParser, guarded
 
 
 def build_parser():
     """Command-line parser."""
-    parser = _Parser(
+    parser = ArgumentParser(
         prog='discrepancy',
         description='Find where a noise model and measured IMU data disagree (Allan '
                     'deviation), name the missing effect, add it and show the gap shrink.')
@@ -248,12 +241,13 @@ def _fail(message):
     return 2
 
 
+@guarded
 def main(argv=None):
     """Entry point; returns the exit status."""
     args = build_parser().parse_args(argv)
     from imu_allan.core.discrepancy import run_samples
     from imu_allan.core.model import ModelError, NoiseModel
-    from imu_allan.io.errors import InputError
+    from imu_allan.errors import InputError
 
     if args.sims < 0 or args.max_steps < 0:
         return _fail('discrepancy: --sims and --max-steps must be >= 0')
@@ -264,7 +258,7 @@ def main(argv=None):
             return _fail('--terms: give at least one term, e.g. white_noise,bias_instability')
     try:
         model = NoiseModel.from_yaml(args.model) if args.model else None
-        from imu_allan.io.readers import read_samples
+        from imu_allan.formats.readers import read_samples
         samples = read_samples(args.input, args.format, args.topic)
         if samples.n < 20:
             raise InputError(args.input, f'only {samples.n} samples: too short')

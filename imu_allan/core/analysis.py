@@ -1,15 +1,15 @@
 """The offline analysis pipeline: validate, preprocess, Allan deviation, fit, verdicts.
 
-ROS-free and I/O-free: it takes :class:`~imu_allan.io.samples.Samples` and returns an
+ROS-free and I/O-free: it takes :class:`~imu_allan.formats.samples.Samples` and returns an
 :class:`Analysis`; readers, report writers and the ``analyze`` command sit around it.  Every
-problem with the data raises :class:`~imu_allan.io.errors.InputError` naming the source.
+problem with the data raises :class:`~imu_allan.errors.InputError` naming the source.
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..io.errors import InputError
+from ..errors import InputError
 from .allan import (
     allan_deviation,
     AllanResult,
@@ -152,7 +152,7 @@ def analyze_samples(samples, options=None):
         taus = tau_grid(n, options.points_per_decade, options.min_clusters,
                         m_max=int(options.tau_max * rate)) / rate
     if options.online:
-        from .streaming import online_allan
+        from .online import online_allan
         result = online_allan(data, rate, t=samples.t, axes=samples.axes)
         if result is None:
             raise InputError(where, "too short for the online estimator's shortest "

@@ -872,7 +872,7 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
 
 
 def run_samples(samples, **kwargs):
-    """:func:`run_discrepancy` on a :class:`~imu_allan.io.samples.Samples` recording.
+    """:func:`run_discrepancy` on a :class:`~imu_allan.formats.samples.Samples` recording.
 
     The sample rate is the median of the time-stamp differences.
     """

@@ -27,7 +27,7 @@ import os
 import numpy as np
 import yaml
 
-from ..io.errors import InputError
+from ..errors import InputError
 from .units import AXES, conventional, IEEE_TERMS, sensor_of, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3

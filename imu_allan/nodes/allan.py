@@ -12,7 +12,7 @@ and publishes every ``publish_period`` seconds:
 * ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share) and each axis
   against the noise budget (OK / WARN / ERROR / STALE).
 
-The numerics are :class:`imu_allan.core.streaming.OnlineAllan` (stamp checks, stationarity
+The numerics are :class:`imu_allan.core.online.OnlineAllan` (stamp checks, stationarity
 gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
 code, so the numbers agree for the same samples.  Messages are not handled one by one: the
 subscription sits in a callback group the executor never waits on, and a timer takes the queued
@@ -22,12 +22,29 @@ messages in batches (the executor costs about 200 us per message at 1 kHz otherw
 import math
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from ..core import health as hm
+from ..core.model import NoiseModel
+from ..core.online import OnlineAllan, StagedEstimate
 from ..core.units import AXES, TERM_PARAMETERS
-from ..io.errors import InputError
-from .node_utils import (  # noqa: E402
+from ..errors import InputError
+from ..formats.imu_adapter import cdr_to_arrays
+from ..report.coeffs_layout import (
+    COEFF_LABELS,
+    coefficient_table,
+    DEVIATION_LABELS,
+    deviation_table,
+)
+from .common import (
+    apply_changes,
     declare_parameter_table,
     diagnostic_status,
     node_main,
+    Param,
     polled_subscription,
     take_batch,
     validate_on_set,
@@ -37,50 +54,49 @@ DESCRIPTION = ('Live Allan deviation and noise coefficients (with 68.3 % interva
                'imu/data_raw: publishes imu/allan_coeffs, imu/allan_deviation and '
                '/diagnostics against a noise budget. Bounded memory; moving spans left out.')
 
-#: name, default, description, range (None: no range), read-only
+#: The parameter table (nodes.common.Param: name, default, description, range, read-only).
 PARAMETERS = [
-    ('rate_hz', 100.0, 'configured sample rate of imu/data_raw, Hz (tau0 = 1/rate_hz)',
-     (0.1, 10000.0), False),
-    ('publish_period', 10.0, 'seconds between publications (each cycle computes intervals '
-                             'and fits one axis at a time between message drains)',
-     (0.1, 3600.0), False),
-    ('window_s', 0.0, 'sliding window, s: publish the estimate of the last window_s seconds '
-                      '(0 = the whole run)', (0.0, 1.0e7), False),
-    ('max_tau', 10000.0, 'longest averaging time tracked, s (fixes the memory)',
-     (0.001, 1.0e7), False),
-    ('points_per_decade', 10, 'averaging times per decade', (1, 100), False),
-    ('stride_base', 256, 'averaging factors up to this are exact; longer ones use every '
-                         's-th overlapping term (docs/online.md)', (1, 10_000_000), False),
-    ('min_clusters', 10, 'publish an averaging time once the data span min_clusters x tau',
-     (2, 10000), False),
-    ('gate', True, 'leave spans where the IMU moves out of the estimate', None, False),
-    ('gate_window_s', 0.2, 'stationarity gate window, s', (0.005, 60.0), False),
-    ('gate_std_factor', 3.0, 'motion if a window std exceeds this x the noise floor',
-     (1.1, 1000.0), False),
-    ('gate_step_factor', 8.0, 'motion if a window mean jumps by this many sigmas',
-     (0.5, 1000.0), False),
-    ('gate_gyro_max', 0.1, 'motion if the mean angular rate exceeds this, rad/s',
-     (1.0e-6, 100.0), False),
-    ('gate_hold_s', 1.0, 'seconds left out after motion (settling)', (0.0, 600.0), False),
-    ('gap_factor', 1.5, 'a stamp spacing above this many sample intervals is a gap (the '
-                        'phase restarts)', (1.01, 1000.0), False),
-    ('terms', '', 'comma-separated terms to fit (empty: automatic among the five IEEE '
-                  'terms)', None, False),
-    ('budget_file', '', 'noise budget YAML (empty: the packaged 3DM-GX3-25 datasheet '
-                        'budget)', None, False),
-    ('model_file', '', 'noise model YAML for a model-vs-data discrepancy check (optional)',
-     None, False),
-    ('timeout_s', 2.0, 'ERROR on /diagnostics after this many seconds without samples',
-     (0.01, 3600.0), False),
-    ('rate_tolerance', 0.1, 'WARN when the measured rate differs by more than this fraction',
-     (0.0, 10.0), False),
-    ('hardware_id', '', 'hardware_id of the diagnostic statuses', None, False),
-    ('drain_period', 0.05, 'seconds between taking the queued messages (read-only)',
-     (0.001, 1.0), True),
-    ('queue_depth', 5000, 'subscription queue depth, messages (read-only; >= rate x '
-                          'drain_period x a margin)', (10, 1_000_000), True),
+    Param('rate_hz', 100.0, 'configured sample rate of imu/data_raw, Hz (tau0 = 1/rate_hz)',
+          (0.1, 10000.0)),
+    Param('publish_period', 10.0, 'seconds between publications (each cycle computes intervals '
+                                  'and fits one axis at a time between message drains)',
+          (0.1, 3600.0)),
+    Param('window_s', 0.0, 'sliding window, s: publish the estimate of the last window_s seconds '
+                           '(0 = the whole run)', (0.0, 1.0e7)),
+    Param('max_tau', 10000.0, 'longest averaging time tracked, s (fixes the memory)',
+          (0.001, 1.0e7)),
+    Param('points_per_decade', 10, 'averaging times per decade', (1, 100)),
+    Param('stride_base', 256, 'averaging factors up to this are exact; longer ones use every '
+                              's-th overlapping term (docs/online.md)', (1, 10_000_000)),
+    Param('min_clusters', 10, 'publish an averaging time once the data span min_clusters x tau',
+          (2, 10000)),
+    Param('gate', True, 'leave spans where the IMU moves out of the estimate'),
+    Param('gate_window_s', 0.2, 'stationarity gate window, s', (0.005, 60.0)),
+    Param('gate_std_factor', 3.0, 'motion if a window std exceeds this x the noise floor',
+          (1.1, 1000.0)),
+    Param('gate_step_factor', 8.0, 'motion if a window mean jumps by this many sigmas',
+          (0.5, 1000.0)),
+    Param('gate_gyro_max', 0.1, 'motion if the mean angular rate exceeds this, rad/s',
+          (1.0e-6, 100.0)),
+    Param('gate_hold_s', 1.0, 'seconds left out after motion (settling)', (0.0, 600.0)),
+    Param('gap_factor', 1.5, 'a stamp spacing above this many sample intervals is a gap (the '
+                             'phase restarts)', (1.01, 1000.0)),
+    Param('terms', '', 'comma-separated terms to fit (empty: automatic among the five IEEE '
+                       'terms)'),
+    Param('budget_file', '', 'noise budget YAML (empty: the packaged 3DM-GX3-25 datasheet '
+                             'budget)'),
+    Param('model_file', '', 'noise model YAML for a model-vs-data discrepancy check (optional)'),
+    Param('timeout_s', 2.0, 'ERROR on /diagnostics after this many seconds without samples',
+          (0.01, 3600.0)),
+    Param('rate_tolerance', 0.1, 'WARN when the measured rate differs by more than this fraction',
+          (0.0, 10.0)),
+    Param('hardware_id', '', 'hardware_id of the diagnostic statuses'),
+    Param('drain_period', 0.05, 'seconds between taking the queued messages (read-only)',
+          (0.001, 1.0), read_only=True),
+    Param('queue_depth', 5000, 'subscription queue depth, messages (read-only; >= rate x '
+                               'drain_period x a margin)', (10, 1_000_000), read_only=True),
 ]
-_DEFAULTS = {name: default for name, default, *_ in PARAMETERS}
+_DEFAULTS = {p.name: p.default for p in PARAMETERS}
 #: Longest stretch of publish-cycle work done in one drain callback, s (a step may overrun it).
 STEP_BUDGET_S = 0.02
 # Parameters whose change restarts the estimate.
@@ -133,7 +149,6 @@ def check_parameters(p):
 
 def multiarray(table, labels):
     """A row-major ``std_msgs/Float64MultiArray`` of a numpy array with dimension labels."""
-    from std_msgs.msg import Float64MultiArray, MultiArrayDimension
     msg = Float64MultiArray()
     stride = int(table.size)
     for label, size in zip(labels, table.shape):
@@ -149,156 +164,134 @@ def main(args=None):
     node_main('allan', DESCRIPTION, PARAMETERS, AllanNode, args)
 
 
-def _make_node_class():
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.node import Node
-    from sensor_msgs.msg import Imu
-    from std_msgs.msg import Float64MultiArray
+class AllanNode(Node):
+    def __init__(self):
+        super().__init__('allan')
+        self.params = declare_parameter_table(self, PARAMETERS)
+        check_parameters(self.params)  # InputError: main() prints it, exit status 2
+        self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
+        self._load_model()
+        self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
+        self.add_on_set_parameters_callback(validate_on_set(self.params, PARAMETERS,
+                                                            check_parameters))
+        self.add_post_set_parameters_callback(self._post_set)
 
-    from ..core import health as hm
-    from ..core.model import NoiseModel
-    from ..core.streaming import coefficient_table, deviation_table, OnlineAllan, StagedEstimate
-    from ..io.imu_adapter import cdr_to_arrays
+        depth = int(self.params['queue_depth'])
+        self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth, raw=True)
+        self._max_batch = depth
+        self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
+        self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._last_arrival = None
+        self._cycle = None
+        self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
+                           'cycle_wall_s': math.nan}
+        self._drain_timer = self.create_timer(self.params['drain_period'], self.drain)
+        self._publish_timer = self.create_timer(self.params['publish_period'],
+                                                self.publish)
+        self.get_logger().info(
+            f'waiting for imu/data_raw at {self.params["rate_hz"]:g} Hz; publishing every '
+            f'{self.params["publish_period"]:g} s; budget {self.budget.source}; estimator '
+            f'memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
 
-    class Node_(Node):
-        def __init__(self):
-            super().__init__('allan')
-            self.params = declare_parameter_table(self, PARAMETERS)
-            check_parameters(self.params)  # InputError: main() prints it, exit status 2
+    # -- parameters ------------------------------------------------------------------
+
+    def _post_set(self, params):
+        changed = apply_changes(self.params, PARAMETERS, params)
+        if changed & _RESTART or 'terms' in changed:
+            if changed & _RESTART:
+                self.get_logger().info('estimator settings changed: estimate restarted')
+                self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
+            else:
+                self.pipeline.terms = parse_terms(self.params['terms'])
+        if 'budget_file' in changed:
             self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
+        if 'model_file' in changed:
             self._load_model()
-            self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
-            self.add_on_set_parameters_callback(validate_on_set(self.params,
-                                                                check_parameters))
-            self.add_post_set_parameters_callback(self._post_set)
-
-            depth = int(self.params['queue_depth'])
-            self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth, raw=True)
-            self._max_batch = depth
-            self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
-            self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
-            self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-            self._last_arrival = None
-            self._cycle = None
-            self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
-                               'cycle_wall_s': math.nan}
-            self._drain_timer = self.create_timer(self.params['drain_period'], self.drain)
+        if 'publish_period' in changed:
+            self._publish_timer.cancel()
+            self.destroy_timer(self._publish_timer)
             self._publish_timer = self.create_timer(self.params['publish_period'],
                                                     self.publish)
-            self.get_logger().info(
-                f'waiting for imu/data_raw at {self.params["rate_hz"]:g} Hz; publishing every '
-                f'{self.params["publish_period"]:g} s; budget {self.budget.source}; estimator '
-                f'memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
 
-        # -- parameters ------------------------------------------------------------------
+    # -- work ------------------------------------------------------------------------
 
-        def _post_set(self, params):
-            changed = {p.name for p in params if p.name in self.params}
-            for param in params:
-                if param.name in self.params:
-                    self.params[param.name] = param.value
-            if changed & _RESTART or 'terms' in changed:
-                if changed & _RESTART:
-                    self.get_logger().info('estimator settings changed: estimate restarted')
-                    self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
-                else:
-                    self.pipeline.terms = parse_terms(self.params['terms'])
-            if 'budget_file' in changed:
-                self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
-            if 'model_file' in changed:
-                self._load_model()
-            if 'publish_period' in changed:
-                self._publish_timer.cancel()
-                self.destroy_timer(self._publish_timer)
-                self._publish_timer = self.create_timer(self.params['publish_period'],
-                                                        self.publish)
-
-        # -- work ------------------------------------------------------------------------
-
-        def drain(self):
-            """Take every queued message, feed them in one batch, advance a publish cycle."""
-            msgs = take_batch(self._sub, self._max_batch)
-            if msgs:
-                self._last_arrival = time.monotonic()
-                t, data = cdr_to_arrays(msgs)
-                self.pipeline.feed(t, data)
-            if self._cycle is not None:
-                self._advance_cycle()
-
-        def publish(self):
-            """Start a publish cycle: freeze the sums; the steps run between drains."""
-            if self._cycle is not None:
-                return  # the previous cycle is still running (publish_period very short)
-            self._cycle = StagedEstimate(self.pipeline, window=self.params['window_s'] > 0)
-            self._cycle_cpu = 0.0
-            self._cycle_max_step = 0.0
-            self._cycle_wall = time.monotonic()
+    def drain(self):
+        """Take every queued message, feed them in one batch, advance a publish cycle."""
+        msgs = take_batch(self._sub, self._max_batch)
+        if msgs:
+            self._last_arrival = time.monotonic()
+            t, data = cdr_to_arrays(msgs)
+            self.pipeline.feed(t, data)
+        if self._cycle is not None:
             self._advance_cycle()
 
-        def _advance_cycle(self):
-            """Run cycle steps for up to STEP_BUDGET_S, then publish once the cycle is done."""
-            start = time.perf_counter()
-            cycle = self._cycle
-            while not cycle.done and time.perf_counter() - start < STEP_BUDGET_S:
-                t0 = time.perf_counter()
-                cycle.step()
-                self._cycle_max_step = max(self._cycle_max_step, time.perf_counter() - t0)
-            if cycle.done:
-                result, fitted = cycle.result, cycle.fitted
-                if result is not None:
-                    self._pub_dev.publish(multiarray(deviation_table(result, AXES),
-                                                     ('row', 'tau')))
-                table = coefficient_table(fitted, AXES) if fitted is not None else None
-                if table is not None:
-                    self._pub_coeffs.publish(multiarray(table, ('axis', 'term', 'stat')))
-                self._cycle = None
-                self._cycle_cpu += time.perf_counter() - start
-                self.last_cycle = {'cycle_total_s': self._cycle_cpu,
-                                   'cycle_max_step_s': self._cycle_max_step,
-                                   'cycle_wall_s': time.monotonic() - self._cycle_wall}
-                self._pub_diag.publish(self._diagnostics(result, table))
-            else:
-                self._cycle_cpu += time.perf_counter() - start
+    def publish(self):
+        """Start a publish cycle: freeze the sums; the steps run between drains."""
+        if self._cycle is not None:
+            return  # the previous cycle is still running (publish_period very short)
+        self._cycle = StagedEstimate(self.pipeline, window=self.params['window_s'] > 0)
+        self._cycle_cpu = 0.0
+        self._cycle_max_step = 0.0
+        self._cycle_wall = time.monotonic()
+        self._advance_cycle()
 
-        def _load_model(self):
-            """The reference noise model for the discrepancy check (validated on set)."""
-            self.model_file = self.params['model_file']
-            self.model = NoiseModel.from_yaml(self.model_file) if self.model_file else None
+    def _advance_cycle(self):
+        """Run cycle steps for up to STEP_BUDGET_S, then publish once the cycle is done."""
+        start = time.perf_counter()
+        cycle = self._cycle
+        while not cycle.done and time.perf_counter() - start < STEP_BUDGET_S:
+            t0 = time.perf_counter()
+            cycle.step()
+            self._cycle_max_step = max(self._cycle_max_step, time.perf_counter() - t0)
+        if cycle.done:
+            result, fitted = cycle.result, cycle.fitted
+            if result is not None:
+                self._pub_dev.publish(multiarray(deviation_table(result, AXES),
+                                                 DEVIATION_LABELS))
+            table = coefficient_table(fitted, AXES) if fitted is not None else None
+            if table is not None:
+                self._pub_coeffs.publish(multiarray(table, COEFF_LABELS))
+            self._cycle = None
+            self._cycle_cpu += time.perf_counter() - start
+            self.last_cycle = {'cycle_total_s': self._cycle_cpu,
+                               'cycle_max_step_s': self._cycle_max_step,
+                               'cycle_wall_s': time.monotonic() - self._cycle_wall}
+            self._pub_diag.publish(self._diagnostics(result, table))
+        else:
+            self._cycle_cpu += time.perf_counter() - start
 
-        def _diagnostics(self, result, table):
-            prefix = f'{self.get_name()}: '
-            silence = (time.monotonic() - self._last_arrival
-                       if self._last_arrival is not None else math.inf)
-            p = self.pipeline
-            stream = hm.stream_health(
-                p.monitor, p.monitor.take_recent(), silence, self.params['timeout_s'],
-                self.params['rate_tolerance'], p.excluded_share, name=prefix + 'IMU stream')
-            stream.values.update({
-                'samples_used': p.estimator.n_used,
-                'samples_offered': p.estimator.n_offered,
-                'averaging_times': 0 if result is None else int(result.tau.size),
-                'longest_tau_s': math.nan if result is None else float(result.tau[-1]),
-                'estimator_memory_bytes': p.memory_bytes(),
-                'window_s': self.params['window_s'],
-                'budget_file': self.budget.source,
-                'model_file': self.model_file or '(none)',
-                **self.last_cycle,
-            })
-            records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
-            if self.model is not None:  # issue 5's online hook: gap and effect per axis
-                records += hm.discrepancy_health(self.model, result, AXES, prefix)
-            array = DiagnosticArray()
-            array.header.stamp = self.get_clock().now().to_msg()
-            hw = self.params['hardware_id']
-            for rec in records:
-                array.status.append(diagnostic_status(rec.name, rec.level, rec.message, hw,
-                                                      rec.values))
-            return array
+    def _load_model(self):
+        """The reference noise model for the discrepancy check (validated on set)."""
+        self.model_file = self.params['model_file']
+        self.model = NoiseModel.from_yaml(self.model_file) if self.model_file else None
 
-    return Node_
-
-
-def AllanNode():  # noqa: N802 - a factory named like the class it builds
-    """Build the node (rclpy imported lazily so ``--help`` needs no ROS)."""
-    return _make_node_class()()
-
+    def _diagnostics(self, result, table):
+        prefix = f'{self.get_name()}: '
+        silence = (time.monotonic() - self._last_arrival
+                   if self._last_arrival is not None else math.inf)
+        p = self.pipeline
+        stream = hm.stream_health(
+            p.monitor, p.monitor.take_recent(), silence, self.params['timeout_s'],
+            self.params['rate_tolerance'], p.excluded_share, name=prefix + 'IMU stream')
+        stream.values.update({
+            'samples_used': p.estimator.n_used,
+            'samples_offered': p.estimator.n_offered,
+            'averaging_times': 0 if result is None else int(result.tau.size),
+            'longest_tau_s': math.nan if result is None else float(result.tau[-1]),
+            'estimator_memory_bytes': p.memory_bytes(),
+            'window_s': self.params['window_s'],
+            'budget_file': self.budget.source,
+            'model_file': self.model_file or '(none)',
+            **self.last_cycle,
+        })
+        records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
+        if self.model is not None:  # issue 5's online hook: gap and effect per axis
+            records += hm.discrepancy_health(self.model, result, AXES, prefix)
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        hw = self.params['hardware_id']
+        for rec in records:
+            array.status.append(diagnostic_status(rec.name, rec.level, rec.message, hw,
+                                                  rec.values))
+        return array

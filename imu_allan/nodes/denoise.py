@@ -14,11 +14,22 @@ noise level.  With ``mad`` each block estimates its own noise level per wavelet 
 
 from collections import deque
 
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray
+
 from ..core.units import AXES, IEEE_TERMS
-from ..io.errors import InputError
-from .node_utils import (
+from ..errors import InputError
+from ..formats.imu_adapter import imus_to_arrays
+from ..report.coeffs_layout import decode_table
+from .common import (
+    apply_changes,
     declare_parameter_table,
     node_main,
+    Param,
     polled_subscription,
     take_batch,
     validate_on_set,
@@ -27,26 +38,27 @@ from .node_utils import (
 DESCRIPTION = ('Wavelet (PyWavelets) or median denoising of imu/data_raw on overlapping blocks '
                'with bounded latency; publishes imu/data_denoised with the original stamps.')
 
-#: name, default, description, range (None: no range), read-only
+#: The parameter table (nodes.common.Param).
 PARAMETERS = [
-    ('rate_hz', 100.0, 'sample rate of imu/data_raw, Hz (block sizes, noise conversion)',
-     (0.1, 10000.0), False),
-    ('method', 'wavelet', 'wavelet or median', None, False),
-    ('wavelet', 'sym8', 'PyWavelets discrete wavelet (sym8 as in the thesis; haar, db4, ...)',
-     None, False),
-    ('level', 4, 'decomposition levels; latency about (filter length - 1) x 2^level samples '
-                 '(sym8: 240 samples at level 4, 61440 at level 12)', (1, 20), False),
-    ('rule', 'universal', 'threshold rule: universal, minimax or sure', None, False),
-    ('mode', 'soft', 'soft or hard thresholding', None, False),
-    ('noise_source', 'mad', 'mad (per block and level) or allan (white-noise coefficient '
-                            'from imu/allan_coeffs)', None, False),
-    ('median_window', 21, 'median filter window, samples', (1, 100001), False),
-    ('hop_s', 0.1, 'output step, s (rounded up to 2^level samples)', (0.0001, 60.0), False),
-    ('drain_period', 0.02, 'seconds between taking the queued messages (read-only)',
-     (0.001, 1.0), True),
-    ('queue_depth', 5000, 'subscription queue depth (read-only)', (10, 1_000_000), True),
+    Param('rate_hz', 100.0, 'sample rate of imu/data_raw, Hz (block sizes, noise conversion)',
+          (0.1, 10000.0)),
+    Param('method', 'wavelet', 'wavelet or median'),
+    Param('wavelet', 'sym8', 'PyWavelets discrete wavelet (sym8 as in the thesis; haar, db4, '
+                             '...)'),
+    Param('level', 4, 'decomposition levels; latency about (filter length - 1) x 2^level samples '
+                      '(sym8: 240 samples at level 4, 61440 at level 12)', (1, 20)),
+    Param('rule', 'universal', 'threshold rule: universal, minimax or sure'),
+    Param('mode', 'soft', 'soft or hard thresholding'),
+    Param('noise_source', 'mad', 'mad (per block and level) or allan (white-noise coefficient '
+                                 'from imu/allan_coeffs)'),
+    Param('median_window', 21, 'median filter window, samples', (1, 100001)),
+    Param('hop_s', 0.1, 'output step, s (rounded up to 2^level samples)', (0.0001, 60.0)),
+    Param('drain_period', 0.02, 'seconds between taking the queued messages (read-only)',
+          (0.001, 1.0), read_only=True),
+    Param('queue_depth', 5000, 'subscription queue depth (read-only)',
+          (10, 1000000), read_only=True),
 ]
-_DEFAULTS = {name: default for name, default, *_ in PARAMETERS}
+_DEFAULTS = {p.name: p.default for p in PARAMETERS}
 _DENOISER = {'rate_hz', 'method', 'wavelet', 'level', 'rule', 'mode', 'median_window', 'hop_s',
              'noise_source'}
 
@@ -74,12 +86,14 @@ def make_denoiser(p):
                          mode=p['mode'], median_window=p['median_window'])
 
 
-def white_noise_from_coeffs(data, layout_sizes):
-    """White-noise coefficient N per axis (6,) from an ``imu/allan_coeffs`` payload, or None."""
-    import numpy as np
-    if tuple(layout_sizes) != (len(AXES), len(IEEE_TERMS), 3):
+def white_noise_from_coeffs(data, dims):
+    """White-noise coefficient N per axis (6,) from an ``imu/allan_coeffs`` payload, or None.
+
+    ``dims`` is the layout as ``(label, size)`` pairs.
+    """
+    if tuple(size for _, size in dims) != (len(AXES), len(IEEE_TERMS), 3):
         return None
-    table = np.asarray(data, dtype=float).reshape(layout_sizes)
+    table = decode_table(data, dims)
     n = table[:, IEEE_TERMS.index('white_noise'), 0]
     return n if np.all(np.isfinite(n)) and np.all(n > 0) else None
 
@@ -89,88 +103,66 @@ def main(args=None):
     node_main('denoise', DESCRIPTION, PARAMETERS, DenoiseNode, args)
 
 
-def _make_node_class():
-    from rclpy.node import Node
-    from rclpy.qos import (
-        qos_profile_sensor_data,
-    )
-    from rclpy.qos_overriding_options import QoSOverridingOptions
-    from sensor_msgs.msg import Imu
-    from std_msgs.msg import Float64MultiArray
+class DenoiseNode(Node):
+    def __init__(self):
+        super().__init__('denoise')
+        self.params = declare_parameter_table(self, PARAMETERS)
+        check_parameters(self.params)
+        self.denoiser = make_denoiser(self.params)
+        self._pending = deque()  # messages waiting for their denoised values
+        self._noise = None
+        self.add_on_set_parameters_callback(validate_on_set(self.params, PARAMETERS,
+                                                            check_parameters))
+        self.add_post_set_parameters_callback(self._post_set)
+        depth = int(self.params['queue_depth'])
+        self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth)
+        self._max_batch = depth
+        self._pub = self.create_publisher(
+            Imu, 'imu/data_denoised', qos_profile_sensor_data,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+        self._coeff_sub = self.create_subscription(
+            Float64MultiArray, 'imu/allan_coeffs', self._on_coeffs, 10)
+        self._log_latency()
+        self._timer = self.create_timer(self.params['drain_period'], self.drain)
 
-    from ..io.imu_adapter import imus_to_arrays
+    def _log_latency(self):
+        d = self.denoiser
+        self.get_logger().info(
+            f'{self.params["method"]} denoising, latency up to {d.latency_samples} samples '
+            f'({d.latency_s:.3g} s at {self.params["rate_hz"]:g} Hz)')
 
-    class Node_(Node):
-        def __init__(self):
-            super().__init__('denoise')
-            self.params = declare_parameter_table(self, PARAMETERS)
-            check_parameters(self.params)
+    def _post_set(self, params):
+        changed = apply_changes(self.params, PARAMETERS, params)
+        if changed & _DENOISER:
+            # Finish the samples in flight with the old settings, then switch.
+            self._publish_rows(self.denoiser.flush())
             self.denoiser = make_denoiser(self.params)
-            self._pending = deque()  # messages waiting for their denoised values
-            self._noise = None
-            self.add_on_set_parameters_callback(validate_on_set(self.params,
-                                                                check_parameters))
-            self.add_post_set_parameters_callback(self._post_set)
-            depth = int(self.params['queue_depth'])
-            self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth)
-            self._max_batch = depth
-            self._pub = self.create_publisher(
-                Imu, 'imu/data_denoised', qos_profile_sensor_data,
-                qos_overriding_options=QoSOverridingOptions.with_default_policies())
-            self._coeff_sub = self.create_subscription(
-                Float64MultiArray, 'imu/allan_coeffs', self._on_coeffs, 10)
-            self._log_latency()
-            self._timer = self.create_timer(self.params['drain_period'], self.drain)
-
-        def _log_latency(self):
-            d = self.denoiser
-            self.get_logger().info(
-                f'{self.params["method"]} denoising, latency up to {d.latency_samples} samples '
-                f'({d.latency_s:.3g} s at {self.params["rate_hz"]:g} Hz)')
-
-        def _post_set(self, params):
-            changed = {p.name for p in params if p.name in self.params}
-            for param in params:
-                if param.name in self.params:
-                    self.params[param.name] = param.value
-            if changed & _DENOISER:
-                # Finish the samples in flight with the old settings, then switch.
-                self._publish_rows(self.denoiser.flush())
-                self.denoiser = make_denoiser(self.params)
-                self._apply_noise()
-                self._log_latency()
-
-        def _on_coeffs(self, msg):
-            sizes = [d.size for d in msg.layout.dim]
-            self._noise = white_noise_from_coeffs(msg.data, sizes)
             self._apply_noise()
+            self._log_latency()
 
-        def _apply_noise(self):
-            if self.params['noise_source'] == 'allan' and self._noise is not None:
-                self.denoiser.set_noise(noise_density=self._noise)
-            else:
-                self.denoiser.set_noise()
+    def _on_coeffs(self, msg):
+        dims = [(d.label, d.size) for d in msg.layout.dim]
+        self._noise = white_noise_from_coeffs(msg.data, dims)
+        self._apply_noise()
 
-        def drain(self):
-            """Take the queued messages, denoise, publish what is ready."""
-            msgs = take_batch(self._sub, self._max_batch)
-            if not msgs:
-                return
-            _, data = imus_to_arrays(msgs)
-            self._pending.extend(msgs)
-            self._publish_rows(self.denoiser.push(data))
+    def _apply_noise(self):
+        if self.params['noise_source'] == 'allan' and self._noise is not None:
+            self.denoiser.set_noise(noise_density=self._noise)
+        else:
+            self.denoiser.set_noise()
 
-        def _publish_rows(self, rows):
-            for row in rows:
-                msg = self._pending.popleft()
-                w, a = msg.angular_velocity, msg.linear_acceleration
-                w.x, w.y, w.z, a.x, a.y, a.z = (float(v) for v in row)
-                self._pub.publish(msg)
+    def drain(self):
+        """Take the queued messages, denoise, publish what is ready."""
+        msgs = take_batch(self._sub, self._max_batch)
+        if not msgs:
+            return
+        _, data = imus_to_arrays(msgs)
+        self._pending.extend(msgs)
+        self._publish_rows(self.denoiser.push(data))
 
-    return Node_
-
-
-def DenoiseNode():  # noqa: N802 - a factory named like the class it builds
-    """Build the node (rclpy imported lazily so ``--help`` needs no ROS)."""
-    return _make_node_class()()
-
+    def _publish_rows(self, rows):
+        for row in rows:
+            msg = self._pending.popleft()
+            w, a = msg.angular_velocity, msg.linear_acceleration
+            w.x, w.y, w.z, a.x, a.y, a.z = (float(v) for v in row)
+            self._pub.publish(msg)

@@ -1,0 +1,216 @@
+"""The online pipeline the allan node runs, and the staged publish cycle.
+
+Stamp checks -> stationarity gate -> streaming
+Allan variance (:mod:`imu_allan.core.streaming`) -> fit.
+
+``analyze --online`` runs the same code through :func:`online_allan`, so the numbers agree
+with the node's for the same samples.
+"""
+
+import math
+
+import numpy as np
+
+from .allan import AllanResult
+from .fit import fit_noise_model, FitError, FittedModel
+from .health import StampMonitor
+from .stationarity import StationarityGate
+from .streaming import StreamingAllan
+from .units import AXES, is_gyro
+
+
+class OnlineAllan:
+    """The online pipeline: stamp checks -> stationarity gate -> streaming Allan -> fit.
+
+    ROS-free; the allan node feeds it message batches and ``online_allan`` feeds it a whole
+    record, so both produce the same numbers for the same samples.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Configured sample rate, Hz.
+    axes : sequence of str
+        Columns of the data (default the six package axes).
+    gate : bool
+        Leave moving spans out (:class:`~imu_allan.core.stationarity.StationarityGate`).
+    gate_options : dict, optional
+        Gate parameters.
+    gap_factor : float
+        A stamp spacing above this many sample intervals is a gap (phase restarts there).
+    terms : sequence of str, optional
+        Terms to fit (default: automatic selection among the five IEEE terms).
+    **estimator_options
+        :class:`StreamingAllan` parameters (max_tau, window_s, stride_base, ...).
+
+    """
+
+    def __init__(self, rate_hz, axes=AXES, gate=True, gate_options=None, gap_factor=1.5,
+                 terms=None, **estimator_options):
+        self.axes = tuple(axes)
+        self.rate_hz = float(rate_hz)
+        self.estimator = StreamingAllan(rate_hz, self.axes, **estimator_options)
+        self.monitor = StampMonitor(rate_hz, gap_factor)
+        self.gate = None
+        if gate:
+            gyro_columns = [i for i, a in enumerate(self.axes) if is_gyro(a)]
+            self.gate = StationarityGate(rate_hz, len(self.axes), gyro_columns,
+                                         **(gate_options or {}))
+            self._gate_breaks = _TagDelay(self.gate.w)
+        self.terms = terms
+
+    def memory_bytes(self):
+        """Bytes held in numpy buffers by the estimator and the gate (fixed)."""
+        extra = self.gate.memory_bytes() + self._gate_breaks.memory_bytes() if self.gate else 0
+        return self.estimator.memory_bytes() + extra
+
+    @property
+    def excluded_share(self):
+        """Share of samples the gate left out (NaN with no gate or no decision yet)."""
+        return self.gate.excluded_share if self.gate is not None else math.nan
+
+    def feed(self, t, data):
+        """Add samples with header stamps ``t`` (s, (n,)) and ``data`` (n, A) in SI units."""
+        data = np.asarray(data, dtype=float)
+        if data.ndim == 1:
+            data = data[:, None]
+        if t is None:
+            keep, brk = np.ones(data.shape[0], bool), np.zeros(data.shape[0], bool)
+        else:
+            keep, brk = self.monitor.check(t)
+        data, brk = data[keep], brk[keep]
+        if data.shape[0] == 0:
+            return
+        if self.gate is None:
+            self.estimator.update(data, None, brk)
+            return
+        out, still = self.gate.update(data)
+        brk_out = self._gate_breaks.push(brk, out.shape[0])
+        if out.shape[0]:
+            self.estimator.update(out, still, brk_out)
+
+    def result(self, window=False):
+        """Current :class:`~imu_allan.core.allan.AllanResult` (None until enough data)."""
+        return self.estimator.result(window=window)
+
+    def fit(self, result):
+        """Fit the noise terms to a result; None when it has too few averaging times."""
+        if result is None or result.tau.size < 2:
+            return None
+        try:
+            return fit_noise_model(result, terms=self.terms)
+        except FitError:
+            return None
+
+
+class StagedEstimate:
+    """One estimate-and-fit cycle of an :class:`OnlineAllan`, in short steps.
+
+    The sums are frozen when the cycle starts; each :meth:`step` then does one axis's EDF and
+    intervals or one axis's fit (a few tens of ms), so a node can interleave them with taking
+    messages instead of blocking for the whole cycle.  Axes are independent in both, so the
+    final :attr:`result` and :attr:`fitted` equal ``pipeline.result()`` and
+    ``pipeline.fit(...)`` on the frozen data.
+    """
+
+    def __init__(self, pipeline, window=False):
+        self.pipeline = pipeline
+        self.snapshot = pipeline.estimator.snapshot(window)
+        self.result = None
+        self.fitted = None
+        self._parts = {}
+        self._fits = {}
+        n_axes = len(pipeline.axes)
+        self._queue = ([] if self.snapshot is None else
+                       [(kind, j) for j in range(n_axes) for kind in ('result', 'fit')])
+
+    @property
+    def done(self):
+        """True when every step has run."""
+        return not self._queue
+
+    def step(self):
+        """Run the next step; return :attr:`done`."""
+        if not self._queue:
+            return True
+        kind, j = self._queue.pop(0)
+        est = self.pipeline.estimator
+        if kind == 'result':
+            self._parts[j] = est.result_from(self.snapshot, [j])
+        else:
+            fitted = self.pipeline.fit(self._parts[j])
+            if fitted is not None:
+                self._fits.update(fitted.fits)
+        if not self._queue:
+            self._finish()
+        return self.done
+
+    def _finish(self):
+        parts = [self._parts[j] for j in sorted(self._parts)]
+        if not parts:
+            return
+        first = parts[0]
+
+        def stack(name):
+            return np.concatenate([getattr(p, name) for p in parts], axis=1)
+        self.result = AllanResult(first.tau, first.m, stack('avar'), stack('adev'),
+                                  stack('ci_low'), stack('ci_high'), stack('edf'),
+                                  stack('alpha'), tuple(self.pipeline.axes), first.rate_hz,
+                                  first.n_samples)
+        if self._fits:
+            fits = {a: self._fits[a] for a in self.pipeline.axes if a in self._fits}
+            self.fitted = FittedModel(fits, first.rate_hz, self.result)
+
+
+class _TagDelay:
+    """Delays per-sample flags by the gate's latency (the gate returns samples in order)."""
+
+    def __init__(self, window):
+        # The gate holds at most two windows; a ring of that size suffices.
+        self._buf = np.zeros(2 * window + 1, bool)
+        self._n = 0
+
+    def memory_bytes(self):
+        return self._buf.nbytes
+
+    def push(self, flags, n_out):
+        """Append ``flags``; pop the flags of the ``n_out`` oldest samples."""
+        total = self._n + flags.size
+        merged = np.concatenate((self._buf[:self._n], flags))
+        out = merged[:n_out]
+        rest = merged[n_out:total]
+        self._buf[:rest.size] = rest
+        self._n = rest.size
+        return out
+
+
+def online_allan(data, rate_hz, t=None, axes=None, gate=True, gate_options=None,
+                 gap_factor=1.5, window=False, **estimator_options):
+    """Run the online estimator over a whole record; return an ``AllanResult`` (or None).
+
+    The same code and defaults as the allan node: for the same samples (and options) the
+    numbers equal what the node publishes.  ``t`` (s) enables the stamp checks (out-of-order
+    samples dropped, gaps restart the phase); ``gate`` leaves moving spans out (the last one
+    to two gate windows, still undecided, are not included - as in the node).
+
+    Parameters
+    ----------
+    data : array_like
+        Shape (n, A), SI units.
+    rate_hz : float
+        Sample rate, Hz.
+    axes : sequence of str, optional
+        Column names (default the first A package axes).
+    **estimator_options
+        :class:`StreamingAllan` parameters: ``max_tau``, ``points_per_decade``, ``taus``,
+        ``stride_base``, ``exact``, ``window_s``, ``window_buckets``, ``frame``,
+        ``min_clusters``.
+
+    """
+    data = np.asarray(data, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]
+    pipeline = OnlineAllan(rate_hz, axes, gate=gate, gate_options=gate_options,
+                           gap_factor=gap_factor, **estimator_options)
+    pipeline.feed(t, data)
+    return pipeline.result(window=window)

@@ -1,0 +1,563 @@
+"""Serial transport to a 3DM-GX3-25 and the device session loop (ROS-free).
+
+* :class:`SerialLink`: open/read/write/close a pyserial port; every failure becomes a
+  :class:`LinkError` with a one-line reason.
+* :class:`Backoff`: retry delays doubling from ``initial`` up to ``maximum`` seconds.
+* :class:`TimeSync`: device timer -> host clock mapping (method below).
+* :class:`Gx3Session`: the loop a driver runs in a thread: open the port (with back-off),
+  configure the device (stop, identify, sampling settings, continuous mode), read and frame the
+  stream, detect gaps, stalls and vanished ports, and recover from all of them.  Decoded
+  batches go to a callback; nothing here imports ROS.
+
+Time stamping (:class:`TimeSync`)
+---------------------------------
+Each record carries the device timer (62,500 ticks/s).  It is unwrapped to 64 bits
+(rollovers added, :class:`~imu_allan.device.gx3_protocol.TimerUnwrapper`) and converted to device
+seconds ``d``.  Each record also gets a host arrival time ``h``: the clock reading right after
+the read that returned it, minus the time the bytes after it took on the wire
+(``bytes * 10 / baud``).  ``h - d`` is then the clock offset plus a transport delay that is
+never negative and is sometimes close to its minimum.  The published stamp is ``d + o`` where
+the offset ``o`` follows ``T = min(h - d)`` over the last ``window`` seconds (the passive
+synchronisation of Olson, IROS 2010, as in the pronto/libbot GX3 driver), but ``o`` may move
+towards ``T`` by at most ``max_slew`` seconds per second of device time (default 5e-4, five
+times the device clock's 1e-4 tolerance).  So:
+
+* stamps keep the device's even spacing: two stamps differ by the device timer difference
+  times a factor within ``1 +- max_slew`` (host read jitter never reaches them);
+* slow drift between the clocks is followed (the minimum moves with it);
+* stamps sit at the earliest plausible arrival time, a small constant latency after the true
+  sampling time (``time_offset`` in the driver corrects a known latency);
+* a rollover is invisible; a timer reset, a reconnect, a stall, or ``|T - o|`` above
+  ``jump_threshold`` re-anchors ``o`` at once (counted in ``jumps``).
+"""
+
+from collections import deque
+import math
+import threading
+import time
+
+import numpy as np
+
+from . import gx3_protocol as p
+from .gx3_stream import StreamParser
+
+
+class LinkError(Exception):
+    """The serial port cannot be opened, has vanished or failed; the message is one line."""
+
+
+class SerialLink:
+    """A pyserial port (8N1, no flow control, raw) with errors mapped to :class:`LinkError`."""
+
+    def __init__(self, port, baud, read_timeout=0.05):
+        """Remember the settings; nothing is opened yet."""
+        self.port = port
+        self.baud = int(baud)
+        self.read_timeout = read_timeout
+        self.serial = None
+
+    @property
+    def is_open(self):
+        """True while the port is open."""
+        return self.serial is not None
+
+    def open(self):
+        """Open the port; discard anything received before this moment."""
+        import serial
+        self.close()
+        try:
+            self.serial = serial.Serial(self.port, self.baud, bytesize=8, parity='N',
+                                        stopbits=1, timeout=self.read_timeout,
+                                        write_timeout=1.0, xonxoff=False, rtscts=False)
+            self.serial.reset_input_buffer()
+        except (serial.SerialException, OSError, ValueError) as exc:
+            self.serial = None
+            raise LinkError(f'{self.port}: cannot open ({_reason(exc)})') from None
+
+    def set_baud(self, baud):
+        """Change the host-side baud rate of the open port."""
+        self.baud = int(baud)
+        if self.serial is not None:
+            try:
+                self.serial.baudrate = self.baud
+            except Exception as exc:  # pyserial raises several types here
+                raise LinkError(f'{self.port}: cannot set baud {baud} ({_reason(exc)})') \
+                    from None
+
+    def read(self):
+        """Return the bytes waiting (after waiting up to ``read_timeout`` for the first)."""
+        import serial
+        try:
+            waiting = self.serial.in_waiting
+            return self.serial.read(max(1, waiting))
+        except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+            raise LinkError(f'{self.port}: read failed ({_reason(exc)})') from None
+
+    def write(self, data):
+        """Write all bytes."""
+        import serial
+        try:
+            self.serial.write(data)
+        except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+            raise LinkError(f'{self.port}: write failed ({_reason(exc)})') from None
+
+    def close(self):
+        """Close the port (never raises)."""
+        if self.serial is not None:
+            try:
+                self.serial.close()
+            except Exception:  # closing a vanished port may fail in many ways; ignore
+                pass
+            self.serial = None
+
+
+def _reason(exc):
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+class Backoff:
+    """Retry delays: ``initial``, doubled after each failure, capped at ``maximum`` (s)."""
+
+    def __init__(self, initial=0.25, maximum=5.0):
+        """Start at ``initial`` seconds."""
+        self.initial = initial
+        self.maximum = maximum
+        self.delay = initial
+
+    def next(self):
+        """Return the delay to wait now and double the next one."""
+        delay = self.delay
+        self.delay = min(self.maximum, self.delay * 2.0)
+        return delay
+
+    def reset(self):
+        """After a success: back to the initial delay."""
+        self.delay = self.initial
+
+
+class TimeSync:
+    """Map device seconds to host seconds with even spacing (see the module docstring)."""
+
+    def __init__(self, max_slew=5e-4, window=10.0, jump_threshold=0.5):
+        """``max_slew``: s/s; ``window``: s of device time; ``jump_threshold``: s."""
+        self.max_slew = max_slew
+        self.window = window
+        self.jump_threshold = jump_threshold
+        self.jumps = 0
+        self.epoch = None
+        self.reset()
+
+    def reset(self):
+        """Forget the mapping (after a reconnect, a stall or a timer reset)."""
+        self.offset = None
+        self.last_device = None
+        self.minima = deque()
+
+    def stamps(self, device_s, host_s):
+        """Host-clock stamps, integer ns, for device times ``device_s`` received at ``host_s``.
+
+        Internally times are relative to a whole-second epoch of the host clock, so float64
+        keeps sub-nanosecond resolution (absolute epoch seconds would round to 0.24 us).
+        """
+        device_s = np.asarray(device_s, dtype=np.float64)
+        host_s = np.asarray(host_s, dtype=np.float64)
+        if self.epoch is None:
+            self.epoch = int(math.floor(host_s[0]))
+        if self.last_device is not None and device_s[0] < self.last_device:
+            # The device time went back (timer reset): the old minima mean nothing now.
+            self.reset()
+            self.jumps += 1
+        lat = (host_s - self.epoch) - device_s
+        batch_min = float(lat.min())
+        end = float(device_s[-1])
+        # Sliding-window minimum (monotonic deque: values increase from left to right), O(1)
+        # per batch however many batches the window holds.
+        minima = self.minima
+        while minima and minima[-1][1] >= batch_min:
+            minima.pop()
+        minima.append((end, batch_min))
+        while minima[0][0] < end - self.window:
+            minima.popleft()
+        target = minima[0][1]
+        if self.offset is None or abs(target - self.offset) > self.jump_threshold:
+            if self.offset is not None:
+                self.jumps += 1
+            self.offset = target
+            self.last_device = float(device_s[0])
+        allowed = self.max_slew * np.maximum(device_s - self.last_device, 0.0)
+        offsets = self.offset + np.clip(target - self.offset, -allowed, allowed)
+        self.offset = float(offsets[-1])
+        self.last_device = end
+        return np.round((device_s + offsets) * 1e9).astype(np.int64) + self.epoch * 10**9
+
+
+#: Driver modes -> streamed data command.
+MODES = {
+    'accel_rate': p.ACCEL_RATE,
+    'accel_rate_mag': p.ACCEL_RATE_MAG,
+    'accel_rate_orientation': p.ACCEL_RATE_MATRIX,
+    'accel_rate_mag_orientation': p.ACCEL_RATE_MAG_MATRIX,
+}
+
+
+def check_rate(rate_hz, baud, mode):
+    """Validate a rate for a baud rate and mode; return ``(decimation, flags)``.
+
+    Raise ValueError with a user-facing reason when the link cannot carry the rate (DCP-GX3
+    Table 5, extended to longer records by the byte budget) or when orientation is asked for
+    above 500 Hz.
+    """
+    if baud not in p.BAUD_RATES:
+        raise ValueError(f'baud {baud} is not supported (use one of '
+                         f'{", ".join(map(str, p.BAUD_RATES))})')
+    if mode not in MODES:
+        raise ValueError(f'mode {mode!r} is unknown (use one of {", ".join(MODES)})')
+    if not (math.isfinite(rate_hz) and 0 < rate_hz <= p.BASE_RATE_HZ):
+        raise ValueError(f'rate_hz {rate_hz} is outside (0, 1000] Hz')
+    code = MODES[mode]
+    decimation = p.decimation_for_rate(rate_hz)
+    length = p.REPLY_LENGTHS[code]
+    lowest = p.min_decimation(baud, length)
+    if decimation < lowest:
+        faster = [b for b in p.BAUD_RATES if p.min_decimation(b, length) <= decimation]
+        hint = f'; use baud {faster[0]}' if faster else ''
+        raise ValueError(f'rate_hz {rate_hz:g} is too high for {baud} baud with {length}-byte '
+                         f'{mode} records: at most {p.rate_for_decimation(lowest):.4g} Hz'
+                         f'{hint}')
+    orientation = 'orientation' in mode
+    if orientation and decimation < 2:
+        raise ValueError(f'rate_hz {rate_hz:g}: orientation is only computed up to 500 Hz')
+    # 1000 Hz needs the orientation calculation off (DCP-GX3 Table 5).
+    flags = p.DEFAULT_FLAGS if decimation >= 2 else p.FLAG_CONING_SCULLING
+    return decimation, flags
+
+
+class SessionStats:
+    """Counters of a session (read by the driver's diagnostics; ints only, no lock needed)."""
+
+    def __init__(self):
+        """All zero."""
+        self.records = 0
+        self.dropped = 0
+        self.stalls = 0
+        self.reconnects = 0
+        self.opens = 0
+        self.setups = 0
+        self.setup_failures = 0
+        self.timer_resets = 0
+        self.rollovers = 0
+        self.internal_errors = 0
+
+
+class Gx3Session:
+    """Talk to one 3DM-GX3-25 on a serial port and deliver decoded batches.
+
+    ``on_batch(code, records, stamps)`` is called from the session thread with ``records``
+    from :func:`~imu_allan.device.gx3_protocol.decode_records` (device units) and host-clock
+    ``stamps`` (s).  ``clock()`` returns host seconds (the driver passes its ROS clock).
+    ``log(level, text)`` reports events (level 'info', 'warn', 'error').
+    """
+
+    def __init__(self, port, baud, mode, rate_hz, on_batch, clock=time.time, log=None,
+                 stall_timeout=1.0, reply_timeout=0.3, record_raw=None, poll_interval=0.005,
+                 time_sync=None, backoff=None):
+        """Configure; call :meth:`run` in a thread and :meth:`stop` to end it."""
+        self.decimation, self.flags = check_rate(rate_hz, baud, mode)
+        self.code = MODES[mode]
+        self.baud = baud
+        self.link = SerialLink(port, baud)
+        self.on_batch = on_batch
+        self.clock = clock
+        self.log = log or (lambda level, text: None)
+        self.stall_timeout = stall_timeout
+        self.reply_timeout = reply_timeout
+        self.poll_interval = poll_interval
+        self.sync = time_sync or TimeSync()
+        self.backoff = backoff or Backoff()
+        self.parser = StreamParser()
+        self.unwrapper = p.TimerUnwrapper()
+        self.stats = SessionStats()
+        self.expected_step = self.decimation * p.TICKS_PER_SECOND / p.BASE_RATE_HZ
+        self.raw = open(record_raw, 'ab') if record_raw else None
+        self.state = 'starting'
+        self.last_error = ''
+        self.firmware = ''
+        self.model = ''
+        self.serial_number = ''
+        self._stop = threading.Event()
+        self._last_ticks = None     # unwrapped ticks of the last record (gap reference)
+        self._replies = deque()
+        self.thread = None
+
+    # ------------------------------------------------------------------ thread control
+    def start(self):
+        """Run the session in a daemon thread."""
+        self.thread = threading.Thread(target=self.run, name='gx3_session', daemon=True)
+        self.thread.start()
+
+    def stop(self, timeout=5.0):
+        """Ask the loop to end, stop continuous mode and close the port.
+
+        The loop sends the stop command on its way out; the timeout is generous because the
+        process exits (ending this daemon thread) once it returns, and a device left streaming
+        would keep sending into a closed port (seen under load with 2 s).
+        """
+        self._stop.set()
+        if self.thread is not None:
+            self.thread.join(timeout)
+
+    def _wait(self, seconds):
+        return self._stop.wait(seconds)
+
+    # ------------------------------------------------------------------ main loop
+    def run(self):
+        """Open, configure, stream, recover; until :meth:`stop`."""
+        failures = 0
+        needs_setup = True
+        last_data = 0.0
+        try:
+            while not self._stop.is_set():
+                if not self.link.is_open:
+                    if not self._open():
+                        continue
+                    needs_setup, failures = True, 0
+                try:
+                    if needs_setup:
+                        if self._setup():
+                            needs_setup, failures = False, 0
+                            last_data = time.monotonic()
+                            self.state = 'streaming'
+                        else:
+                            failures += 1
+                            self.stats.setup_failures += 1
+                            # Keep reading while backing off: a device that resumes on its
+                            # own (end of a stall) is taken as it comes, nothing is lost.
+                            if self._idle(self.backoff.next()):
+                                needs_setup, failures = False, 0
+                                last_data = time.monotonic()
+                                self.state = 'streaming'
+                                self.log('info', f'{self.link.port}: streaming again')
+                            continue
+                    got = self._pump()
+                    now = time.monotonic()
+                    if got:
+                        last_data = now
+                        self.backoff.reset()
+                        if self.state != 'streaming':
+                            self.log('info', f'{self.link.port}: streaming again')
+                        self.state = 'streaming'
+                    elif now - last_data > self.stall_timeout:
+                        self.stats.stalls += 1
+                        self.state = 'stalled'
+                        self.last_error = (f'no data for {now - last_data:.1f} s '
+                                           f'(device stalled or unplugged)')
+                        self.log('warn', f'{self.link.port}: {self.last_error}, reconfiguring')
+                        self._new_epoch()
+                        needs_setup = True
+                        last_data = now
+                    self._wait(self.poll_interval)
+                except LinkError as exc:
+                    self._lost(str(exc))
+                except Exception as exc:  # noqa: B902 - a bug must not end the data stream
+                    self.stats.internal_errors += 1
+                    self._lost(f'{self.link.port}: internal error {type(exc).__name__}: '
+                               f'{exc}')
+        finally:
+            self._shutdown()
+
+    def _idle(self, seconds):
+        """Wait ``seconds`` while still reading; return True if data records arrived."""
+        end = time.monotonic() + seconds
+        got = 0
+        while not self._stop.is_set() and time.monotonic() < end:
+            got += self._pump()
+            if got:
+                return True
+            self._wait(self.poll_interval)
+        return False
+
+    def _open(self):
+        try:
+            self.link.set_baud(self.baud)
+            self.link.open()
+        except LinkError as exc:
+            self.state = 'port unavailable'
+            if str(exc) != self.last_error:
+                self.log('error', f'{exc}; retrying with back-off')
+            self.last_error = str(exc)
+            self._wait(self.backoff.next())
+            return False
+        self.stats.opens += 1
+        if self.stats.opens > 1:
+            self.stats.reconnects += 1
+        self.parser.reset()
+        self._new_epoch()
+        self.log('info', f'{self.link.port}: opened at {self.link.baud} baud')
+        return True
+
+    def _lost(self, reason):
+        self.state = 'port lost'
+        self.last_error = reason
+        self.log('error', f'{reason}; reopening with back-off')
+        self.link.close()
+        self._new_epoch()
+        self._wait(self.backoff.next())
+
+    def _new_epoch(self):
+        """A discontinuity: the next record starts a new gap reference and time anchor."""
+        self._last_ticks = None
+        self.unwrapper = p.TimerUnwrapper()
+        self.sync.reset()
+
+    def _shutdown(self):
+        if self.link.is_open:
+            try:
+                # Leave the device quiet, as the reference drivers do.
+                self.link.write(p.cmd_stop_continuous())
+                time.sleep(0.02)
+            except LinkError:
+                pass
+            self.link.close()
+        if self.raw is not None:
+            self.raw.close()
+            self.raw = None
+        self.state = 'stopped'
+
+    # ------------------------------------------------------------------ reading
+    def _pump(self):
+        """Read once, frame, deliver data records; return the number of records."""
+        data = self.link.read()
+        if not data:
+            return 0
+        host = self.clock()
+        if self.raw is not None:
+            self.raw.write(data)
+        packets = self.parser.feed(data)
+        if not packets:
+            return 0
+        byte_time = p.BITS_PER_BYTE / self.link.baud
+        # Bytes on the wire after each packet (the parser keeps unfinished bytes buffered).
+        after = self.parser.buffered
+        tail = []
+        for packet in reversed(packets):
+            tail.append(after)
+            after += len(packet)
+        tail.reverse()
+        records, times = [], []
+        for packet, later in zip(packets, tail):
+            if packet[0] == self.code:
+                records.append(packet)
+                times.append(host - later * byte_time)
+            else:
+                self._replies.append(packet)
+        if records:
+            self._deliver(records, np.asarray(times))
+        return len(records)
+
+    def _deliver(self, packets, host_times):
+        rec = p.decode_records(self.code, packets)
+        raw = rec['timer']
+        ticks = np.empty(len(raw), dtype=np.int64)
+        u = self.unwrapper
+        for i, value in enumerate(raw.tolist()):
+            ticks[i] = u.update(value)
+            if u.event == 'reset':
+                self.stats.timer_resets += 1
+                self.sync.reset()
+                self._last_ticks = None
+            elif u.event == 'rollover':
+                self.stats.rollovers += 1
+            last = self._last_ticks
+            if last is not None:
+                missing = round((ticks[i] - last) / self.expected_step) - 1
+                if missing > 0:
+                    self.stats.dropped += missing
+            self._last_ticks = ticks[i]
+        stamps = self._stamps(ticks, host_times)
+        self.stats.records += len(packets)
+        self.on_batch(self.code, rec, stamps)
+
+    def _stamps(self, ticks, host_times):
+        device_s = ticks / float(p.TICKS_PER_SECOND)
+        # A timer reset inside the batch: stamp the pieces separately (the sync was reset).
+        breaks = np.nonzero(np.diff(device_s) < 0)[0]
+        if breaks.size == 0:
+            return self.sync.stamps(device_s, host_times)
+        out, start = [], 0
+        for b in list(breaks + 1) + [len(device_s)]:
+            self.sync.reset()
+            out.append(self.sync.stamps(device_s[start:b], host_times[start:b]))
+            start = b
+        return np.concatenate(out)
+
+    # ------------------------------------------------------------------ configuration
+    def _request(self, command, code, check=None):
+        """Send a command and wait for its reply (data records keep flowing meanwhile)."""
+        self._replies.clear()
+        self.link.write(command)
+        deadline = time.monotonic() + self.reply_timeout
+        while time.monotonic() < deadline and not self._stop.is_set():
+            self._pump()
+            while self._replies:
+                reply = self._replies.popleft()
+                if reply[0] == code and (check is None or check(reply)):
+                    return reply
+        return None
+
+    def _setup(self):
+        """Stop, identify, set the rate, start continuous mode; True on success."""
+        self.state = 'configuring'
+        self.stats.setups += 1
+        self.link.write(p.cmd_stop_continuous())
+        # Let a running stream drain; its records are still delivered.
+        end = time.monotonic() + 0.05
+        while time.monotonic() < end:
+            self._pump()
+        reply = self._request(p.cmd_firmware_version(), p.FIRMWARE_VERSION)
+        if reply is None and self.baud != p.DEFAULT_BAUD:
+            reply = self._change_baud()
+        if reply is None:
+            self.last_error = 'device does not answer (firmware query 0xE9 timed out)'
+            self.log('warn', f'{self.link.port}: {self.last_error}')
+            return False
+        self.firmware = p.decode_firmware_reply(reply)[1]
+        for selector, attr in ((2, 'model'), (1, 'serial_number')):
+            reply = self._request(p.cmd_device_id(selector), p.DEVICE_ID,
+                                  lambda r, s=selector: r[1] == s)
+            if reply is not None:
+                setattr(self, attr, p.decode_device_id_reply(reply)[1])
+        settings = p.SamplingSettings(decimation=self.decimation, flags=self.flags)
+        reply = self._request(p.cmd_sampling_settings(settings), p.SAMPLING_SETTINGS)
+        if reply is None or p.decode_sampling_reply(reply).decimation != self.decimation:
+            self.last_error = 'sampling settings 0xDB not confirmed'
+            self.log('warn', f'{self.link.port}: {self.last_error}')
+            return False
+        reply = self._request(p.cmd_continuous(self.code), p.SET_CONTINUOUS,
+                              lambda r: r[1] == self.code)
+        if reply is None:
+            self.last_error = f'continuous mode 0x{self.code:02X} not confirmed'
+            self.log('warn', f'{self.link.port}: {self.last_error}')
+            return False
+        # A new stream: its first record is not compared with the last one of the old one.
+        self._new_epoch()
+        self.log('info', f'{self.link.port}: {self.model or "device"} {self.serial_number} '
+                         f'firmware {self.firmware} streaming 0x{self.code:02X} at '
+                         f'{p.rate_for_decimation(self.decimation):g} Hz')
+        return True
+
+    def _change_baud(self):
+        """The device did not answer at our baud: try the factory 115200, switch it with 0xD9."""
+        self.link.set_baud(p.DEFAULT_BAUD)
+        self.link.write(p.cmd_stop_continuous())
+        reply = self._request(p.cmd_comm_settings(self.baud, function=1), p.COMM_SETTINGS)
+        self.link.set_baud(self.baud)
+        if reply is None or p.decode_comm_reply(reply)[1] != self.baud:
+            return None
+        self.log('info', f'{self.link.port}: device switched from 115200 to {self.baud} baud')
+        return self._request(p.cmd_firmware_version(), p.FIRMWARE_VERSION)
+
+    def parser_stats(self):
+        """The framer's counters (bytes, packets, bad checksums, rejected bytes, resyncs)."""
+        return self.parser.stats
+

@@ -1,0 +1,138 @@
+"""The CSV sample format of the contract (design page, section 5).
+
+Header line ``t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z``: ``t`` in seconds, gyro in
+rad/s, accel in m/s^2. ``t`` is required; any subset of the axis columns may be present (read
+back in :data:`~imu_allan.core.units.AXES` order); extra columns (``mag_x``, ...) may follow the
+axis columns and are returned in ``Samples.extra``. Blank lines and lines starting with ``#``
+are ignored. Writing uses Python's shortest round-trip float repr, so write -> read gives the
+same float64 values bit for bit.
+"""
+
+import re
+
+import numpy as np
+
+from ..core.units import AXES
+from ..errors import InputError
+from .samples import Samples
+
+_NAME = re.compile(r'^[A-Za-z_][A-Za-z0-9_.]*$')
+_BLOCK = 100_000  # rows formatted per write call (bounds memory for long recordings)
+
+
+def _parse_header(path, line, lineno):
+    names = [c.strip() for c in line.split(',')]
+    seen = set()
+    for name in names:
+        if name in seen:
+            raise InputError(path, f'line {lineno}: column {name!r} appears twice')
+        seen.add(name)
+    if 't' not in names:
+        raise InputError(path, f'line {lineno}: no t column in the header '
+                               '(expected t,gyro_x,...,accel_z)')
+    axis_pos = [i for i, n in enumerate(names) if n in AXES]
+    last_axis = max(axis_pos) if axis_pos else names.index('t')
+    for i, name in enumerate(names):
+        if name == 't' or name in AXES:
+            continue
+        looks_like_axis = name.lower().startswith(('gyro', 'accel', 'acc_', 'time'))
+        if i < last_axis or looks_like_axis or not _NAME.match(name):
+            raise InputError(path, f'line {lineno}: unknown column {name!r} (known: t, '
+                                   f'{", ".join(AXES)}; extra columns only after the axes)')
+    if not axis_pos:
+        raise InputError(path, f'line {lineno}: no axis column ({", ".join(AXES)})')
+    return names
+
+
+def _locate_bad(path, lines, first, names):
+    """Find the first bad data line (slow path, only used to word an error)."""
+    k = len(names)
+    for lineno in range(first, len(lines) + 1):
+        text = lines[lineno - 1].strip()
+        if not text or text.startswith('#'):
+            continue
+        cells = text.split(',')
+        if len(cells) != k:
+            raise InputError(path, f'line {lineno}: {len(cells)} cells, the header has {k}')
+        for name, cell in zip(names, cells):
+            try:
+                value = float(cell)
+            except ValueError:
+                raise InputError(path, f'line {lineno}, column {name}: not a number: '
+                                       f'{cell.strip()[:40]!r}') from None
+            if not np.isfinite(value):
+                raise InputError(path, f'line {lineno}, column {name}: {cell.strip()} '
+                                       '(NaN or infinite value)')
+    raise InputError(path, 'unreadable numbers')  # pragma: no cover (loadtxt and float agree)
+
+
+def read_csv(path):
+    """Read a CSV sample file.
+
+    Returns
+    -------
+    Samples
+        ``t`` (s), ``data`` (n, A) in SI with ``axes`` the axis columns present (AXES order),
+        ``extra`` the extra columns by name. A header with no rows gives n = 0.
+
+    Raises
+    ------
+    InputError
+        Missing/empty file, no ``t`` column, unknown or duplicate columns, wrong cell count,
+        non-numeric cells (line and column named), NaN or infinite values (first line named).
+
+    """
+    try:
+        with open(path, encoding='utf-8') as f:
+            text = f.read()
+    except FileNotFoundError:
+        raise InputError(path, 'no such file') from None
+    except UnicodeDecodeError:
+        raise InputError(path, 'not a text file (CSV expected)') from None
+    except OSError as err:
+        raise InputError(path, f'cannot read: {err.strerror}') from None
+    lines = text.splitlines()
+    header_no = next((i + 1 for i, ln in enumerate(lines)
+                      if ln.strip() and not ln.lstrip().startswith('#')), None)
+    if header_no is None:
+        raise InputError(path, 'empty file (no CSV header)')
+    names = _parse_header(path, lines[header_no - 1], header_no)
+    body = [ln for ln in lines[header_no:] if ln.strip() and not ln.lstrip().startswith('#')]
+    k = len(names)
+    if body:
+        try:
+            table = np.loadtxt(body, delimiter=',', dtype=np.float64, ndmin=2)
+        except ValueError:
+            _locate_bad(path, lines, header_no + 1, names)
+        if table.shape[1] != k:
+            _locate_bad(path, lines, header_no + 1, names)
+        if not np.isfinite(table).all():
+            _locate_bad(path, lines, header_no + 1, names)
+    else:
+        table = np.zeros((0, k))
+    col = {name: table[:, i] for i, name in enumerate(names)}
+    axes = tuple(a for a in AXES if a in col)
+    data = np.column_stack([col[a] for a in axes]) if table.shape[0] else np.zeros((0, len(axes)))
+    extra = {n: np.ascontiguousarray(col[n]) for n in names if n != 't' and n not in AXES}
+    return Samples(t=np.ascontiguousarray(col['t']), data=np.ascontiguousarray(data), axes=axes,
+                   source=str(path), extra=extra)
+
+
+def write_csv(path, samples):
+    """Write samples as CSV (header ``t,<axes>,<extra columns>``), exact float round trip."""
+    t = np.asarray(samples.t, dtype=np.float64)
+    data = np.asarray(samples.data, dtype=np.float64).reshape(t.shape[0], len(samples.axes))
+    extra = dict(samples.extra or {})
+    names = ['t', *samples.axes, *extra]
+    columns = [t, *(data[:, j] for j in range(data.shape[1])),
+               *(np.asarray(v, dtype=np.float64) for v in extra.values())]
+    try:
+        with open(path, 'w', encoding='utf-8', newline='\n') as f:
+            f.write(','.join(names) + '\n')
+            for start in range(0, t.shape[0], _BLOCK):
+                # repr() is Python's shortest string that reads back to the same float64.
+                cols = [list(map(repr, c[start:start + _BLOCK].tolist())) for c in columns]
+                f.write('\n'.join(map(','.join, zip(*cols))))
+                f.write('\n')
+    except OSError as err:
+        raise InputError(path, f'cannot write: {err.strerror}') from None

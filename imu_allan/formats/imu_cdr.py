@@ -1,0 +1,433 @@
+"""The one ``sensor_msgs/Imu`` codec: bulk encoding and decoding of its fixed byte layouts.
+
+A CDR Imu is: 4-byte encapsulation header (``00 01`` = little-endian CDR), ``int32 sec``,
+``uint32 nanosec``, ``uint32`` frame_id length (with the trailing NUL), the frame_id bytes,
+padding to an 8-byte boundary (counted from the end of the encapsulation header), then 37
+float64 (orientation 4, its covariance 9, angular velocity 3, its covariance 9, linear
+acceleration 3, its covariance 9). ROS 1 has ``uint32 seq, sec, nsec``, the frame_id length and
+bytes (no NUL) and the same 37 float64 with no padding. Messages are grouped by (length,
+frame_id length) so each group is one ``np.frombuffer`` view; anything else (big-endian CDR,
+unexpected length) goes through the generic deserializer (:func:`deserialize`).
+
+Encoding: :func:`encode_imu` (bag writers, the same bytes ``rosbags`` gives), :class:`CdrPacker`
+(the driver: a template serialized once by rclpy, patched in bulk), stamp splitting
+(:func:`seconds_to_stamps`, :func:`split_stamps`).
+
+Also holds what the storage scanners (:mod:`.mcap_scan`, :mod:`.sqlite_pages`,
+:mod:`.ros1_scan`) and :mod:`.bag_reader` share: the Imu type names, topic choice and the
+one-line error text.
+"""
+
+import mmap
+import struct
+
+import numpy as np
+
+from ..errors import InputError
+from .imu_adapter import imu_to_row
+
+IMU_TYPE = 'sensor_msgs/msg/Imu'
+IMU_TYPES = {IMU_TYPE, 'sensor_msgs/Imu'}
+
+# Offsets (in float64 units) of the fields used, inside the 37-double tail of an Imu.
+_GYRO_OFF = 13
+_ACCEL_OFF = 25
+_TAIL = 37 * 8
+_ORI_COV = 4  # index of orientation_covariance[0] in the 37-double tail
+
+
+def _cdr_layout(slen):
+    """Return (double block start, total length) of a little-endian CDR Imu with frame_id slen."""
+    pos = 4 + 4 + 4 + 4 + slen
+    pad = (-(pos - 4)) % 8  # CDR aligns relative to the end of the encapsulation header
+    return pos + pad, pos + pad + _TAIL
+
+
+def _ros1_layout(slen):
+    """Return (double block start, total length) of a ROS 1 Imu with a frame_id of slen bytes."""
+    start = 16 + slen
+    return start, start + _TAIL
+
+
+def _take_f8(rows, start, count):
+    """Read ``count`` little-endian float64 starting at byte ``start`` of every row."""
+    block = np.ascontiguousarray(rows[:, start:start + 8 * count])
+    return block.view('<f8').reshape(rows.shape[0], count)
+
+
+def _u32(rows, start):
+    """Read a little-endian uint32 at byte ``start`` of every row."""
+    return np.ascontiguousarray(rows[:, start:start + 4]).view('<u4')[:, 0]
+
+
+def decode_rows(rows, ros1):
+    """Bulk-decode equal-length serialized Imu messages.
+
+    Parameters
+    ----------
+    rows : numpy.ndarray
+        Shape (k, L) uint8, one serialized message per row.
+    ros1 : bool
+        ROS 1 serialization instead of CDR.
+
+    Returns
+    -------
+    ok : numpy.ndarray
+        Shape (k,) bool, rows decoded here; the others need the generic deserializer.
+    t : numpy.ndarray
+        Shape (k,), stamps in seconds (valid where ``ok``).
+    data : numpy.ndarray
+        Shape (k, 6), rad/s and m/s^2 (valid where ``ok``).
+
+    """
+    k, length = rows.shape
+    t = np.zeros(k)
+    data = np.zeros((k, 6))
+    ok = np.zeros(k, dtype=bool)
+    if length < 16 + _TAIL:
+        return ok, t, data
+    slen = _u32(rows, 12)
+    if ros1:
+        good = np.ones(k, dtype=bool)
+        layout = _ros1_layout
+    else:
+        # Only little-endian plain CDR (encapsulation 00 01) has this byte layout.
+        good = (rows[:, 0] == 0) & (rows[:, 1] == 1)
+        layout = _cdr_layout
+    for s in np.unique(slen[good]):
+        start, total = layout(int(s))
+        if total != length:
+            continue
+        sel = good & (slen == s)
+        sub = rows[sel] if not sel.all() else rows
+        ok[sel] = True
+        if ros1:
+            sec = _u32(sub, 4).astype(np.float64)
+        else:
+            sec = _u32(sub, 4).view('<i4').astype(np.float64)
+        nsec = _u32(sub, 8).astype(np.float64)
+        # Same float operations as the adapter: sec + nanosec * 1e-9.
+        t[sel] = sec + nsec * 1e-9
+        data[sel, :3] = _take_f8(sub, start + 8 * _GYRO_OFF, 3)
+        data[sel, 3:] = _take_f8(sub, start + 8 * _ACCEL_OFF, 3)
+    return ok, t, data
+
+
+def decode_at(u8, off, length, ros1):
+    """Bulk-decode serialized Imu messages of one length found at byte offsets of a buffer.
+
+    Same result as :func:`decode_rows` on the gathered rows, but only the header and the 48
+    bytes of angular velocity and linear acceleration are gathered. (Byte gathers beat word
+    gathers through unaligned views here; callers pass batches of about 10^4 messages so the
+    index arrays stay small.)
+    """
+    k = off.shape[0]
+    t = np.zeros(k)
+    data = np.zeros((k, 6))
+    ok = np.zeros(k, dtype=bool)
+    if length < 16 + _TAIL or k == 0:
+        return ok, t, data
+    head = u8[off[:, None] + np.arange(16)]
+    slen = _u32(head, 12)
+    if ros1:
+        good = np.ones(k, dtype=bool)
+        layout = _ros1_layout
+    else:
+        good = (head[:, 0] == 0) & (head[:, 1] == 1)
+        layout = _cdr_layout
+    span = np.arange(24)
+    for s in np.unique(slen[good]):
+        start, total = layout(int(s))
+        if total != length:
+            continue
+        sel = good & (slen == s)
+        ok[sel] = True
+        h = head[sel]
+        sec = _u32(h, 4).astype(np.float64) if ros1 else \
+            _u32(h, 4).view('<i4').astype(np.float64)
+        t[sel] = sec + _u32(h, 8).astype(np.float64) * 1e-9
+        # One gather for both vectors: gyro bytes then accel bytes, 48 per message.
+        cols = np.concatenate([start + 8 * _GYRO_OFF + span, start + 8 * _ACCEL_OFF + span])
+        data[sel] = u8[off[sel][:, None] + cols].view('<f8')
+    return ok, t, data
+
+
+class Collector:
+    """Accumulate serialized Imu messages of one connection in file order, decode in bulk."""
+
+    def __init__(self, ros1, deserialize, force_generic=False):
+        self.ros1 = ros1
+        self.deserialize = deserialize
+        self.force_generic = force_generic  # reference path: every message deserialized
+        self.parts = []  # (order, log_time, t, data) arrays
+        self.single_order = []
+        self.single_time = []
+        self.single_blob = []
+        self.count = 0
+        self.undecodable = 0  # messages the deserializer rejected (dropped, with a warning)
+
+    def add_rows(self, log_time, rows):
+        """Add k messages given as a (k, L) uint8 array with their receive times (ns)."""
+        k = rows.shape[0]
+        order = np.arange(self.count, self.count + k)
+        self.count += k
+        ok, t, data = decode_rows(rows, self.ros1)
+        if self.force_generic:
+            ok[:] = False
+        if not ok.all():
+            for i in np.nonzero(~ok)[0]:
+                t[i], data[i] = self.generic(rows[i].tobytes())
+        self.parts.append((order, np.asarray(log_time, dtype=np.int64), t, data))
+
+    def add_one(self, log_time, blob):
+        """Add one message (bytes) with its receive time (ns)."""
+        self.single_order.append(self.count)
+        self.single_time.append(log_time)
+        self.single_blob.append(blob)
+        self.count += 1
+
+    def generic(self, blob):
+        """Deserialize one message; NaN stamp (dropped in :meth:`result`) if it is garbage."""
+        try:
+            return imu_to_row(self.deserialize(blob))
+        except Exception:  # any deserializer failure means this one message is unusable
+            self.undecodable += 1
+            return np.nan, np.full(6, np.nan)
+
+    def warnings(self):
+        """Warning lines about this collector's messages."""
+        if self.undecodable:
+            return [f'{self.undecodable} message(s) could not be decoded and were skipped']
+        return []
+
+    def _flush_singles(self):
+        if not self.single_blob:
+            return
+        lens = np.fromiter((len(b) for b in self.single_blob), dtype=np.int64,
+                           count=len(self.single_blob))
+        order = np.asarray(self.single_order, dtype=np.int64)
+        times = np.asarray(self.single_time, dtype=np.int64)
+        blobs = self.single_blob
+        for length in np.unique(lens):
+            idx = np.nonzero(lens == length)[0]
+            joined = b''.join([blobs[i] for i in idx])
+            rows = np.frombuffer(joined, dtype=np.uint8).reshape(idx.size, int(length))
+            ok, t, data = decode_rows(rows, self.ros1)
+            if self.force_generic:
+                ok[:] = False
+            for j in np.nonzero(~ok)[0]:
+                t[j], data[j] = self.generic(blobs[idx[j]])
+            self.parts.append((order[idx], times[idx], t, data))
+        self.single_order, self.single_time, self.single_blob = [], [], []
+
+    def result(self):
+        """Return (t, data) sorted by receive time, ties in file order (as rosbags yields)."""
+        self._flush_singles()
+        if not self.parts:
+            return np.zeros(0), np.zeros((0, 6))
+        order = np.concatenate([p[0] for p in self.parts])
+        log_time = np.concatenate([p[1] for p in self.parts])
+        t = np.concatenate([p[2] for p in self.parts])
+        data = np.concatenate([p[3] for p in self.parts])
+        if order.shape[0] > 1 and np.all(np.diff(order) > 0) and np.all(np.diff(log_time) >= 0):
+            return self._drop_undecodable(t, data)  # already in order (usual): no sort needed
+        idx = np.lexsort((order, log_time))
+        t, data = t[idx], data[idx]
+        return self._drop_undecodable(t, data)
+
+    def _drop_undecodable(self, t, data):
+        if not self.undecodable:
+            return t, data
+        keep = ~np.isnan(t)
+        return t[keep], data[keep]
+
+
+def map_file(f):
+    """Memory-map a whole file read-only."""
+    return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+
+
+def deserialize(blob, ros1=False):
+    """Deserialize one Imu: CDR with the Jazzy typestore, ROS 1 (``ros1``) with the Noetic one.
+
+    Each typestore is built once, on first use.
+    """
+    store = _STORES.get(ros1)
+    if store is None:
+        from rosbags.typesys import get_typestore, Stores
+        store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)
+        _STORES[ros1] = store
+    if ros1:
+        return store.deserialize_ros1(blob, IMU_TYPE)
+    return store.deserialize_cdr(blob, IMU_TYPE)
+
+
+_STORES = {}  # ros1 flag -> typestore
+
+
+def one_line(err):
+    """Return an exception's text on one line of at most 200 characters."""
+    text = ' '.join(str(err).split()) or type(err).__name__
+    return text if len(text) < 200 else text[:197] + '...'
+
+
+def choose_topic(path, topics, topic):
+    """Pick the Imu topic to read from {topic: (type, count)} or raise InputError."""
+    imu = [t for t, (typ, _) in topics.items() if typ in IMU_TYPES]
+    if topic is not None:
+        if topic not in topics:
+            have = ', '.join(imu) if imu else 'none'
+            raise InputError(path, f'no topic {topic} (Imu topics: {have})')
+        if topics[topic][0] not in IMU_TYPES:
+            raise InputError(path, f'topic {topic} is {topics[topic][0]}, not {IMU_TYPE}')
+        return topic
+    if not imu:
+        raise InputError(path, f'no {IMU_TYPE} topic in the bag')
+    if len(imu) > 1:
+        raise InputError(path, f'several Imu topics ({", ".join(imu)}): choose one with --topic')
+    return imu[0]
+
+
+# -- encoding ------------------------------------------------------------------------------
+
+
+def seconds_to_stamps(t):
+    """Split times in s into (sec, nanosec) int64 arrays and the same instants in int64 ns.
+
+    Split before scaling (floor, then the fraction to ns), so a stamp of 1.7e9 s keeps its
+    nanoseconds (t * 1e9 alone would round to 256 ns there).
+    """
+    t = np.asarray(t, dtype=np.float64)
+    sec = np.floor(t)
+    nsec = np.rint((t - sec) * 1e9)
+    carry = nsec >= 1e9
+    sec = sec + carry
+    nsec = np.where(carry, nsec - 1e9, nsec)
+    sec = sec.astype(np.int64)
+    nsec = nsec.astype(np.int64)
+    return sec, nsec, sec * 1_000_000_000 + nsec
+
+
+def encode_imu(t, data6, frame_id='imu_link', ros1=False):
+    """Serialize Imu messages in bulk.
+
+    Parameters
+    ----------
+    t : array_like
+        Shape (n,), header stamps in s.
+    data6 : array_like
+        Shape (n, 6), rad/s and m/s^2 in AXES order.
+    frame_id : str
+        Header frame id.
+    ros1 : bool
+        ROS 1 serialization instead of little-endian CDR.
+
+    Returns
+    -------
+    rows : numpy.ndarray
+        Shape (n, L) uint8, one serialized message per row.
+    stamp_ns : numpy.ndarray
+        Shape (n,) int64, the stamps in ns (used as receive times).
+
+    """
+    sec, nsec, stamp_ns = seconds_to_stamps(t)
+    data6 = np.asarray(data6, dtype=np.float64)
+    n = sec.shape[0]
+    fid = frame_id.encode()
+    if ros1:
+        if np.any(sec < 0) or np.any(sec >= 2**32):
+            raise InputError('samples', 'time stamps out of the ROS 1 range (0 to 2^32 s)')
+        head = b'\0' * 12 + len(fid).to_bytes(4, 'little') + fid
+    else:
+        if np.any(sec < -2**31) or np.any(sec >= 2**31):
+            raise InputError('samples', 'time stamps out of the int32 seconds range')
+        head = b'\x00\x01\x00\x00' + b'\0' * 8 + (len(fid) + 1).to_bytes(4, 'little') + fid + b'\0'
+    start = (_ros1_layout(len(fid)) if ros1 else _cdr_layout(len(fid) + 1))[0]
+    head = head.ljust(start, b'\0')
+    tail = np.zeros(37)
+    tail[_ORI_COV] = -1.0
+    template = np.frombuffer(head + tail.astype('<f8').tobytes(), dtype=np.uint8)
+    rows = np.tile(template, (n, 1))
+    if ros1:
+        rows[:, 0:4] = np.arange(n, dtype='<u4').view(np.uint8).reshape(n, 4)  # header.seq
+        rows[:, 4:8] = sec.astype('<u4').view(np.uint8).reshape(n, 4)
+    else:
+        rows[:, 4:8] = sec.astype('<i4').view(np.uint8).reshape(n, 4)
+    rows[:, 8:12] = nsec.astype('<u4').view(np.uint8).reshape(n, 4)
+    gyro = start + _GYRO_OFF * 8
+    accel = start + _ACCEL_OFF * 8
+    rows[:, gyro:gyro + 24] = np.ascontiguousarray(data6[:, :3], dtype='<f8').view(
+        np.uint8).reshape(n, 24)
+    rows[:, accel:accel + 24] = np.ascontiguousarray(data6[:, 3:], dtype='<f8').view(
+        np.uint8).reshape(n, 24)
+    return rows, stamp_ns
+
+
+def split_stamps(stamps_ns):
+    """Integer nanoseconds -> (sec, nanosec) lists for builtin_interfaces/Time."""
+    ns = np.asarray(stamps_ns, dtype=np.int64)
+    sec = ns // 1_000_000_000
+    return sec.tolist(), (ns - sec * 1_000_000_000).tolist()
+
+
+_SENTINEL_STAMP = (0x7A5A5A01, 0x3A5A5A02)
+
+
+def _sentinel(k):
+    """A float64 with a distinctive bit pattern (found again in serialized bytes)."""
+    return struct.unpack('<d', struct.pack('<Q', 0x1A2B3C4D5E6F0100 + k))[0]
+
+
+def _find_once(raw, pattern):
+    i = raw.find(pattern)
+    if i < 0 or raw.find(pattern, i + 1) >= 0:
+        raise RuntimeError('CDR layout not recognised')
+    return i
+
+
+class CdrPacker:
+    """Serialize a batch of messages by patching a CDR template with numpy.
+
+    The template is the configured message (frame_id, covariances) serialized once by rclpy
+    with sentinel values in the fields that change per message (stamp and float64 vectors);
+    the sentinels locate those fields.  ``pack`` then writes a whole batch at once, and each
+    message is published as bytes (rclpy ``publish`` accepts serialized messages).  Values
+    are the same float64 numbers that would have been assigned to the message fields.
+    """
+
+    def __init__(self, msg, vectors):
+        """``vectors``: name -> (sub-message, attribute letters), e.g. ('...', 'xyz')."""
+        from rclpy.serialization import serialize_message
+        msg.header.stamp.sec, msg.header.stamp.nanosec = _SENTINEL_STAMP
+        k = 0
+        firsts = {}
+        for name, (obj, attrs) in vectors.items():
+            firsts[name] = (k, len(attrs))
+            for attr in attrs:
+                setattr(obj, attr, _sentinel(k))
+                k += 1
+        raw = serialize_message(msg)
+        if raw[:2] != b'\x00\x01':
+            raise RuntimeError('expected little-endian CDR')
+        self.size = len(raw)
+        self.template = np.frombuffer(raw, dtype=np.uint8)
+        self.stamp = _find_once(raw, struct.pack('<iI', *_SENTINEL_STAMP))
+        self.offsets = {}
+        for name, (first, n) in firsts.items():
+            pattern = b''.join(struct.pack('<d', _sentinel(first + j)) for j in range(n))
+            self.offsets[name] = (_find_once(raw, pattern), n)
+
+    def pack(self, secs, nsecs, **vectors):
+        """Return ``(bytes of n messages back to back, message size)``."""
+        n = len(secs)
+        out = np.empty((n, self.size), dtype=np.uint8)
+        out[:] = self.template
+        stamp = np.empty((n, 2), dtype='<u4')
+        stamp[:, 0] = np.asarray(secs, dtype=np.int64).astype('<i4').view('<u4')
+        stamp[:, 1] = nsecs
+        out[:, self.stamp:self.stamp + 8] = stamp.view(np.uint8).reshape(n, 8)
+        for name, values in vectors.items():
+            off, k = self.offsets[name]
+            block = np.ascontiguousarray(values, dtype='<f8').reshape(n, k)
+            out[:, off:off + 8 * k] = block.view(np.uint8).reshape(n, 8 * k)
+        return out.tobytes(), self.size

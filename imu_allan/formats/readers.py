@@ -1,0 +1,107 @@
+"""One entry point for every input format: ``read_samples(path, fmt='auto', topic=None)``.
+
+Formats: ``rosbag2`` (folder with ``metadata.yaml``, bare ``.db3`` or ``.mcap``), ``ros1``
+(``.bag``), ``csv`` (contract CSV), ``thesis`` (thesis text log), ``gx3raw`` (raw 3DM-GX3-25
+serial capture). ``auto`` looks at the path (folder, extension) and then at the content (file
+signatures, the first text lines, the GX3 command bytes 0xCB/0xC2/0xCF).
+"""
+
+from pathlib import Path
+
+from ..errors import InputError
+from . import FORMATS
+from .bag_reader import bag_kind, MCAP_MAGIC, read_bag, ROS1_MAGIC, SQLITE_MAGIC
+from .csv_samples import read_csv
+from .thesis_log import looks_like_thesis_log, read_thesis_log
+
+_GX3_CODES = (0xCB, 0xC2, 0xCF)
+
+
+def detect_format(path):
+    """Return the format name of an input, or raise InputError saying why it is unknown."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(path, 'no such file or directory')
+    if p.is_dir():
+        return 'rosbag2'
+    suffix = p.suffix.lower()
+    if suffix in ('.db3', '.mcap'):
+        return 'rosbag2'
+    if suffix == '.bag':
+        return 'ros1'
+    if suffix == '.csv':
+        return 'csv'
+    try:
+        with open(p, 'rb') as f:
+            head = f.read(4096)
+    except OSError as err:
+        raise InputError(path, f'cannot read: {err.strerror}') from None
+    if not head:
+        raise InputError(path, 'empty file')
+    if head.startswith(MCAP_MAGIC) or head.startswith(SQLITE_MAGIC):
+        return 'rosbag2'
+    if head.startswith(ROS1_MAGIC):
+        return 'ros1'
+    if head[0] in _GX3_CODES:
+        return 'gx3raw'
+    try:
+        text = head.decode('utf-8')
+    except UnicodeDecodeError:
+        text = None
+    if text is not None:
+        first = next((ln.strip() for ln in text.splitlines()
+                      if ln.strip() and not ln.startswith('#')), '')
+        names = [c.strip() for c in first.split(',')]
+        if 't' in names or any(n.startswith(('gyro_', 'accel_')) for n in names):
+            return 'csv'
+        if looks_like_thesis_log(text):
+            return 'thesis'
+    raise InputError(path, 'unknown input format (use --format '
+                           'rosbag2|ros1|csv|thesis|gx3raw)')
+
+
+def read_samples(path, fmt='auto', topic=None, fast=True):
+    """Read IMU samples from any supported input.
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The input file or rosbag2 folder.
+    fmt : str
+        One of :data:`FORMATS`.
+    topic : str, optional
+        Imu topic for bags (ignored for other formats).
+    fast : bool
+        Bags only: bulk decoder (True) or the generic deserializer (same numbers).
+
+    Returns
+    -------
+    Samples
+        t in s, data in SI, axes in AXES order.
+
+    Raises
+    ------
+    InputError
+        Unknown format, or any problem the chosen reader reports.
+
+    """
+    if fmt not in FORMATS:
+        raise InputError('--format', f'unknown format {fmt!r} (one of {", ".join(FORMATS)})')
+    if fmt == 'auto':
+        fmt = detect_format(path)
+    elif not Path(path).exists():
+        raise InputError(path, 'no such file or directory')
+    if fmt in ('rosbag2', 'ros1'):
+        kind = bag_kind(path)[0]
+        if fmt == 'ros1' and kind != 'ros1':
+            raise InputError(path, 'not a ROS 1 bag')
+        if fmt == 'rosbag2' and kind == 'ros1':
+            raise InputError(path, 'a ROS 1 bag, not rosbag2 (use --format ros1)')
+        return read_bag(path, topic=topic, fast=fast)
+    if fmt == 'csv':
+        return read_csv(path)
+    if fmt == 'thesis':
+        return read_thesis_log(path)
+    # Imported here: the raw-capture reader belongs to the driver's protocol layer.
+    from .gx3raw import read_gx3raw
+    return read_gx3raw(path)

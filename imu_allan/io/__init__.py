@@ -1,1 +1,0 @@
-"""ROS-free input and output: device protocol, serial link, bags, logs and CSV."""

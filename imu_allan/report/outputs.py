@@ -1,0 +1,96 @@
+"""The ``--out DIR`` files: report.json, Kalibr imu.yaml, allan_results.csv and PNG plots.
+
+Files are first written into a staging folder next to DIR and moved in only when all of them
+succeeded, so a failed run never leaves a half-written report behind.
+"""
+
+import csv
+import json
+import math
+import os
+from pathlib import Path
+import shutil
+import tempfile
+
+from ..core.units import AXES, IEEE_TERMS, si_unit
+from . import plots
+from .json_report import analysis_to_json, kalibr_values
+
+
+def write_kalibr_yaml(path, analysis, topic='/imu/data_raw'):
+    """Kalibr ``imu.yaml``: continuous-time values of the worst axis, per-axis in comments."""
+    values, per_axis = kalibr_values(analysis)
+    lines = ['# Kalibr IMU noise model from imu_allan (continuous-time, SI units).',
+             '# *_noise_density = white noise N (rad/s/sqrt(Hz), m/s^2/sqrt(Hz));',
+             '# *_random_walk = bias random walk K (rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz));',
+             '# the worst (largest) axis of each sensor, as Kalibr users expect.',
+             '# Kalibr needs all four > 0: where the data do not show a term, its 95 % upper',
+             '# limit is written (marked below); null means not even a limit was found.']
+    for key, axes in per_axis.items():
+        text = ', '.join(f'{a} {v:.6g}' + (' (upper limit, not detected)' if bound else '')
+                         if math.isfinite(v) else f'{a} not detected'
+                         for a, (v, bound) in axes.items())
+        lines.append(f'# {key} per axis: {text}')
+    lines.append(f'rostopic: {topic}')
+    lines.append(f'update_rate: {values["update_rate"]:.6g}')
+    for key in ('accelerometer_noise_density', 'accelerometer_random_walk',
+                'gyroscope_noise_density', 'gyroscope_random_walk'):
+        value = values.get(key)
+        lines.append(f'{key}: {value:.6e}' if value is not None else f'{key}: null')
+    Path(path).write_text('\n'.join(lines) + '\n', encoding='utf-8')
+
+
+def write_results_csv(path, analysis, denoised=None):
+    """Thesis layout: one row per term, one column per axis (+ intervals, + denoised)."""
+    axes = [a for a in AXES if a in analysis.axes]
+    header = ['term', 'unit_gyro', 'unit_accel'] + axes
+    header += [f'{a}_ci_low' for a in axes] + [f'{a}_ci_high' for a in axes]
+    if denoised is not None:
+        header += [f'{a}_denoised' for a in axes]
+    fit = analysis.fit
+    with open(path, 'w', newline='', encoding='utf-8') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(header)
+        for term in IEEE_TERMS:
+            row = [term, si_unit('gyro_x', term), si_unit('accel_x', term)]
+            row += [_cell(fit.value(a, term)) for a in axes]
+            row += [_cell(fit.interval(a, term)[0]) for a in axes]
+            row += [_cell(fit.interval(a, term)[1]) for a in axes]
+            if denoised is not None:
+                row += [_cell(denoised.fit.value(a, term)) for a in axes]
+            writer.writerow(row)
+
+
+def _cell(value):
+    return f'{value:.6e}' if math.isfinite(value) else ''
+
+
+def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/imu/data_raw',
+                  extra=None):
+    """Write every report file into ``out_dir`` atomically; returns the list of file names.
+
+    ``extra(staging_dir)`` may write more files (e.g. a bag) into the staging folder first.
+    """
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f'.{out_dir.name}.', dir=out_dir.parent))
+    try:
+        if extra is not None:
+            extra(staging)
+        report = report if report is not None else analysis_to_json(analysis)
+        (staging / 'report.json').write_text(json.dumps(report, indent=1), encoding='utf-8')
+        write_kalibr_yaml(staging / 'imu.yaml', analysis, topic)
+        write_results_csv(staging / 'allan_results.csv', analysis, denoised)
+        for sensor in ('gyro', 'accel'):
+            plots.plot_adev(staging / f'adev_{sensor}.png', analysis, sensor, denoised)
+        plots.plot_timeseries(staging / 'timeseries.png', analysis, raw)
+        out_dir.mkdir(exist_ok=True)
+        names = sorted(os.listdir(staging))
+        for name in names:
+            target = out_dir / name
+            if target.is_dir():  # a bag folder from an earlier run: replaced whole
+                shutil.rmtree(target)
+            os.replace(staging / name, target)
+        return names
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
