@@ -1,7 +1,7 @@
 """``analyze``: IMU noise report from bags, logs, CSV and raw captures.
 
 Usage: ``analyze INPUT... [--topic T] [--format auto|rosbag2|ros1|csv|thesis|gx3raw]
-[--out DIR] [--json] [--export-samples FILE.csv] [--denoise]`` (design.md section 5).
+[--out DIR] [--json] [--export-samples FILE.csv] [--denoise]`` (docs/interfaces.md).
 Several inputs are analysed in parallel, one process per core, and summarised in one table.
 """
 

@@ -2,11 +2,11 @@
 
 The simulator opens a pseudo-terminal in raw mode, prints the path a driver should open as the
 first line on stdout, and then behaves like a 3DM-GX3-25 with single-byte firmware
-(``reference/gx3_protocol.md``): it answers the commands, streams continuous mode at
+(the DCP manual, docs/references.md): it answers the commands, streams continuous mode at
 1000 Hz / decimation, paced by the baud rate, with noise from
 :func:`imu_allan.core.simulate.simulate`.
 
-Choices where the protocol is silent (gx3_protocol.md §15): unknown command bytes and a bare
+Choices where the DCP manual is silent: unknown command bytes and a bare
 ``FA`` are ignored; an invalid continuous-command byte is ignored and the current one echoed;
 the 0xC4 reply precedes the first record; the device powers up in Active mode (or streaming,
 with ``--stream``); polled data commands are answered at once; 0xCD replies after at most

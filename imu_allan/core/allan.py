@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from . import edf as _edf
+from .terms import ID_ALPHA, TERMS
 from .units import AXES
 
 #: Fewest non-overlapping clusters allowed at the longest averaging time (tau_max = T / 10).
@@ -46,7 +47,9 @@ class AllanResult:
     rate_hz : float
         Sample rate, Hz.
     n_samples : int
-        Number of rate samples the estimate was computed from.
+        Record length behind the estimate, samples: the number of rate samples for the batch
+        estimator; for the streaming estimator (gaps, excluded spans) the longest span any
+        averaging time covers, which is what the EDF and a simulation of the same record use.
 
     """
 
@@ -66,15 +69,17 @@ class AllanResult:
     def from_avar(cls, m, avar, n_samples, rate_hz, axes=None, alpha=None):
         """Build a result (EDF, intervals) from Allan variances computed elsewhere.
 
-        ``avar`` has shape (T, A) for averaging factors ``m``; ``n_samples`` is the number of
-        rate samples behind each estimate (an int, or an array (T,) or (T, A) for estimators
-        that use different spans per averaging time).  ``alpha`` (T, A) overrides the noise
-        identification.
+        ``avar`` has shape (T, A) for averaging factors ``m`` (a 1-D array is one axis);
+        ``n_samples`` is the number of rate samples behind each estimate (an int, or an array
+        (T,) or (T, A) for estimators that use different spans per averaging time; the result
+        keeps the largest).  ``alpha`` (T, A) overrides the noise identification.
         """
-        m = np.asarray(m, dtype=np.int64)
-        avar = np.atleast_2d(np.asarray(avar, dtype=float))
+        m = np.atleast_1d(np.asarray(m, dtype=np.int64))
+        avar = np.asarray(avar, dtype=float)
+        if avar.ndim == 1:
+            avar = avar[:, None]
         if avar.shape[0] != m.size:
-            avar = avar.T
+            raise ValueError(f'avar has {avar.shape[0]} rows for {m.size} averaging factors')
         axes = tuple(axes) if axes is not None else AXES[:avar.shape[1]]
         tau = m / float(rate_hz)
         if alpha is None:
@@ -92,6 +97,22 @@ class AllanResult:
         return self.axes.index(axis)
 
 
+def min_record(min_clusters=DEFAULT_MIN_CLUSTERS):
+    """Fewest samples for which :func:`tau_grid` has any averaging time (m = 1)."""
+    return max(int(min_clusters), 2)
+
+
+def log_grid(stop, points_per_decade):
+    """Unique integers from 1 to ``stop`` spaced ``points_per_decade`` per decade (log)."""
+    if points_per_decade <= 0:
+        raise ValueError('points_per_decade must be > 0')
+    if stop < 1:
+        return np.zeros(0, dtype=np.int64)
+    count = int(math.floor(math.log10(stop) * points_per_decade)) + 1
+    ms = np.unique(np.round(np.logspace(0.0, math.log10(stop), count)).astype(np.int64))
+    return ms[ms >= 1]
+
+
 def tau_grid(n_samples, points_per_decade=DEFAULT_POINTS_PER_DECADE,
              min_clusters=DEFAULT_MIN_CLUSTERS, m_max=None):
     """Log-spaced averaging factors m = 1 .. n / min_clusters (unique integers).
@@ -100,15 +121,8 @@ def tau_grid(n_samples, points_per_decade=DEFAULT_POINTS_PER_DECADE,
     time (the common tau_max = T/10 rule); returns an empty array when even m = 1 fails it.
     ``m_max`` lowers the longest averaging factor further.
     """
-    if points_per_decade <= 0:
-        raise ValueError('points_per_decade must be > 0')
-    limit = int(n_samples // max(int(min_clusters), 2))
-    m_max = limit if m_max is None else min(int(m_max), limit)
-    if m_max < 1:
-        return np.zeros(0, dtype=np.int64)
-    count = int(math.floor(math.log10(m_max) * points_per_decade)) + 1
-    ms = np.unique(np.round(np.logspace(0.0, math.log10(m_max), count)).astype(np.int64))
-    return ms[ms >= 1]
+    limit = int(n_samples // min_record(min_clusters))
+    return log_grid(limit if m_max is None else min(int(m_max), limit), points_per_decade)
 
 
 def _phase(data):
@@ -185,17 +199,6 @@ def avar_fast(data, ms):
     return _kernel()(_phase(data), np.ascontiguousarray(ms, dtype=np.int64))
 
 
-# Dominant-term noise identification: unweighted relative fit of the five IEEE shapes, then the
-# exponent of whichever term dominates at each tau. Each entry: (shape(tau), alpha).
-_ID_SHAPES = (
-    (lambda t: 3.0 / t ** 2, 2),   # quantization ~ white PM
-    (lambda t: 1.0 / t, 0),        # white noise ~ white FM
-    (lambda t: np.ones_like(t), -1),  # bias instability ~ flicker FM
-    (lambda t: t / 3.0, -2),       # rate random walk ~ random-walk FM
-    (lambda t: t * t / 2.0, -2),   # rate ramp: treated as random-walk FM (most conservative)
-)
-
-
 def identify_noise(tau, avar):
     """Power-law exponent alpha of the dominant noise at each (tau, axis).
 
@@ -206,8 +209,8 @@ def identify_noise(tau, avar):
     from scipy.optimize import nnls
     tau = np.asarray(tau, dtype=float)
     avar = np.atleast_2d(avar)
-    basis = np.column_stack([f(tau) for f, _ in _ID_SHAPES])
-    alphas = np.array([a for _, a in _ID_SHAPES])
+    basis = np.column_stack([TERMS[t].id_shape(tau) for t in ID_ALPHA])
+    alphas = np.array(list(ID_ALPHA.values()))
     out = np.zeros(avar.shape, dtype=int)
     for j in range(avar.shape[1]):
         y = avar[:, j]
@@ -260,7 +263,7 @@ def allan_deviation(data, rate_hz, taus=None, points_per_decade=DEFAULT_POINTS_P
         ms = tau_grid(n, points_per_decade, min_clusters)
         if ms.size == 0:
             raise ValueError(f'{n} samples are too few for any averaging time '
-                             f'(need at least {2 * min_clusters})')
+                             f'(need at least {min_record(min_clusters)})')
     else:
         tau_in = np.atleast_1d(np.asarray(taus, dtype=float))
         ms = np.round(tau_in * rate_hz).astype(np.int64)

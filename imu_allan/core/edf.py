@@ -3,10 +3,14 @@
 The EDF follows Greenhall & Riley (2004), "Uncertainty of stability variances based on finite
 differences" (the algorithm NIST SP1065 and allantools use), for the unmodified, fully
 overlapping Allan variance (d = 2, F = S = m).  Where the paper switches to a fitted table for
-long sums (J > 100), we evaluate the same basic sum exactly instead: with numpy that costs
-microseconds and removes the table's approximation.  Power-law noise types are given by the
-frequency-PSD exponent alpha: +2 white PM (quantization), +1 flicker PM, 0 white FM (white noise),
--1 flicker FM (bias instability), -2 random-walk FM (rate random walk, ramp).
+long sums (J > 100), we evaluate the same basic sum instead: exactly up to J = 4096 lags, and
+above that (infinite-filter limit only, where the summand is smooth) by the trapezoid rule on
+4096 points with Euler-Maclaurin end corrections, measured within 8e-7 of the exact sum for
+alpha = 0, -1, -2, m = 2,000 to 100,000 and M = 3m to 100m (well below the EDF's own
+accuracy).  With numpy this costs microseconds and removes the table's approximation.
+Power-law noise types are given by the frequency-PSD exponent alpha: +2 white PM
+(quantization), +1 flicker PM, 0 white FM (white noise), -1 flicker FM (bias instability), -2
+random-walk FM (rate random walk, ramp).
 """
 
 import functools
@@ -90,7 +94,8 @@ def _lag_sum(j_count, big_m, m, f, alpha):
 
     In the infinite-filter limit (f = inf) the summand is smooth in j apart from kinks at
     j = m, 2m, so the trapezoid rule on 4096 points plus the half end-points (Euler-Maclaurin)
-    is accurate to ~1e-6 relative; a finite filter has kinks at every lag, so it is summed.
+    is used above 4096 lags: measured within 8e-7 of the exact sum (module docstring); a
+    finite filter has kinks at every lag, so it is always summed.
     """
     if j_count <= _SUM_POINTS or not math.isinf(f):
         j = np.arange(1, j_count, dtype=float)

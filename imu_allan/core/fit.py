@@ -35,6 +35,7 @@ from scipy.optimize import minimize_scalar, nnls
 
 from . import terms as _terms
 from .model import NoiseModel
+from .terms import TERMS
 from .units import ALL_TERMS, conventional, IEEE_TERMS, si_unit
 
 #: Correlation width (decades) of AVAR estimates vs noise exponent alpha (measured, see doc).
@@ -119,28 +120,20 @@ class _Problem:
 
 
 def _shape_columns(problem, names, nonlinear):
-    cols = []
-    for name in names:
-        if name == 'gauss_markov':
-            cols.append(_terms.gauss_markov_shape(problem.tau, nonlinear['gauss_markov']))
-        elif name == 'sinusoid':
-            cols.append(_terms.sinusoid_shape(problem.tau, nonlinear['sinusoid']))
-        else:
-            cols.append(_terms.linear_shape(name, problem.tau, problem.rate_hz))
-    return np.column_stack(cols)
+    return np.column_stack([TERMS[name].shape(problem.tau, problem.rate_hz, nonlinear.get(name))
+                            for name in names])
 
 
 def _nonlinear_range(problem, name):
-    t0, t1 = problem.tau[0], problem.tau[-1]
-    if name == 'gauss_markov':  # hump peak at 1.89 tau_c inside the measured span
-        return math.log(t0 / 1.89), math.log(t1 / 1.89)
-    return math.log(0.371 / t1), math.log(0.371 / t0)  # sinusoid: bump at 0.371 / f0
+    """Log-position range of a hump term whose peak lies inside the measured span."""
+    lo, hi = TERMS[name].position_range(problem.tau[0], problem.tau[-1])
+    return math.log(lo), math.log(hi)
 
 
 def _fit_terms(problem, names):
     """Fit the named terms; returns AxisFit (profiling tau_c / f0 when present)."""
     names = list(names)
-    nl_names = [n for n in names if n in ('gauss_markov', 'sinusoid')]
+    nl_names = [n for n in names if TERMS[n].position]
 
     def evaluate(nonlinear):
         return problem.solve(_shape_columns(problem, names, nonlinear))
@@ -178,17 +171,10 @@ def _fit_terms(problem, names):
             continue
         value = math.sqrt(coef[j])
         interval = (math.sqrt(max(coef[j] - sd[j], 0.0)), math.sqrt(coef[j] + sd[j]))
-        if name == 'gauss_markov':
-            p_lo, p_hi = _profile_interval(profiles[name], chi2)
-            fit.terms[name] = {'sigma': value, 'tau_c': nonlinear[name]}
-            fit.intervals[name] = {'sigma': interval, 'tau_c': (p_lo, p_hi)}
-        elif name == 'sinusoid':
-            p_lo, p_hi = _profile_interval(profiles[name], chi2)
-            fit.terms[name] = {'amplitude': value, 'frequency_hz': nonlinear[name]}
-            fit.intervals[name] = {'amplitude': interval, 'frequency_hz': (p_lo, p_hi)}
-        else:
-            fit.terms[name] = {'value': value}
-            fit.intervals[name] = {'value': interval}
+        spec = TERMS[name]
+        fit.terms[name] = spec.pack(value, nonlinear.get(name))
+        fit.intervals[name] = spec.pack(interval, _profile_interval(profiles[name], chi2)
+                                        if spec.position else None)
     n_params = int(active.sum()) + sum(1 for n in nl_names if n in fit.terms)
     fit.dof = max(problem.tau.size - n_params, 0)
     return fit
@@ -251,7 +237,7 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
     if problem.tau.size < 2 or not others:
         return math.nan
     base = _shape_columns(problem, others, {})
-    extra = _terms.linear_shape(term, problem.tau, rate_hz)
+    extra = TERMS[term].shape(problem.tau, rate_hz)
 
     def chi2(log_c):
         return problem.solve(base, offset=math.exp(log_c) * extra)[1]
@@ -304,7 +290,7 @@ class FittedModel:
         """JSON-ready ``{term: {value, ci, unit, time, conventional}}`` for one axis."""
         out = {}
         for term, params in self.model.terms.get(axis, {}).items():
-            main = 'value' if 'value' in params else next(iter(params))
+            main = TERMS[term].params[0]
             lo, hi = self.intervals[axis][term][main]
             conv, conv_unit = conventional(axis, term, params[main])
             entry = {'value': params[main], 'ci': [lo, hi], 'unit': si_unit(axis, term),
@@ -314,9 +300,9 @@ class FittedModel:
                                              conventional(axis, term, hi)[0]]}}
             for extra in params:
                 if extra != main:
-                    unit = 's' if extra == 'tau_c' else 'Hz'
                     entry[extra] = {'value': params[extra],
-                                    'ci': list(self.intervals[axis][term][extra]), 'unit': unit}
+                                    'ci': list(self.intervals[axis][term][extra]),
+                                    'unit': TERMS[term].param_unit(axis, extra)}
             out[term] = entry
         return out
 

@@ -31,7 +31,6 @@ from ..errors import InputError
 from .units import AXES, conventional, IEEE_TERMS, sensor_of, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
-LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
 #: The packaged 3DM-GX3-25 datasheet budget.
 DEFAULT_BUDGET_FILE = os.path.join(os.path.dirname(os.path.dirname(__file__)), 'data',

@@ -69,6 +69,20 @@ class TimingReport:
     gap_indices: np.ndarray
 
 
+def count_gaps(steps, nominal, gap_factor=GAP_FACTOR):
+    """Which sample spacings are gaps, and how many samples the gaps lost.
+
+    ``steps`` are spacings (any unit: s, device ticks) and ``nominal`` the regular spacing in
+    the same unit; a spacing above ``gap_factor`` x nominal is a gap that lost
+    round(step / nominal) - 1 samples.  Returns ``(gap mask, missing samples)``.  The one
+    rule for time stamps, raw captures and the live device link.
+    """
+    steps = np.asarray(steps, dtype=float)
+    gaps = steps > gap_factor * nominal
+    missing = int(np.sum(np.round(steps[gaps] / nominal) - 1)) if gaps.any() else 0
+    return gaps, missing
+
+
 def check_timing(t, gap_factor=GAP_FACTOR):
     """Analyse time stamps ``t`` (s): rate, gaps, jitter and non-increasing steps.
 
@@ -83,10 +97,9 @@ def check_timing(t, gap_factor=GAP_FACTOR):
     if positive.size == 0:
         raise ValueError('time stamps never increase')
     nominal = float(np.median(positive))
-    gaps = dt > gap_factor * nominal
+    gaps, missing = count_gaps(dt, nominal, gap_factor)
     regular = dt[(dt > 0) & ~gaps]
     jitter = float(np.std(regular) / nominal) if regular.size else 0.0
-    missing = int(np.sum(np.round(dt[gaps] / nominal) - 1)) if gaps.any() else 0
     return TimingReport(
         rate_hz=1.0 / nominal, nominal_dt=nominal, duration_s=float(t[-1] - t[0]) + nominal,
         n_gaps=int(gaps.sum()), longest_gap_s=float(dt[gaps].max()) if gaps.any() else 0.0,

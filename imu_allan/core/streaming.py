@@ -48,7 +48,7 @@ import math
 
 import numpy as np
 
-from .allan import AllanResult, DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE
+from .allan import AllanResult, DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, log_grid
 from .units import AXES
 
 DEFAULT_STRIDE_BASE = 256
@@ -71,8 +71,7 @@ def factor_grid(rate_hz, max_tau=DEFAULT_MAX_TAU, points_per_decade=DEFAULT_POIN
         m_max = int(round(max_tau * rate_hz))
         if m_max < 1:
             raise ValueError('max_tau is shorter than one sample')
-        count = int(math.floor(math.log10(m_max) * points_per_decade)) + 1 if m_max > 1 else 1
-        ms = np.round(np.logspace(0.0, math.log10(m_max), count)).astype(np.int64)
+        ms = log_grid(m_max, points_per_decade)
     ms = np.unique(ms)
     if exact:
         return ms, np.ones_like(ms)

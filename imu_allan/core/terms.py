@@ -1,6 +1,10 @@
-"""Analytic Allan variance of each noise term (IEEE Std 952 / 1293), continuous time, SI.
+"""The noise-term registry (:data:`TERMS`) and the analytic Allan variance of each term.
 
-All functions take averaging times ``tau`` (s, array) and return AVAR in (unit)^2:
+One :class:`TermSpec` per term holds its parameters and units, power-law exponent, Allan
+shape, peak ratio and conventional units; the estimator, the fit, the discrepancy workflow,
+the units and the reports read them from here (IEEE Std 952 / 1293; continuous time, SI).
+
+The shape functions take averaging times ``tau`` (s, array) and return AVAR in (unit)^2:
 
 =================  =====================================================  ==================
 term               AVAR(tau)                                              ADEV slope
@@ -19,11 +23,11 @@ sinusoid (A, f0)   A^2 [sin^2(pi f0 tau) / (pi f0 tau)]^2                 bump a
 =================  =====================================================  ==================
 """
 
+from dataclasses import dataclass, field
 import functools
 import math
 
 import numpy as np
-from scipy.special import sici
 
 #: sqrt(2 ln 2 / pi): flat ADEV level of bias instability per unit B (not 0.644, not 0.798).
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
@@ -31,6 +35,7 @@ FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 
 def flicker_shape(tau, f0):
     """AVAR of bias instability per unit B^2 with the 1/f PSD cut off at ``f0`` (Hz)."""
+    from scipy.special import sici  # here, so that importing the registry needs no scipy
     x = math.pi * f0 * np.asarray(tau, dtype=float)
     ci2 = sici(2.0 * x)[1]
     ci4 = sici(4.0 * x)[1]
@@ -87,30 +92,199 @@ def sinusoid_shape(tau, frequency_hz):
     return (np.sin(x) ** 2 / x) ** 2
 
 
-def linear_shape(term, tau, rate_hz):
-    """AVAR per unit squared coefficient for the five IEEE terms (linear in the square)."""
+def quantization_shape(tau):
+    """AVAR of quantization noise per unit Q^2: 3 / tau^2 (IEEE Std 952, Table C.1)."""
+    return 3.0 / np.asarray(tau, dtype=float) ** 2
+
+
+def white_shape(tau):
+    """AVAR of white rate noise per unit N^2: 1 / tau."""
+    return 1.0 / np.asarray(tau, dtype=float)
+
+
+def random_walk_shape(tau, rate_hz=None):
+    """AVAR of a rate random walk per unit K^2: tau / 3.
+
+    With ``rate_hz`` the exact correction for a *sampled* random walk is added: the AVAR of
+    a cumulative sum of white steps at factor m is K^2 dt (2 m^2 + 1) / (6 m), i.e.
+    tau / 3 + dt^2 / (6 tau).
+    """
     tau = np.asarray(tau, dtype=float)
-    if term == 'quantization':
-        return 3.0 / tau ** 2
-    if term == 'white_noise':
-        return 1.0 / tau
-    if term == 'bias_instability':
-        return sampled_flicker_shape(tau, rate_hz)
-    if term == 'rate_random_walk':
-        # tau/3 plus the exact correction for a sampled random walk, (2m^2 + 1) dt / (6m)
-        return tau / 3.0 + 1.0 / (6.0 * rate_hz ** 2 * tau)
-    if term == 'rate_ramp':
-        return tau * tau / 2.0
-    raise ValueError(f'{term} is not a single-coefficient term')
+    if rate_hz is None:
+        return tau / 3.0
+    return tau / 3.0 + 1.0 / (6.0 * rate_hz ** 2 * tau)
+
+
+def ramp_shape(tau):
+    """AVAR of a rate ramp per unit R^2: tau^2 / 2."""
+    return np.asarray(tau, dtype=float) ** 2 / 2.0
+
+
+def _flat(tau):
+    return np.ones_like(np.asarray(tau, dtype=float))
+
+
+DEG = math.pi / 180.0
+HOUR = 3600.0
+#: Standard gravity, m/s^2 per g (for conventional mg; re-exported by :mod:`.units`).
+STANDARD_GRAVITY = 9.80665
+
+
+@dataclass(frozen=True)
+class TermSpec:
+    """Everything the package knows about one noise term, in one place.
+
+    Attributes
+    ----------
+    name, symbol : str
+        Key (``white_noise``) and IEEE symbol (``N``).
+    params : tuple of str
+        Parameter names; the first is the amplitude (AVAR is linear in its square), the
+        second, for hump terms, the position (``tau_c`` in s or ``frequency_hz`` in Hz).
+    alpha : int or None
+        Frequency-PSD power-law exponent of the estimate's noise (drives the EDF and the
+        correlation between averaging times; Greenhall & Riley 2004 notation): +2 white PM,
+        0 white FM, -1 flicker FM, -2 random-walk FM.  None for deterministic terms, whose
+        estimate carries no randomness of its own; Gauss-Markov depends on tau (see
+        :meth:`alpha_at`).
+    adev_slope : str
+        Log-log slope of the Allan deviation (IEEE Std 952 Fig. C.1), for people.
+    si_units, conventional : dict
+        Per sensor (``gyro``, ``accel``): the SI unit of the amplitude (continuous time) and
+        ``(label, factor)`` with conventional = SI * factor.
+    peak_ratio : float or None
+        Hump terms: where the Allan deviation peaks, tau_peak / tau_c (Gauss-Markov) or
+        tau_peak * f0 (sinusoid).
+    id_shape : callable
+        Continuous-time AVAR shape per unit squared amplitude used to identify the dominant
+        noise at each averaging time (no sampling corrections).
+
+    """
+
+    name: str
+    symbol: str
+    params: tuple
+    alpha: object
+    adev_slope: str
+    si_units: dict
+    conventional: dict
+    peak_ratio: float = None
+    id_shape: object = None
+    position_units: dict = field(default_factory=dict)
+
+    @property
+    def deterministic(self):
+        """True for terms whose Allan variance estimate carries no randomness of its own."""
+        return self.alpha is None and self.name != 'gauss_markov'
+
+    @property
+    def position(self):
+        """Name of the position parameter of a hump term, else None."""
+        return self.params[1] if len(self.params) > 1 else None
+
+    def shape(self, tau, rate_hz, position=None):
+        """AVAR per unit squared amplitude at ``tau`` (s) for data sampled at ``rate_hz``."""
+        return _SHAPES[self.name](tau, rate_hz, position)
+
+    def avar(self, params, tau, rate_hz):
+        """Analytic AVAR of this term with ``params`` (dict, SI) at ``tau`` (s)."""
+        amplitude, position = self.unpack(params)
+        return amplitude ** 2 * self.shape(tau, rate_hz, position)
+
+    def pack(self, amplitude, position=None):
+        """Parameter dict from the amplitude (and the position of a hump term)."""
+        if self.position is None:
+            return {self.params[0]: amplitude}
+        return {self.params[0]: amplitude, self.params[1]: position}
+
+    def unpack(self, params):
+        """``(amplitude, position or None)`` from a parameter dict."""
+        return params[self.params[0]], (params[self.params[1]] if self.position else None)
+
+    def alpha_at(self, tau, params=None):
+        """Noise exponent per averaging time (array); 0 for deterministic terms.
+
+        A Gauss-Markov process looks like a random walk (-2) below its correlation time and
+        like white noise (0) above it.
+        """
+        tau = np.asarray(tau, dtype=float)
+        if self.name == 'gauss_markov':
+            return np.where(tau >= params['tau_c'], 0, -2)
+        return np.full(tau.shape, 0 if self.alpha is None else self.alpha, dtype=int)
+
+    def position_range(self, tau_lo, tau_hi):
+        """Positions whose Allan-deviation peak lies inside ``[tau_lo, tau_hi]`` (s)."""
+        if self.name == 'gauss_markov':
+            return tau_lo / self.peak_ratio, tau_hi / self.peak_ratio
+        return self.peak_ratio / tau_hi, self.peak_ratio / tau_lo
+
+    def position_at_peak(self, tau_peak):
+        """The position that puts the Allan-deviation peak at ``tau_peak`` (s)."""
+        if self.name == 'gauss_markov':
+            return tau_peak / self.peak_ratio
+        return self.peak_ratio / tau_peak
+
+    def param_unit(self, axis, param):
+        """SI unit of one parameter for an axis (``tau_c`` s, ``frequency_hz`` Hz)."""
+        if param in self.position_units:
+            return self.position_units[param]
+        return self.si_units['gyro' if axis.startswith('gyro') else 'accel']
+
+
+def _conv(gyro, accel):
+    return {'gyro': gyro, 'accel': accel}
+
+
+_SHAPES = {
+    'quantization': lambda tau, rate, _pos: quantization_shape(tau),
+    'white_noise': lambda tau, rate, _pos: white_shape(tau),
+    'bias_instability': lambda tau, rate, _pos: sampled_flicker_shape(tau, rate),
+    'rate_random_walk': lambda tau, rate, _pos: random_walk_shape(tau, rate),
+    'rate_ramp': lambda tau, rate, _pos: ramp_shape(tau),
+    'gauss_markov': lambda tau, rate, pos: gauss_markov_shape(tau, pos),
+    'sinusoid': lambda tau, rate, pos: sinusoid_shape(tau, pos),
+}
+
+#: The registry: one :class:`TermSpec` per term, in the package's term order.
+TERMS = {spec.name: spec for spec in (
+    TermSpec('quantization', 'Q', ('value',), 2, '-1',
+             _conv('rad', 'm/s'), _conv(('deg', 1.0 / DEG), ('m/s', 1.0)),
+             id_shape=quantization_shape),
+    TermSpec('white_noise', 'N', ('value',), 0, '-1/2',
+             _conv('rad/s/sqrt(Hz)', 'm/s^2/sqrt(Hz)'),
+             _conv(('deg/sqrt(h)', math.sqrt(HOUR) / DEG), ('m/s/sqrt(h)', math.sqrt(HOUR))),
+             id_shape=white_shape),
+    TermSpec('bias_instability', 'B', ('value',), -1, '0',
+             _conv('rad/s', 'm/s^2'), _conv(('deg/h', HOUR / DEG), ('m/s/h', HOUR)),
+             id_shape=_flat),
+    TermSpec('rate_random_walk', 'K', ('value',), -2, '+1/2',
+             _conv('rad/s^2/sqrt(Hz)', 'm/s^3/sqrt(Hz)'),
+             _conv(('deg/h/sqrt(h)', HOUR * math.sqrt(HOUR) / DEG),
+                   ('m/s/h/sqrt(h)', HOUR * math.sqrt(HOUR))),
+             id_shape=random_walk_shape),
+    # A ramp is deterministic, but for noise identification it is counted as random-walk FM,
+    # the most conservative EDF where it dominates.
+    TermSpec('rate_ramp', 'R', ('value',), None, '+1',
+             _conv('rad/s^2', 'm/s^3'), _conv(('deg/h^2', HOUR * HOUR / DEG),
+                                              ('m/s/h^2', HOUR * HOUR)),
+             id_shape=ramp_shape),
+    # peak ratios: maximum of gauss_markov_shape(tau, 1), and tan(x) = 2x for the sinusoid
+    # (x = pi f0 tau); both computed to 1e-10 and rounded here.
+    TermSpec('gauss_markov', 'GM', ('sigma', 'tau_c'), None, '+1/2 then -1/2',
+             _conv('rad/s', 'm/s^2'), _conv(('deg/h', HOUR / DEG), ('m/s/h', HOUR)),
+             peak_ratio=1.892618, position_units={'tau_c': 's'}),
+    TermSpec('sinusoid', 'S', ('amplitude', 'frequency_hz'), None, 'bump',
+             _conv('rad/s', 'm/s^2'), _conv(('deg/s', 1.0 / DEG), ('mg', 1e3 / STANDARD_GRAVITY)),
+             peak_ratio=0.371010, position_units={'frequency_hz': 'Hz'}),
+)}
+#: Exponent used for noise identification where a term dominates (ramp: random-walk FM).
+ID_ALPHA = {'quantization': 2, 'white_noise': 0, 'bias_instability': -1,
+            'rate_random_walk': -2, 'rate_ramp': -2}
 
 
 def term_avar(term, params, tau, rate_hz):
     """Analytic AVAR of one term with parameters ``params`` (dict, SI) at ``tau`` (s)."""
-    if term == 'gauss_markov':
-        return params['sigma'] ** 2 * gauss_markov_shape(tau, params['tau_c'])
-    if term == 'sinusoid':
-        return params['amplitude'] ** 2 * sinusoid_shape(tau, params['frequency_hz'])
-    return params['value'] ** 2 * linear_shape(term, tau, rate_hz)
+    return TERMS[term].avar(params, tau, rate_hz)
 
 
 def model_avar(axis_terms, tau, rate_hz):

@@ -1,12 +1,14 @@
 """Axis names, noise-term keys and unit conversions shared by the whole package.
 
 Everything inside the package is SI: rad/s and m/s^2 for samples, continuous-time noise
-coefficients in the IEEE Std 952 / 1293 units listed in :data:`TERM_UNITS`.  Conversions to the
-conventional units engineers read on datasheets (deg/sqrt(h), deg/h, m/s/sqrt(h), ...) live here
-and only here.
+coefficients in the IEEE Std 952 / 1293 units of the term registry
+(:data:`imu_allan.core.terms.TERMS`), which also holds each term's conventional units
+(deg/sqrt(h), deg/h, m/s/sqrt(h), ...); the conversions are done here.
 """
 
 import math
+
+from .terms import DEG, HOUR, STANDARD_GRAVITY, TERMS  # noqa: F401 - re-exported
 
 #: Axis order everywhere (topics, arrays, JSON, CSV).
 AXES = ('gyro_x', 'gyro_y', 'gyro_z', 'accel_x', 'accel_y', 'accel_z')
@@ -15,24 +17,12 @@ ACCEL_AXES = AXES[3:]
 
 #: The five IEEE terms carried on ``imu/allan_coeffs`` (in this order).
 IEEE_TERMS = ('quantization', 'white_noise', 'bias_instability', 'rate_random_walk', 'rate_ramp')
-#: Every term the core can model, fit and simulate.
-ALL_TERMS = IEEE_TERMS + ('gauss_markov', 'sinusoid')
+#: Every term the core can model, fit and simulate (the registry's order).
+ALL_TERMS = tuple(TERMS)
+assert ALL_TERMS[:len(IEEE_TERMS)] == IEEE_TERMS
 
-#: Standard gravity, m/s^2 (used for g -> m/s^2 unless the input states a local value).
-STANDARD_GRAVITY = 9.80665
-DEG = math.pi / 180.0
-HOUR = 3600.0
-
-#: Noise-term parameter names (single-parameter terms use ``value``).
-TERM_PARAMETERS = {
-    'quantization': ('value',),
-    'white_noise': ('value',),
-    'bias_instability': ('value',),
-    'rate_random_walk': ('value',),
-    'rate_ramp': ('value',),
-    'gauss_markov': ('sigma', 'tau_c'),
-    'sinusoid': ('amplitude', 'frequency_hz'),
-}
+#: Noise-term parameter names (single-parameter terms use ``value``), from the registry.
+TERM_PARAMETERS = {name: spec.params for name, spec in TERMS.items()}
 
 
 def is_gyro(axis):
@@ -45,80 +35,20 @@ def sensor_of(axis):
     return 'gyro' if is_gyro(axis) else 'accel'
 
 
-# SI units of each term's main parameter, continuous time; q is rad (gyro) or m/s (accel).
-_SI_UNITS = {
-    'gyro': {
-        'quantization': 'rad',
-        'white_noise': 'rad/s/sqrt(Hz)',
-        'bias_instability': 'rad/s',
-        'rate_random_walk': 'rad/s^2/sqrt(Hz)',
-        'rate_ramp': 'rad/s^2',
-        'gauss_markov': 'rad/s',
-        'sinusoid': 'rad/s',
-    },
-    'accel': {
-        'quantization': 'm/s',
-        'white_noise': 'm/s^2/sqrt(Hz)',
-        'bias_instability': 'm/s^2',
-        'rate_random_walk': 'm/s^3/sqrt(Hz)',
-        'rate_ramp': 'm/s^3',
-        'gauss_markov': 'm/s^2',
-        'sinusoid': 'm/s^2',
-    },
-}
-
-# Conventional units: (label, factor) so that conventional = SI * factor.
-_CONVENTIONAL = {
-    'gyro': {
-        'quantization': ('deg', 1.0 / DEG),
-        'white_noise': ('deg/sqrt(h)', math.sqrt(HOUR) / DEG),
-        'bias_instability': ('deg/h', HOUR / DEG),
-        'rate_random_walk': ('deg/h/sqrt(h)', HOUR * math.sqrt(HOUR) / DEG),
-        'rate_ramp': ('deg/h^2', HOUR * HOUR / DEG),
-        'gauss_markov': ('deg/h', HOUR / DEG),
-        'sinusoid': ('deg/s', 1.0 / DEG),
-    },
-    'accel': {
-        'quantization': ('m/s', 1.0),
-        'white_noise': ('m/s/sqrt(h)', math.sqrt(HOUR)),
-        'bias_instability': ('m/s/h', HOUR),
-        'rate_random_walk': ('m/s/h/sqrt(h)', HOUR * math.sqrt(HOUR)),
-        'rate_ramp': ('m/s/h^2', HOUR * HOUR),
-        'gauss_markov': ('m/s/h', HOUR),
-        'sinusoid': ('mg', 1e3 / STANDARD_GRAVITY),
-    },
-}
-
-
 def si_unit(axis, term):
     """SI unit string of a term's main parameter for an axis (continuous time)."""
-    return _SI_UNITS[sensor_of(axis)][term]
+    return TERMS[term].si_units[sensor_of(axis)]
 
 
 def conventional(axis, term, value):
     """Convert a term's SI value to conventional units; return ``(value, unit)``."""
-    unit, factor = _CONVENTIONAL[sensor_of(axis)][term]
+    unit, factor = TERMS[term].conventional[sensor_of(axis)]
     return value * factor, unit
 
 
 def sample_unit(axis):
     """SI unit of a sample of this axis."""
     return 'rad/s' if is_gyro(axis) else 'm/s^2'
-
-
-def g_to_mps2(values, gravity=STANDARD_GRAVITY):
-    """Convert accelerations in g to m/s^2 with the given gravity (m/s^2 per g)."""
-    return values * gravity
-
-
-def deg_to_rad(values):
-    """Convert degrees (or deg/s) to radians (or rad/s)."""
-    return values * DEG
-
-
-def rad_to_deg(values):
-    """Convert radians (or rad/s) to degrees (or deg/s)."""
-    return values / DEG
 
 
 def discrete_white_std(noise_density, rate_hz):

@@ -1,6 +1,6 @@
 """LORD MicroStrain 3DM-GX3-25 single-byte protocol: command encoders and reply decoders.
 
-ROS-free.  Byte layouts follow ``reference/gx3_protocol.md`` (DCP manual v1.14):
+ROS-free.  Byte layouts follow the DCP manual v1.14 (docs/references.md):
 
 * commands start with a one-byte code, settings commands carry two "confirm intent" bytes,
   commands carry no checksum;
@@ -153,11 +153,6 @@ def timer_of(packet):
 def ticks_to_seconds(ticks):
     """Convert device timer ticks to seconds (62,500 ticks/s)."""
     return ticks / TICKS_PER_SECOND
-
-
-def seconds_to_ticks(seconds):
-    """Convert seconds to (integer) device timer ticks, rounded to the nearest tick."""
-    return int(round(seconds * TICKS_PER_SECOND))
 
 
 # --------------------------------------------------------------------------------------------

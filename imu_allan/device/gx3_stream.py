@@ -3,7 +3,7 @@
 The protocol has no sync pattern and no length field: a reply is recognised by its header
 byte, the fixed length that header implies, and a valid checksum.  Header values also occur
 inside float data, so a header match alone is not a frame boundary.  :class:`StreamParser`
-therefore slides one byte at a time (the MicroStrain sample-code method, gx3_protocol.md §13)
+therefore slides one byte at a time (the method of MicroStrain's own sample code)
 over a buffer fed with arbitrary chunks, and accepts a packet only when the header is known,
 the full length is available and the checksum matches.  Its output does not depend on how
 the bytes were chunked.
@@ -18,7 +18,7 @@ What it rejects is counted (:class:`ParserStats`):
   lost bytes or a truncated packet).
 """
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 import re
 
 from .gx3_protocol import REPLY_LENGTHS
@@ -33,10 +33,6 @@ class ParserStats:
     bad_checksums: int = 0
     rejected_bytes: int = 0
     resyncs: int = 0
-
-    def as_dict(self):
-        """Plain dict of the counters."""
-        return asdict(self)
 
 
 class StreamParser:

@@ -255,8 +255,8 @@ class Gx3Session:
 
     ``on_batch(code, records, stamps)`` is called from the session thread with ``records``
     from :func:`~imu_allan.device.gx3_protocol.decode_records` (device units) and host-clock
-    ``stamps`` (s).  ``clock()`` returns host seconds (the driver passes its ROS clock).
-    ``log(level, text)`` reports events (level 'info', 'warn', 'error').
+    ``stamps`` (int64 nanoseconds).  ``clock()`` returns host seconds (the driver passes its
+    ROS clock).  ``log(level, text)`` reports events (level 'info', 'warn', 'error').
     """
 
     def __init__(self, port, baud, mode, rate_hz, on_batch, clock=time.time, log=None,
@@ -479,7 +479,7 @@ class Gx3Session:
         self.on_batch(self.code, rec, stamps)
 
     def _stamps(self, ticks, host_times):
-        device_s = ticks / float(p.TICKS_PER_SECOND)
+        device_s = p.ticks_to_seconds(ticks)
         # A timer reset inside the batch: stamp the pieces separately (the sync was reset).
         breaks = np.nonzero(np.diff(device_s) < 0)[0]
         if breaks.size == 0:
@@ -556,8 +556,4 @@ class Gx3Session:
             return None
         self.log('info', f'{self.link.port}: device switched from 115200 to {self.baud} baud')
         return self._request(p.cmd_firmware_version(), p.FIRMWARE_VERSION)
-
-    def parser_stats(self):
-        """The framer's counters (bytes, packets, bad checksums, rejected bytes, resyncs)."""
-        return self.parser.stats
 

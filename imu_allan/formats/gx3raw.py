@@ -14,8 +14,15 @@ columns ``mag_x, mag_y, mag_z``.
 
 import numpy as np
 
+from ..core.preprocess import count_gaps
 from ..core.units import AXES, GYRO_AXES, STANDARD_GRAVITY
-from ..device.gx3_protocol import decode_records, GAUSS_TO_TESLA, TICKS_PER_SECOND, TimerUnwrapper
+from ..device.gx3_protocol import (
+    decode_records,
+    GAUSS_TO_TESLA,
+    TICKS_PER_SECOND,
+    ticks_to_seconds,
+    TimerUnwrapper,
+)
 from ..device.gx3_stream import StreamParser
 from ..errors import InputError
 from .samples import Samples
@@ -71,14 +78,13 @@ def read_gx3raw(path, gravity=STANDARD_GRAVITY):
         warnings.append(f'device timer reset {resets} time(s): bridged with the previous '
                         'sample spacing')
     steps = np.diff(ticks)
-    if steps.size:
-        nominal = float(np.median(steps))
-        gaps = steps[steps > 1.5 * nominal]
-        if gaps.size and nominal > 0:
-            lost = int(np.sum(np.round(gaps / nominal) - 1))
-            warnings.append(f'{gaps.size} gap(s) in the device timer: about {lost} '
+    nominal = float(np.median(steps)) if steps.size else 0.0
+    if nominal > 0:
+        gaps, lost = count_gaps(steps, nominal)
+        if lost:
+            warnings.append(f'{int(gaps.sum())} gap(s) in the device timer: about {lost} '
                             'packet(s) missing')
-    t = ticks / float(TICKS_PER_SECOND)
+    t = ticks_to_seconds(ticks)
     gyro = rec['gyro'].astype(np.float64)
     if axes == AXES:
         accel = rec['accel'].astype(np.float64) * gravity

@@ -1,4 +1,4 @@
-r"""Reader for the thesis text logs (``reference/allan_thesis.txt``, figure 4.2).
+r"""Reader for the thesis text logs (the thesis, figure 4.2; docs/references.md).
 
 Format: a few header lines, for example::
 

@@ -286,7 +286,7 @@ class AllanNode(Node):
             **self.last_cycle,
         })
         records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
-        if self.model is not None:  # issue 5's online hook: gap and effect per axis
+        if self.model is not None:  # the discrepancy check: gap and effect per axis
             records += hm.discrepancy_health(self.model, result, AXES, prefix)
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()

@@ -1,6 +1,6 @@
 """Reports of an :class:`~imu_allan.core.analysis.Analysis`: JSON, console text, Kalibr.
 
-JSON follows the contract of design.md section 6 (SI units, continuous-time coefficients) and
+JSON follows the contract in docs/interfaces.md (SI units, continuous-time coefficients) and
 adds ``verdict``, ``timing``, ``outliers`` and ``kalibr`` blocks.
 """
 

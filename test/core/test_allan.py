@@ -124,3 +124,26 @@ def test_white_noise_adev_level_is_unbiased():
     r = allan_deviation(y, 400.0, taus=[1.0])
     assert r.ci_low[0, 0] < 0.0025 < r.ci_high[0, 0]
     assert r.adev[0, 0] == pytest.approx(0.0025, rel=0.02)
+
+
+def test_from_avar_keeps_orientation_when_taus_equal_axes():
+    """(T, A) with T == A is taken as given (it used to be transposed); shapes checked."""
+    from imu_allan.core.allan import AllanResult
+    rng = np.random.default_rng(3)
+    ms = np.array([1, 2, 4, 8, 16, 32])
+    avar = rng.uniform(1.0, 2.0, (6, 6)) / ms[:, None]  # column j: axis j
+    res = AllanResult.from_avar(ms, avar, 100_000, 100.0)
+    np.testing.assert_array_equal(res.avar, avar)
+    one_axis = AllanResult.from_avar(ms, avar[:, 0], 100_000, 100.0)
+    assert one_axis.avar.shape == (6, 1)
+    with pytest.raises(ValueError, match='rows'):
+        AllanResult.from_avar(ms[:5], avar, 100_000, 100.0)
+
+
+def test_too_few_samples_message_states_what_the_grid_needs():
+    """The error names exactly the count at which the first averaging time appears."""
+    from imu_allan.core.allan import min_record, tau_grid
+    need = min_record(10)
+    assert tau_grid(need - 1).size == 0 and tau_grid(need).size == 1
+    with pytest.raises(ValueError, match=f'need at least {need}'):
+        allan_deviation(np.zeros((need - 1, 1)) + np.arange(need - 1)[:, None], 100.0)

@@ -1,4 +1,4 @@
-"""Hidden-effect suite of the discrepancy workflow (issue 5).
+"""Hidden-effect suite of the discrepancy workflow.
 
 Cases (see ``discrepancy_cases.py`` for the sizes and why each effect is hidden):
 

@@ -1,12 +1,10 @@
 """Thesis preprocessing: Tukey outlier replacement, time-stamp gaps and jitter, units."""
 
-import math
 
 import numpy as np
 import pytest
 
 from imu_allan.core.preprocess import check_timing, replace_outliers, tukey_fences
-from imu_allan.core.units import conventional, deg_to_rad, g_to_mps2, STANDARD_GRAVITY
 
 
 def test_tukey_replaces_extreme_outliers_with_inlier_mean_and_counts_them():
@@ -57,18 +55,3 @@ def test_timing_counts_non_increasing_steps():
     assert check_timing(t).n_nonincreasing == 2
     with pytest.raises(ValueError):
         check_timing(np.array([1.0]))
-
-
-def test_unit_conversions():
-    assert g_to_mps2(np.array([1.0]))[0] == STANDARD_GRAVITY
-    assert g_to_mps2(1.0, 9.80261) == 9.80261
-    assert deg_to_rad(180.0) == pytest.approx(math.pi)
-    # anchors 10.1: 1 deg/sqrt(h) = 2.9089e-4 rad/sqrt(s); 1 deg/h = 4.8481e-6 rad/s;
-    # 1 m/s/sqrt(h) = 1/60 m/s^2/sqrt(Hz)
-    assert conventional('gyro_x', 'white_noise', 2.9089e-4)[0] == pytest.approx(1.0, rel=1e-4)
-    assert conventional('gyro_y', 'bias_instability', 4.8481e-6)[0] == pytest.approx(1.0,
-                                                                                  rel=1e-4)
-    assert conventional('accel_x', 'white_noise', 1 / 60) == pytest.approx((1.0,
-                                                                           'm/s/sqrt(h)'))
-    assert conventional('gyro_z', 'rate_random_walk', 8.0802e-8)[0] == pytest.approx(1.0,
-                                                                                   rel=1e-4)

@@ -142,7 +142,7 @@ def test_reader_errors(tmp_path):
 # ------------------------------------------------------------------------ worked byte examples
 
 def test_worked_examples_from_reference():
-    """The byte strings of gx3_protocol.md §16 and §7."""
+    """The command byte strings and reply examples of the DCP manual."""
     c2 = bytes.fromhex('C2 3C23D70A BCA3D70A BF7F7CEE 3A83126F BB03126F 3A03126F 12345678 0B39')
     assert p.encode_record(0xC2, [0.01, -0.02, -0.998, 0.001, -0.002, 0.0005],
                            0x12345678) == c2

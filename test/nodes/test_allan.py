@@ -195,7 +195,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
                                  for a in AXES)
         assert spin_until(executor, tightened, 15), 'levels did not change to ERROR'
 
-        # 4. The discrepancy hook (issue 5): with a model file, /diagnostics carries the gap
+        # 4. The discrepancy hook: with a model file, /diagnostics carries the gap
         #    per axis and the effect that fits the excess.  The true model is consistent; a
         #    model without bias instability is not, and bias instability is named.
         true_file, white_file = tmp_path / 'true.yaml', tmp_path / 'white.yaml'

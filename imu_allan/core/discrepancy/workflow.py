@@ -1,478 +1,21 @@
-"""The discrepancy workflow: where do a noise model and measured data disagree, and why.
-
-Given measured IMU samples and a starting noise model (a model file, or a few named terms fitted
-to the data), the workflow
-
-1. computes the measured overlapping Allan deviation (:func:`~imu_allan.core.allan.
-   allan_deviation`);
-2. builds, for every averaging time, where the measured log-deviation should lie if the model
-   were complete: the analytic curve of the model (:mod:`imu_allan.core.terms`) corrected for the
-   bias of the log of a chi-square estimate, with a spread from the model's equivalent degrees of
-   freedom (Greenhall EDF of each term, :mod:`imu_allan.core.edf`), pooled with ``n_sims``
-   independent simulations of the model at the measured rate and length through the same
-   estimator;
-3. measures the gap per averaging time, z_i = (ln adev_meas - centre_i) / spread_i, and one
-   number per axis, G = sqrt(mean_i z_i^2), which is about 1 when the model is complete; its
-   significance uses the effective number of independent averaging times
-   T_eff = T^2 / sum_ij rho_ij^2 (rho: the measured correlation of estimates between averaging
-   times, :func:`~imu_allan.core.fit.correlation_matrix`), G^2 T_eff ~ chi-square(T_eff);
-4. locates the band of averaging times where the data leave the model's band (smoothed |z| > 2
-   around the largest excursion);
-5. lets every effect the model lacks compete: each is added and all terms are refitted (a
-   weighted least-squares fit in log-deviation, the same metric as the gap); with the effective
-   Akaike criterion AIC = (T_eff / T) Q + 2 k (Q = sum z^2 after the fit, k parameters), the
-   winner is the candidate whose AIC drop per added parameter is largest, and it is only
-   accepted if its improvement is significant (a Satterthwaite chi-square test of Delta Q under
-   the correlated null, Bonferroni over the candidates, and for Gauss-Markov / sinusoid also
-   over the T_eff positions their hump could take);
-6. adds it, refits, re-simulates, re-measures, and repeats until nothing significant is left.
-
-Everything is SI (rad/s, m/s^2, s, Hz) and ROS-free.  ``docs/discrepancy.md`` explains the method
-and the validation results.
-"""
+"""The discrepancy workflow: candidates compete, the winner is added, the gap re-measured."""
 
 from dataclasses import dataclass, field
-import functools
 import math
 
 import numpy as np
-from scipy.optimize import least_squares, nnls
 from scipy.special import digamma, polygamma
-from scipy.stats import chi2
 
-from . import terms as _terms
-from .allan import allan_deviation, avar_fast
-from .edf import edf_oadev
-from .fit import correlation_matrix
-from .model import ModelError, NoiseModel
-from .simulate import simulate
-from .units import ALL_TERMS, AXES, si_unit, TERM_PARAMETERS
+from ..allan import allan_deviation, avar_fast
+from ..model import ModelError, NoiseModel
+from ..simulate import simulate
+from ..terms import model_avar, TERMS
+from ..units import ALL_TERMS, AXES
+from .band import ALPHA, Band, measure_gap, model_band, pool_simulations
+from .logfit import AxisFit, fit_terms, FitProblem, improvement_test
 
 #: Default starting terms: the thesis's own model (white noise + bias instability).
 DEFAULT_START = ('white_noise', 'bias_instability')
-#: Power-law exponent (frequency PSD) of each random term, for the EDF and the correlation.
-TERM_ALPHA = {'quantization': 2, 'white_noise': 0, 'bias_instability': -1, 'rate_random_walk': -2}
-#: Terms whose Allan variance estimate carries no randomness of its own.
-DETERMINISTIC = ('rate_ramp', 'sinusoid')
-#: Terms with a position parameter (their hump can sit anywhere in the measured span).
-NONLINEAR = {'gauss_markov': 'tau_c', 'sinusoid': 'frequency_hz'}
-#: Weight (pseudo-observations) of the analytic EDF spread when pooled with simulations.
-PRIOR_WEIGHT = 16.0
-#: Default significance level: for calling a model inconsistent and for adding an effect.
-ALPHA = 0.01
-#: Ratio of the ADEV peak time to tau_c (Gauss-Markov) and to 1/f0 (sinusoid).
-GM_PEAK = 1.8926
-SINE_PEAK = 0.37101
-_Z68 = 1.0
-_Z95 = 1.959964
-
-
-# ---------------------------------------------------------------------------------------------
-# The band: where the measured log-deviation should lie if the model were complete
-
-
-@functools.lru_cache(maxsize=4096)
-def _edf(alpha, m, n_phase):
-    return edf_oadev(alpha, int(m), int(n_phase))
-
-
-def _term_edf(term, params, tau, ms, n_samples):
-    """EDF of the AVAR estimate if ``term`` alone were present; inf for deterministic terms."""
-    if term in DETERMINISTIC:
-        return np.full(tau.shape, np.inf)
-    if term == 'gauss_markov':  # random-walk-like below its correlation time, white above
-        alphas = np.where(tau >= params['tau_c'], 0, -2)
-    else:
-        alphas = np.full(tau.shape, TERM_ALPHA[term])
-    return np.array([_edf(int(a), int(m), n_samples + 1) for a, m in zip(alphas, ms)])
-
-
-def _term_alpha(term, params, tau):
-    if term == 'gauss_markov':
-        return np.where(tau >= params['tau_c'], 0, -2)
-    return np.full(tau.shape, TERM_ALPHA.get(term, 0))
-
-
-@dataclass
-class Band:
-    """Expected measured log-deviation of one axis under a model.
-
-    Attributes
-    ----------
-    tau : numpy.ndarray
-        Averaging times, s.
-    avar : numpy.ndarray
-        Analytic model AVAR (unit^2).
-    edf : numpy.ndarray
-        Model EDF of each AVAR estimate (harmonic mix of the terms' EDFs weighted by their AVAR
-        share).
-    alpha : numpy.ndarray
-        Exponent of the dominant random term (drives the correlation between averaging times).
-    center : numpy.ndarray
-        Expected ln(adev) of the estimator: 0.5 ln AVAR + 0.5 (psi(nu/2) - ln(nu/2)).
-    sd : numpy.ndarray
-        Standard deviation of ln(adev) (analytic 0.5 sqrt(psi'(nu/2)), pooled with simulations).
-    sims : numpy.ndarray or None
-        (K, T) ln(adev) of the simulated runs.
-
-    """
-
-    tau: np.ndarray
-    avar: np.ndarray
-    edf: np.ndarray
-    alpha: np.ndarray
-    center: np.ndarray
-    sd: np.ndarray
-    sims: np.ndarray = None
-
-    @property
-    def corr(self):
-        """Correlation of the estimates between averaging times."""
-        return correlation_matrix(self.tau, self.alpha)
-
-    def effective_count(self):
-        """T_eff = T^2 / sum rho_ij^2: independent averaging times equivalent to the curve."""
-        r = self.corr
-        return self.tau.size ** 2 / float(np.sum(r * r))
-
-    def adev_band(self, z=_Z95):
-        """(low, centre, high) of the deviation at +-z spreads (unit of the samples)."""
-        return (np.exp(self.center - z * self.sd), np.exp(self.center),
-                np.exp(self.center + z * self.sd))
-
-
-def model_band(axis_terms, tau, ms, n_samples, rate_hz):
-    """Analytic :class:`Band` of one axis (``axis_terms``: ``{term: params}``, SI)."""
-    tau = np.asarray(tau, dtype=float)
-    contrib = {t: np.maximum(_terms.term_avar(t, p, tau, rate_hz), 0.0)
-               for t, p in axis_terms.items()}
-    total = np.zeros(tau.shape)
-    for value in contrib.values():
-        total = total + value
-    total = np.maximum(total, 1e-300)
-    inv_nu = np.zeros(tau.shape)
-    best = np.zeros(tau.shape)
-    alpha = np.zeros(tau.shape, dtype=int)
-    for term, value in contrib.items():
-        nu = _term_edf(term, axis_terms[term], tau, ms, n_samples)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            inv_nu += np.where(np.isfinite(nu), (value / total) / nu, 0.0)
-        if term not in DETERMINISTIC:
-            dom = value > best
-            alpha = np.where(dom, _term_alpha(term, axis_terms[term], tau), alpha)
-            best = np.maximum(best, value)
-    # a purely deterministic curve still has rounding-level scatter: cap the EDF
-    nu = 1.0 / np.maximum(inv_nu, 1e-9)
-    half = nu / 2.0
-    center = 0.5 * np.log(total) + 0.5 * (digamma(half) - np.log(half))
-    sd = 0.5 * np.sqrt(polygamma(1, half))
-    return Band(tau, total, nu, alpha, center, sd)
-
-
-def pool_simulations(band, sims):
-    """Pool the analytic spread with simulated ln(adev) runs (K, T) about the analytic centre."""
-    sims = np.atleast_2d(sims)
-    k = sims.shape[0]
-    dev2 = np.sum((sims - band.center) ** 2, axis=0)
-    sd = np.sqrt((PRIOR_WEIGHT * band.sd ** 2 + dev2) / (PRIOR_WEIGHT + k))
-    return Band(band.tau, band.avar, band.edf, band.alpha, band.center, sd, sims)
-
-
-@dataclass
-class Gap:
-    """Model-vs-data gap of one axis.
-
-    ``z`` per averaging time (units of the spread), ``value`` = sqrt(mean z^2) (about 1 when
-    consistent), ``t_eff`` effective independent averaging times, ``p_value`` of
-    ``value^2 t_eff`` under chi-square(t_eff), ``threshold`` the largest ``value`` still called
-    consistent at the 1 - ``ALPHA`` level, ``tau_range`` the band where the data leave the model
-    (s, or None).
-    """
-
-    z: np.ndarray
-    value: float
-    t_eff: float
-    p_value: float
-    threshold: float
-    consistent: bool
-    tau_range: tuple = None
-    peak_tau: float = math.nan
-
-
-def _smooth(z):
-    if z.size < 3:
-        return z.copy()
-    padded = np.concatenate([[z[0]], z, [z[-1]]])
-    return 0.25 * padded[:-2] + 0.5 * padded[1:-1] + 0.25 * padded[2:]
-
-
-def excursion_band(tau, z, level=2.0):
-    """Contiguous band of averaging times around the largest smoothed excursion |z| > level.
-
-    Returns ``((tau_lo, tau_hi), tau_peak)``; the band is None when nothing exceeds ``level``.
-    """
-    zs = np.abs(_smooth(z))
-    k = int(np.argmax(zs))
-    if zs[k] <= level:
-        return None, float(tau[k])
-    lo = k
-    while lo > 0 and zs[lo - 1] > level:
-        lo -= 1
-    hi = k
-    while hi < zs.size - 1 and zs[hi + 1] > level:
-        hi += 1
-    return (float(tau[lo]), float(tau[hi])), float(tau[k])
-
-
-def measure_gap(y, band, alpha=ALPHA):
-    """Gap of measured ln(adev) ``y`` against a :class:`Band`."""
-    z = (y - band.center) / band.sd
-    value = float(np.sqrt(np.mean(z * z)))
-    t_eff = band.effective_count()
-    p = float(chi2.sf(value * value * t_eff, t_eff))
-    threshold = float(math.sqrt(chi2.ppf(1.0 - alpha, t_eff) / t_eff))
-    tau_range, peak = excursion_band(band.tau, z)
-    return Gap(z, value, t_eff, p, threshold, p >= alpha, tau_range, peak)
-
-
-# ---------------------------------------------------------------------------------------------
-# Fitting in log-deviation with the gap's own metric
-
-
-def _shape(term, tau, rate_hz, position=None):
-    """AVAR per unit squared amplitude of a term (position: tau_c or f0 for nonlinear terms)."""
-    if term == 'gauss_markov':
-        return _terms.gauss_markov_shape(tau, position)
-    if term == 'sinusoid':
-        return _terms.sinusoid_shape(tau, position)
-    return _terms.linear_shape(term, tau, rate_hz)
-
-
-def _pack(term, amplitude, position=None):
-    if term == 'gauss_markov':
-        return {'sigma': amplitude, 'tau_c': position}
-    if term == 'sinusoid':
-        return {'amplitude': amplitude, 'frequency_hz': position}
-    return {'value': amplitude}
-
-
-def _unpack(term, params):
-    if term == 'gauss_markov':
-        return params['sigma'], params['tau_c']
-    if term == 'sinusoid':
-        return params['amplitude'], params['frequency_hz']
-    return params['value'], None
-
-
-def position_range(term, tau):
-    """Allowed position of a hump term: its ADEV peak must lie inside the measured span."""
-    t0, t1 = float(tau[0]), float(tau[-1])
-    if term == 'gauss_markov':
-        return t0 / GM_PEAK, t1 / GM_PEAK
-    return SINE_PEAK / t1, SINE_PEAK / t0
-
-
-@dataclass
-class AxisFit:
-    """Result of fitting a list of terms to one axis in log-deviation."""
-
-    terms: dict
-    q: float
-    z: np.ndarray
-    jac: np.ndarray
-    names: list
-    cov: np.ndarray
-    intervals68: dict = field(default_factory=dict)
-    intervals95: dict = field(default_factory=dict)
-    at_bound: dict = field(default_factory=dict)
-
-
-class FitProblem:
-    """Measured ln(adev) of one axis with a fixed reference spread (from the current model)."""
-
-    def __init__(self, y, tau, rate_hz, band):
-        self.y = y
-        self.tau = tau
-        self.rate_hz = rate_hz
-        self.bias = band.center - 0.5 * np.log(band.avar)
-        self.sd = band.sd
-        self.corr = band.corr
-        self.t_eff = band.effective_count()
-        # the AVAR level each point asks for, used to scale amplitudes and start the fit
-        self.target = np.exp(2.0 * (y - self.bias))
-        self._shapes = {}
-
-    def shape(self, term, position=None):
-        """AVAR per unit squared amplitude at this problem's tau (cached for fixed shapes)."""
-        if term in NONLINEAR:
-            return _shape(term, self.tau, self.rate_hz, position)
-        if term not in self._shapes:
-            self._shapes[term] = _shape(term, self.tau, self.rate_hz)
-        return self._shapes[term]
-
-    def residual(self, avar):
-        return (self.y - 0.5 * np.log(np.maximum(avar, 1e-300)) - self.bias) / self.sd
-
-    def amplitude_bounds(self, shape):
-        ok = shape > 0
-        top = math.sqrt(float(np.min(self.target[ok] / shape[ok]))) if ok.any() else 1.0
-        return top * 1e-4, top * 30.0
-
-
-def _nnls_start(prob, names, positions):
-    """Relative-error NNLS of squared amplitudes for fixed positions; returns (amps, Q)."""
-    shapes = np.column_stack([prob.shape(t, positions.get(t)) for t in names])
-    w = 1.0 / (2.0 * prob.target * prob.sd)
-    a = shapes * w[:, None]
-    scale = np.linalg.norm(a, axis=0)
-    scale[scale == 0] = 1.0
-    coef = nnls(a / scale, prob.target * w, maxiter=50 * len(names))[0] / scale
-    avar = shapes @ coef
-    if not np.all(avar > 0):
-        return np.sqrt(coef), math.inf
-    z = prob.residual(avar)
-    return np.sqrt(coef), float(z @ z)
-
-
-def fit_terms(prob, names, init=None, hints=None):
-    """Fit ``names`` (all amplitudes and positions free) to a :class:`FitProblem`.
-
-    ``init`` ({term: params}) and ``hints`` ({term: position}) seed the search; hump terms are
-    started from a grid of positions over the measured span plus the hints.
-    """
-    names = [t for t in ALL_TERMS if t in names]
-    init = init or {}
-    hints = hints or {}
-    nl = [t for t in names if t in NONLINEAR]
-    grids = []
-    for t in nl:
-        lo, hi = position_range(t, prob.tau)
-        grid = list(np.geomspace(lo, hi, 14))
-        for extra in (hints.get(t), _unpack(t, init[t])[1] if t in init else None):
-            if extra is not None and lo <= extra <= hi:
-                grid.append(extra)
-        grids.append(grid)
-    starts = []
-    for combo in (np.array(np.meshgrid(*grids)).reshape(len(nl), -1).T if nl else [()]):
-        positions = dict(zip(nl, combo))
-        amps, q = _nnls_start(prob, names, positions)
-        starts.append((q, positions, amps))
-    starts.sort(key=lambda s: s[0])
-    starts = starts[:2]
-    if init and all(t in init for t in names):
-        positions = {t: _unpack(t, init[t])[1] for t in nl}
-        amps = np.array([_unpack(t, init[t])[0] for t in names])
-        starts.append((math.inf, positions, amps))
-
-    # parameter vector: ln amplitude per term, then ln position per hump term
-    bounds_lo, bounds_hi = [], []
-    for t in names:
-        shape = prob.shape(t, math.sqrt(np.prod(position_range(t, prob.tau)))
-                           if t in nl else None)
-        if t in nl:  # amplitude bound from the hump's peak level, position-independent
-            peak = float(np.max(shape))
-            top = math.sqrt(float(np.max(prob.target)) / peak)
-            lo, hi = top * 1e-5, top * 30.0
-        else:
-            lo, hi = prob.amplitude_bounds(shape)
-        bounds_lo.append(math.log(lo))
-        bounds_hi.append(math.log(hi))
-    for t in nl:
-        lo, hi = position_range(t, prob.tau)
-        bounds_lo.append(math.log(lo))
-        bounds_hi.append(math.log(hi))
-    bounds_lo, bounds_hi = np.array(bounds_lo), np.array(bounds_hi)
-
-    def model(theta):
-        amps = np.exp(theta[:len(names)])
-        pos = dict(zip(nl, np.exp(theta[len(names):])))
-        avar = np.zeros(prob.tau.shape)
-        for t, a in zip(names, amps):
-            avar = avar + a * a * prob.shape(t, pos.get(t))
-        return avar
-
-    def fun(theta):
-        return prob.residual(model(theta))
-
-    best = None
-    for _, positions, amps in starts:
-        x0 = np.concatenate([np.log(np.maximum(amps, 1e-300)),
-                             np.log([positions[t] for t in nl])]) if nl else \
-            np.log(np.maximum(amps, 1e-300))
-        span = bounds_hi - bounds_lo
-        x0 = np.clip(x0, bounds_lo + 1e-3 * span, bounds_hi - 1e-3 * span)
-        sol = least_squares(fun, x0, bounds=(bounds_lo, bounds_hi), method='trf',
-                            x_scale=1.0, max_nfev=300)
-        q = float(sol.fun @ sol.fun)
-        if best is None or q < best[0]:
-            best = (q, sol)
-    q, sol = best
-    theta = sol.x
-    jac = sol.jac
-    params = {}
-    amps = np.exp(theta[:len(names)])
-    pos = dict(zip(nl, np.exp(theta[len(names):])))
-    for t, a in zip(names, amps):
-        params[t] = _pack(t, float(a), float(pos[t]) if t in pos else None)
-    cov = _sandwich(jac, prob.corr)
-    labels = [(t, 'amp') for t in names] + [(t, 'pos') for t in nl]
-    fit = AxisFit(params, q, sol.fun, jac, labels, cov)
-    span = bounds_hi - bounds_lo
-    for i, (t, kind) in enumerate(labels):
-        pname = TERM_PARAMETERS[t][0 if kind == 'amp' else 1]
-        sd = math.sqrt(max(cov[i, i], 0.0)) if np.isfinite(cov[i, i]) else math.inf
-        fit.intervals68.setdefault(t, {})[pname] = _log_interval(theta[i], _Z68 * sd)
-        fit.intervals95.setdefault(t, {})[pname] = _log_interval(theta[i], _Z95 * sd)
-        fit.at_bound.setdefault(t, {})[pname] = bool(
-            theta[i] - bounds_lo[i] < 1e-2 * span[i] or bounds_hi[i] - theta[i] < 1e-2 * span[i])
-    return fit
-
-
-def _log_interval(log_value, half_width):
-    """Interval exp(log_value -+ half_width), clipped to the float range (0 .. 1e300)."""
-    if not math.isfinite(half_width):
-        return 0.0, math.inf
-    lo = math.exp(max(log_value - half_width, -700.0))
-    hi = math.exp(min(log_value + half_width, 690.0))
-    return float(lo), float(hi)
-
-
-def _sandwich(jac, corr):
-    """Covariance of the working-independence least-squares estimate under correlation."""
-    a = jac.T @ jac
-    inv = np.linalg.pinv(a)
-    with np.errstate(over='ignore', invalid='ignore'):
-        return inv @ (jac.T @ corr @ jac) @ inv
-
-
-def improvement_test(delta_q, jac_nuisance, jac_added, corr):
-    """p-value of a drop ``delta_q`` in sum z^2 when columns ``jac_added`` are added.
-
-    Under the null (the smaller model is complete) z ~ N(0, R) and the drop is the quadratic
-    form z' P z with P the projection on the added directions orthogonal to the nuisance ones;
-    its distribution is matched by c chi-square(h) (Satterthwaite) with c = tr(PRPR)/tr(PR),
-    h = tr(PR)^2 / tr(PRPR).  Returns ``(p, h)``.
-    """
-    if delta_q <= 0:
-        return 1.0, 0.0
-    x = jac_added
-    if jac_nuisance is not None and jac_nuisance.size:
-        x = x - jac_nuisance @ (np.linalg.pinv(jac_nuisance) @ x)
-    if not np.any(np.abs(x) > 0):
-        return 1.0, 0.0
-    proj = x @ np.linalg.pinv(x)
-    pr = proj @ corr
-    e = float(np.trace(pr))
-    v = float(np.sum(pr * pr.T))
-    if e <= 0 or v <= 0:
-        return 1.0, 0.0
-    c, h = v / e, e * e / v
-    return float(chi2.sf(delta_q / c, h)), h
-
-
-# ---------------------------------------------------------------------------------------------
-# One step: let the candidates compete
-
 
 @dataclass
 class Candidate:
@@ -536,8 +79,8 @@ def _effect_band(tau, band, axis_terms, effect, rate_hz):
     """Averaging times where ``effect`` moves the model's ln(adev) by more than one spread."""
     if effect not in axis_terms:
         return None
-    total = _terms.model_avar(axis_terms, tau, rate_hz)
-    without = _terms.model_avar({t: p for t, p in axis_terms.items() if t != effect}, tau,
+    total = model_avar(axis_terms, tau, rate_hz)
+    without = model_avar({t: p for t, p in axis_terms.items() if t != effect}, tau,
                                 rate_hz)
     shift = 0.5 * np.log(np.maximum(total, 1e-300) / np.maximum(without, 1e-300))
     sel = np.nonzero(shift > band.sd)[0]
@@ -549,8 +92,7 @@ def _effect_band(tau, band, axis_terms, effect, rate_hz):
 def _param_report(axis, term, fit):
     out = {}
     for pname, value in fit.terms[term].items():
-        unit = 's' if pname == 'tau_c' else 'Hz' if pname == 'frequency_hz' else \
-            si_unit(axis, term)
+        unit = TERMS[term].param_unit(axis, pname)
         out[pname] = {'value': value, 'unit': unit,
                       'ci': list(fit.intervals68[term][pname]),
                       'ci95': list(fit.intervals95[term][pname]),
@@ -559,7 +101,7 @@ def _param_report(axis, term, fit):
 
 
 def _n_params(term):
-    return len(TERM_PARAMETERS[term])
+    return len(TERMS[term].params)
 
 
 def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False,
@@ -571,7 +113,7 @@ def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False
     """
     prob = FitProblem(y, tau, rate_hz, band)
     gap = gap or measure_gap(y, band, alpha)
-    hints = {'gauss_markov': gap.peak_tau / GM_PEAK, 'sinusoid': SINE_PEAK / gap.peak_tau}
+    hints = {t: TERMS[t].position_at_peak(gap.peak_tau) for t in ('gauss_markov', 'sinusoid')}
     base_names = list(current)
     scale = prob.t_eff / tau.size
     results = []
@@ -590,7 +132,7 @@ def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False
         ncols = [i for i, (t, _) in enumerate(fit.names) if t != term]
         p, _ = improvement_test(delta, fit.jac[:, ncols] if ncols else None,
                                 fit.jac[:, cols], prob.corr)
-        if term in NONLINEAR:  # the hump's position was searched over the whole span
+        if TERMS[term].position:  # the hump's position was searched over the whole span
             p = min(1.0, p * max(prob.t_eff, 1.0))
         p_adj = min(1.0, p * n_tests)
         results.append(Candidate(term, fit, delta, k, scale * fit.q + 2.0 * k, p_adj,
@@ -606,10 +148,6 @@ def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False
     # the effect that lowers the (effective) AIC most per added parameter ranks first
     results.sort(key=lambda c: -c.gain)
     return results, base
-
-
-# ---------------------------------------------------------------------------------------------
-# The workflow
 
 
 @dataclass
