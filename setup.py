@@ -1,14 +1,18 @@
 """Build script for the imu_allan ament_python package."""
 
 from glob import glob
+import re
 
 from setuptools import find_packages, setup
 
 PACKAGE = 'imu_allan'
+# The version is stated once, in package.xml (as ROS tools read it).
+with open('package.xml', encoding='utf-8') as _xml:
+    VERSION = re.search(r'<version>([^<]+)</version>', _xml.read()).group(1)
 
 setup(
     name=PACKAGE,
-    version='0.1.0',
+    version=VERSION,
     packages=find_packages(exclude=['test']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
