@@ -261,7 +261,7 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
     if chi2(hi) - chi2_min <= delta_chi2:
         return math.nan
     lo = hi - 60.0
-    for _ in range(60):
+    while hi - lo > 1e-3:  # 0.05 % on the coefficient: 16 refits instead of 60
         mid = 0.5 * (lo + hi)
         if chi2(mid) - chi2_min <= delta_chi2:
             lo = mid

@@ -247,16 +247,22 @@ def _yaml_file(name, opencv=False):
     return render
 
 
-def _sqrt_rate(values):
-    return math.sqrt(values.rate_hz)
+def _var(value):
+    return None if value is None else value * value
 
 
-def _scaled(value, factor):
-    return None if value is None else value * factor
+#: The four numbers most consumers take, in the order :func:`_worst_four` names them.
+_FOUR = (('gyro', 'white_noise'), ('gyro', 'rate_random_walk'), ('accel', 'white_noise'),
+         ('accel', 'rate_random_walk'))
 
 
-def _var(value, factor=1.0):
-    return None if value is None else value * value * factor
+def _worst_four(values, keys, convert=None):
+    """Worst-axis gyro N, gyro K, accel N, accel K under ``keys`` (``convert(term, value)``)."""
+    out = {}
+    for key, (sensor, term) in zip(keys, _FOUR):
+        value = values.worst(sensor, term, key)
+        out[key] = value if value is None or convert is None else convert(term, value)
+    return out
 
 
 # ----------------------------------------------------------------------------- Kalibr
@@ -292,14 +298,8 @@ def _openvins_build(values):
     # ov_msckf/src/state/Propagator.cpp:463-466 divides by dt (continuous densities).
     imu0 = {'T_i_b': [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0],
                       [0.0, 0.0, 0.0, 1.0]],
-            'accelerometer_noise_density': values.worst('accel', 'white_noise',
-                                                         'accelerometer_noise_density'),
-            'accelerometer_random_walk': values.worst('accel', 'rate_random_walk',
-                                                      'accelerometer_random_walk'),
-            'gyroscope_noise_density': values.worst('gyro', 'white_noise',
-                                                    'gyroscope_noise_density'),
-            'gyroscope_random_walk': values.worst('gyro', 'rate_random_walk',
-                                                  'gyroscope_random_walk'),
+            **_worst_four(values, ('gyroscope_noise_density', 'gyroscope_random_walk',
+                                   'accelerometer_noise_density', 'accelerometer_random_walk')),
             'rostopic': values.topic, 'time_offset': 0.0, 'update_rate': values.rate_hz,
             'model': 'kalibr', 'Tw': _IDENTITY, 'R_IMUtoGYRO': _IDENTITY, 'Ta': _IDENTITY,
             'R_IMUtoACC': _IDENTITY, 'Tg': [[0.0] * 3 for _ in range(3)]}
@@ -322,11 +322,11 @@ def _vins_build(values):
     # sample) white terms and dt for the bias terms.  Per step the angle gets
     # 2 (0.5 dt)^2 GYR_N^2 = 0.5 dt^2 GYR_N^2 (continuous: N^2 dt, so GYR_N = N sqrt(2 f)) and
     # the bias dt^2 GYR_W^2 (continuous: K^2 dt, so GYR_W = K sqrt(f)).
-    root = _sqrt_rate(values)
-    return {'acc_n': _scaled(values.worst('accel', 'white_noise', 'acc_n'), math.sqrt(2) * root),
-            'gyr_n': _scaled(values.worst('gyro', 'white_noise', 'gyr_n'), math.sqrt(2) * root),
-            'acc_w': _scaled(values.worst('accel', 'rate_random_walk', 'acc_w'), root),
-            'gyr_w': _scaled(values.worst('gyro', 'rate_random_walk', 'gyr_w'), root),
+    root = math.sqrt(values.rate_hz)
+
+    def per_sample(term, value):
+        return value * root * (math.sqrt(2.0) if term == 'white_noise' else 1.0)
+    return {**_worst_four(values, ('gyr_n', 'gyr_w', 'acc_n', 'acc_w'), per_sample),
             'g_norm': GRAVITY, 'imu': 1, 'imu_topic': values.topic}
 
 
@@ -344,10 +344,8 @@ register(Exporter(
 def _orbslam3_build(values):
     # src/Tracking.cc (ParseIMUParamFile, newParameterLoader): sf = sqrt(freq);
     # IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf, Naw/sf): the file holds continuous densities.
-    return {'IMU.NoiseGyro': values.worst('gyro', 'white_noise', 'IMU.NoiseGyro'),
-            'IMU.NoiseAcc': values.worst('accel', 'white_noise', 'IMU.NoiseAcc'),
-            'IMU.GyroWalk': values.worst('gyro', 'rate_random_walk', 'IMU.GyroWalk'),
-            'IMU.AccWalk': values.worst('accel', 'rate_random_walk', 'IMU.AccWalk'),
+    return {**_worst_four(values, ('IMU.NoiseGyro', 'IMU.GyroWalk', 'IMU.NoiseAcc',
+                                   'IMU.AccWalk')),
             'IMU.Frequency': values.rate_hz}
 
 
@@ -454,10 +452,7 @@ def _lio_sam_build(values):
     # src/imuPreintegration.cpp:214-217: accelerometerCovariance = imuAccNoise^2 I ("acc white
     # noise in continuous"); :225, :374-375: bias BetweenFactor sigma sqrt(deltaTij) *
     # imuAccBiasN: continuous densities.
-    params = {'imuAccNoise': values.worst('accel', 'white_noise', 'imuAccNoise'),
-              'imuGyrNoise': values.worst('gyro', 'white_noise', 'imuGyrNoise'),
-              'imuAccBiasN': values.worst('accel', 'rate_random_walk', 'imuAccBiasN'),
-              'imuGyrBiasN': values.worst('gyro', 'rate_random_walk', 'imuGyrBiasN'),
+    params = {**_worst_four(values, ('imuGyrNoise', 'imuGyrBiasN', 'imuAccNoise', 'imuAccBiasN')),
               'imuGravity': GRAVITY}
     return {'/**': {'ros__parameters': params}}
 
@@ -477,11 +472,8 @@ def _fast_lio_build(values):
     # esekfom.hpp:381: P = F P F^T + (dt f_w) Q (dt f_w)^T, so per step the velocity gets
     # dt^2 acc_cov (continuous: N^2 dt -> acc_cov = N^2 f) and the bias dt^2 b_acc_cov
     # (continuous: K^2 dt -> b_acc_cov = K^2 f): per-sample variances.
-    f = values.rate_hz
-    mapping = {'acc_cov': _var(values.worst('accel', 'white_noise', 'acc_cov'), f),
-               'gyr_cov': _var(values.worst('gyro', 'white_noise', 'gyr_cov'), f),
-               'b_acc_cov': _var(values.worst('accel', 'rate_random_walk', 'b_acc_cov'), f),
-               'b_gyr_cov': _var(values.worst('gyro', 'rate_random_walk', 'b_gyr_cov'), f)}
+    mapping = _worst_four(values, ('gyr_cov', 'b_gyr_cov', 'acc_cov', 'b_acc_cov'),
+                          lambda term, value: value * value * values.rate_hz)
     return {'/**': {'ros__parameters': {'mapping': mapping}}}
 
 
