@@ -7,7 +7,7 @@ cites that source line too.  The rules every file shares live in
 not select written as its 95 % upper limit and marked, ``inflate = (white, walk)`` on the
 standard deviations, the worst axis where the format has one number per sensor.
 
-Every file starts with the same header (:func:`header_lines`; a ``imu_allan`` metadata field
+Every file starts with the same header (:func:`header_lines`; an ``imu_allan`` list of lines
 in JSON): software version, input, rate, time base and conversion, axis rule, inflation and
 the keys written as upper limits.
 
@@ -18,17 +18,18 @@ Registry
     Exporter(name, files, consumer, time_base, conversion, build, render)
 
 ``build(values) -> dict`` turns an :class:`~imu_allan.report.export_values.ExportValues` into
-the data the file holds (that dict is what :func:`export` returns); ``render(data, header)``
-returns ``{file name: text}`` for the files in ``files``.  Adding a consumer (for example
-Gazebo's SDF ``<imu>`` element and PX4's gazebo_imu_plugin block) is two functions and one call
-in the module that defines them::
+the data the file holds (that dict is what :func:`export` returns); ``render(data, header,
+values)`` returns ``{file name: text}`` for the files in ``files`` (``header``: the comment
+lines of :func:`header_lines`, to be written first).  Adding a consumer (for example Gazebo's
+SDF ``<imu>`` element and PX4's gazebo_imu_plugin block) is two functions and one call in the
+module that defines them::
 
     from imu_allan.report.exporters import Exporter, register
     register(Exporter('gazebo', ('gazebo_imu.sdf',), 'Gazebo (gz-sensors)', 'per sample',
                       'stddev = N sqrt(f); dynamic_bias_stddev = sigma sqrt(2 / tau_c)',
                       build=_gazebo_build, render=_gazebo_render))
 
-plus importing that module from :data:`PLUGINS` below so that ``--export all`` sees it.  A
+plus that module's name in :data:`PLUGINS` below, so that ``--export`` and ``all`` see it.  A
 builder asks ``values.worst(sensor, term, key)`` or ``values.per_axis(sensor, term, key)``
 (and ``values.value(axis, term, param)`` for Gauss-Markov parameters); the header's axis rule
 and upper-limit marks follow from those calls.
@@ -146,54 +147,32 @@ def _version():
     return __version__
 
 
-def metadata(exporter, values):
-    """The provenance every file carries (a dict; text formats print it as comments)."""
+def header_lines(exporter, values):
+    """The provenance every file starts with, as lines without the comment marker."""
     if exporter.per_axis:
         axis_rule = 'per axis (x, y, z)'
     else:
-        picked = ', '.join(f'{k} from {u["axes"][0]}' for k, u in values.used.items()
-                           if u['axes'])
-        axis_rule = f'worst (largest) axis per sensor: {picked}'
+        axis_rule = 'worst (largest) axis per sensor: ' + ', '.join(
+            f'{k} from {u["axes"][0]}' for k, u in values.used.items() if u['axes'])
     white, walk = values.inflate
-    meta = {
-        'software': f'imu_allan {_version()}',
-        'consumer': exporter.consumer,
-        'input': str(values.source),
-        'rate_hz': values.rate_hz,
-        'time_base': exporter.time_base,
-        'conversion': exporter.conversion,
-        'axis_rule': axis_rule,
-        'inflation': {'white': white, 'walk': walk},
-        'upper_limits': values.upper_limit_keys(),
-        'not_measured': [k for k, u in values.used.items() if not u['axes']],
-    }
-    if values.rate_hz != values.fitted_rate_hz:
-        meta['rate_warning'] = (
-            f'model measured at {values.fitted_rate_hz:g} Hz, converted for {values.rate_hz:g} '
-            'Hz: valid only if the IMU filters to the new band before decimating (Kalibr wiki '
-            '"IMU Noise Model")')
-    return meta
-
-
-def header_lines(meta):
-    """The metadata as comment lines (without the comment marker)."""
-    white, walk = meta['inflation']['white'], meta['inflation']['walk']
     inflation = ('none (x1)' if white == walk == 1.0 else
                  f'white noise x{white:g}, bias (random walk, instability) x{walk:g} '
                  '(standard deviations)')
-    lines = [f'{meta["consumer"]} IMU noise parameters from {meta["software"]}.',
-             f'input: {meta["input"]}',
-             f'rate: {meta["rate_hz"]:g} Hz',
-             f'time base: {meta["time_base"]}; conversion (f = rate in Hz, N white noise, '
-             f'K rate random walk, B bias instability; SI): {meta["conversion"]}',
-             f'axes: {meta["axis_rule"]}',
+    lines = [f'{exporter.consumer} IMU noise parameters from imu_allan {_version()}.',
+             f'input: {values.source}',
+             f'rate: {values.rate_hz:g} Hz',
+             f'time base: {exporter.time_base}; conversion (f = rate in Hz, N white noise, '
+             f'K rate random walk, B bias instability; SI): {exporter.conversion}',
+             f'axes: {axis_rule}',
              f'inflation: {inflation}']
-    if 'rate_warning' in meta:
-        lines.append(f'warning: {meta["rate_warning"]}')
-    for key, axes in meta['upper_limits'].items():
+    if values.rate_hz != values.fitted_rate_hz:
+        lines.append(f'warning: model measured at {values.fitted_rate_hz:g} Hz, converted for '
+                     f'{values.rate_hz:g} Hz: valid only if the IMU filters to the new band '
+                     'before decimating (Kalibr wiki "IMU Noise Model")')
+    for key, axes in values.upper_limit_keys().items():
         lines.append(f'{key}: not detected on {", ".join(axes)}: its 95 % upper limit is '
                      'written (UPPER LIMIT)')
-    for key in meta['not_measured']:
+    for key in [k for k, u in values.used.items() if not u['axes']]:
         lines.append(f'{key}: not measured (no such axis in the input): null')
     return lines
 
@@ -574,8 +553,8 @@ def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
     written = []
     for name in names:
         exporter, values, data = _prepare(fitted, name, rate_hz, inflate, source, topic)
-        meta = metadata(exporter, values)
-        for file_name, text in exporter.render(data, header_lines(meta), values).items():
+        for file_name, text in exporter.render(data, header_lines(exporter, values),
+                                               values).items():
             (target / file_name).write_text(text, encoding='utf-8')
             written.append(f'{EXPORT_DIR}/{file_name}')
     return written
