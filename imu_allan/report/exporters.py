@@ -329,7 +329,7 @@ def _orbslam3_build(values):
 
 
 register(Exporter(
-    'orbslam3', ('orbslam3_imu.yaml',), 'ORB-SLAM3 (settings IMU.*)', 'continuous',
+    'orbslam3', ('orbslam3_imu.yaml',), 'ORB-SLAM3 (IMU.* of the settings file)', 'continuous',
     'Noise* = N, *Walk = K; ORB-SLAM3 uses N sqrt(f) per sample and K / sqrt(f) per step '
     '(src/Tracking.cc, IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf, Naw/sf))',
     _orbslam3_build, _yaml_file('orbslam3_imu.yaml', opencv=True)))

@@ -18,7 +18,8 @@ where white noise carries >= 95 % or the random walk >= 90 % of the model varian
 tau <= 0.1 s both intervals are < 1 % wide, so a factor sqrt(2) (VINS' midpoint rule) or
 sqrt(f) = 10 fails by tens of sigma (``test_wrong_conversion_fails`` checks the 10x).  The
 generators use the same seed for every consumer, so correct files give the same series.
-Budget: about 15 s for the whole file (one fit, 9 exporters x 2-4 generated axes, one CLI run).
+Budget: about 15 s of CPU for the whole file on an idle machine (one 30-min fit, 9 exporters x
+2-6 generated axes, three ``analyze`` runs).
 """
 
 import ast
@@ -353,6 +354,7 @@ def test_every_file_has_the_header(files):
 
 
 def test_export_api_inflation_and_upper_limits(fitted):
+    assert imu_allan.export is export  # the lazy top-level API entry
     plain = export(fitted, 'fast_lio', RATE)['/**']['ros__parameters']['mapping']
     inflated = export(fitted, 'fast_lio', RATE, inflate=(2, 10))['/**']['ros__parameters']
     assert inflated['mapping']['acc_cov'] == pytest.approx(4 * plain['acc_cov'])
