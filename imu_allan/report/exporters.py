@@ -399,7 +399,7 @@ _GTSAM_SETTERS = (('gyroscopeCovariance', 'setGyroscopeCovariance'),
 
 def _gtsam_render(data, header, values=None):
     yaml_text = _yaml_file('gtsam_imu.yaml')(data, header)['gtsam_imu.yaml']
-    lines = ['"""GTSAM PreintegrationCombinedParams from imu_allan (run: python gtsam_imu.py).',
+    lines = ['r"""GTSAM PreintegrationCombinedParams from imu_allan (run: python gtsam_imu.py).',
              ''] + header + ['', 'Covariances are continuous-time variances (sigma^2), not '
                              'sigma; integrationCovariance', 'is not a sensor property (the '
                              'GTSAM examples use 1e-8 I).', '"""', '',
