@@ -25,6 +25,7 @@ _API = {
     'fit_noise_model': 'core.fit', 'FittedModel': 'core.fit',
     'NoiseModel': 'core.model', 'thesis_gx3_25_model': 'core.model',
     'simulate': 'core.simulate',
+    'export': 'report.exporters',
     # streaming and online estimation
     'StreamingAllan': 'core.streaming', 'OnlineAllan': 'core.online',
     'online_allan': 'core.online',

@@ -14,6 +14,7 @@ import sys
 from ..core.units import ALL_TERMS, IEEE_TERMS
 from ..errors import InputError
 from ..formats import FORMATS
+from ..report.exporters import add_arguments as add_export_arguments
 from .common import ArgumentParser, EXIT_BAD_INPUT, guarded
 from .progress import Progress
 
@@ -57,6 +58,7 @@ def build_parser():
     p.add_argument('--jobs', type=int, default=0,
                    help='parallel processes for several inputs (default: cores)')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
+    add_export_arguments(p)
     return p
 
 
@@ -72,6 +74,8 @@ def _options(args):
         raise InputError('--min-clusters', 'must be at least 2')
     if args.tau_max is not None and not args.tau_max > 0:
         raise InputError('--tau-max', 'must be > 0')
+    if args.export and not args.out:
+        raise InputError('--export', 'needs --out DIR (the files go into DIR/export/)')
     from ..core.analysis import AnalysisOptions
     for term in terms or []:
         if term not in ALL_TERMS:
@@ -143,7 +147,7 @@ def run_one(path, args, options, progress=None):
             def extra(staging):
                 _write_denoised_bag(path, real_fmt, samples, den_samples, staging)
         report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
-                                            extra=extra)
+                                            extra=extra, exports=(args.export, args.inflate))
     return report, console_summary(analysis)
 
 

@@ -17,7 +17,7 @@ from .allan import (
     DEFAULT_POINTS_PER_DECADE,
     tau_grid,
 )
-from .fit import fit_noise_model, FitError, FittedModel, upper_limit
+from .fit import fit_noise_model, FitError, FittedModel
 from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
 from .units import is_gyro
 
@@ -165,7 +165,7 @@ def analyze_samples(samples, options=None):
         fit = fit_noise_model(result, terms=options.terms)
     except FitError as exc:
         raise InputError(where, str(exc)) from None
-    upper = _kalibr_upper_limits(result, fit)
+    upper = _kalibr_upper_limits(fit)
     static, motion = motion_verdict(samples.data, samples.axes, rate)
     if not static:
         moving = [a for a, d in motion.items() if d['moving']]
@@ -177,16 +177,12 @@ def analyze_samples(samples, options=None):
                     t=samples.t, upper_limits=upper)
 
 
-def _kalibr_upper_limits(result, fit):
+def _kalibr_upper_limits(fit):
     """95 % upper limits of N and K on axes where the fit did not detect them (for Kalibr)."""
     limits = {}
     for axis in fit.axes:
-        j = result.axis_index(axis)
-        selected = list(fit.model.terms.get(axis, {}))
         for term in ('white_noise', 'rate_random_walk'):
-            if term not in selected and selected:
-                value = upper_limit(result.tau, result.avar[:, j], result.edf[:, j],
-                                    result.alpha[:, j], result.rate_hz, selected + [term], term)
-                if np.isfinite(value):
-                    limits.setdefault(axis, {})[term] = float(value)
+            value = fit.upper_limit(axis, term)
+            if np.isfinite(value):
+                limits.setdefault(axis, {})[term] = value
     return limits

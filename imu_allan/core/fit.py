@@ -247,7 +247,7 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
     if chi2(hi) - chi2_min <= delta_chi2:
         return math.nan
     lo = hi - 60.0
-    for _ in range(60):
+    while hi - lo > 1e-3:  # 0.05 % on the coefficient: 16 refits instead of 60
         mid = 0.5 * (lo + hi)
         if chi2(mid) - chi2_min <= delta_chi2:
             lo = mid
@@ -268,6 +268,7 @@ class FittedModel:
         self.intervals = {a: f.intervals for a, f in fits.items()}
         self.chi2 = {a: f.chi2 for a, f in fits.items()}
         self.dof = {a: f.dof for a, f in fits.items()}
+        self._upper_limits = {}
 
     @property
     def axes(self):
@@ -281,6 +282,23 @@ class FittedModel:
     def interval(self, axis, term, param='value'):
         """The 68.3 % interval of a parameter, ``(nan, nan)`` if not detected."""
         return self.intervals.get(axis, {}).get(term, {}).get(param, (math.nan, math.nan))
+
+    def upper_limit(self, axis, term):
+        """95 % upper limit of a term the fit of ``axis`` did not select (SI, cached).
+
+        NaN if the term was selected, nothing was, or the data do not bound it (see
+        :func:`upper_limit`).  Exporters write it where a consumer needs a number.
+        """
+        key = (axis, term)
+        if key not in self._upper_limits:
+            selected = list(self.model.terms.get(axis, {}))
+            value = math.nan
+            if self.result is not None and selected and term not in selected:
+                r, j = self.result, self.result.axis_index(axis)
+                value = float(upper_limit(r.tau, r.avar[:, j], r.edf[:, j], r.alpha[:, j],
+                                          r.rate_hz, selected + [term], term))
+            self._upper_limits[key] = value
+        return self._upper_limits[key]
 
     def model_avar(self, axis, tau):
         """AVAR of the fitted model of an axis at ``tau`` (s)."""

@@ -8,7 +8,8 @@ import math
 
 import numpy as np
 
-from ..core.units import is_gyro, sample_unit
+from ..core.units import sample_unit
+from .kalibr import kalibr_values
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
              'intervals with Greenhall-Riley EDF; joint GLS non-negative fit')
@@ -16,33 +17,6 @@ ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi
 
 def _floats(values):
     return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=float)]
-
-
-def kalibr_values(analysis):
-    """Kalibr ``imu.yaml`` values: continuous-time, the worst axis per sensor.
-
-    ``*_noise_density`` is the white-noise coefficient N; ``*_random_walk`` is the rate random
-    walk K (bias random walk).  Where the data do not show a term, its 95 % upper limit is used
-    (Kalibr refuses zeros) and listed in ``upper_limits``.  Returns ``(values, per_axis)``;
-    per-axis entries are ``(value, is_upper_limit)``.
-    """
-    out = {'update_rate': float(analysis.rate_hz), 'upper_limits': []}
-    per_axis = {}
-    for sensor, prefix in (('gyro', 'gyroscope'), ('accel', 'accelerometer')):
-        axes = [a for a in analysis.axes if is_gyro(a) == (sensor == 'gyro')]
-        for key, term in (('noise_density', 'white_noise'), ('random_walk', 'rate_random_walk')):
-            values = {}
-            for a in axes:
-                value = analysis.fit.value(a, term)
-                bound = analysis.upper_limits.get(a, {}).get(term, math.nan)
-                values[a] = (value, False) if math.isfinite(value) else (bound, True)
-            per_axis[f'{prefix}_{key}'] = values
-            finite = [(v, b) for v, b in values.values() if math.isfinite(v)]
-            name = f'{prefix}_{key}'
-            out[name] = max(finite)[0] if finite else None
-            if finite and max(finite)[1]:
-                out['upper_limits'].append(name)
-    return out, per_axis
 
 
 def analysis_to_json(analysis):

@@ -14,30 +14,8 @@ import tempfile
 
 from ..core.units import AXES, IEEE_TERMS, si_unit
 from . import plots
-from .json_report import analysis_to_json, kalibr_values
-
-
-def write_kalibr_yaml(path, analysis, topic='/imu/data_raw'):
-    """Kalibr ``imu.yaml``: continuous-time values of the worst axis, per-axis in comments."""
-    values, per_axis = kalibr_values(analysis)
-    lines = ['# Kalibr IMU noise model from imu_allan (continuous-time, SI units).',
-             '# *_noise_density = white noise N (rad/s/sqrt(Hz), m/s^2/sqrt(Hz));',
-             '# *_random_walk = bias random walk K (rad/s^2/sqrt(Hz), m/s^3/sqrt(Hz));',
-             '# the worst (largest) axis of each sensor, as Kalibr users expect.',
-             '# Kalibr needs all four > 0: where the data do not show a term, its 95 % upper',
-             '# limit is written (marked below); null means not even a limit was found.']
-    for key, axes in per_axis.items():
-        text = ', '.join(f'{a} {v:.6g}' + (' (upper limit, not detected)' if bound else '')
-                         if math.isfinite(v) else f'{a} not detected'
-                         for a, (v, bound) in axes.items())
-        lines.append(f'# {key} per axis: {text}')
-    lines.append(f'rostopic: {topic}')
-    lines.append(f'update_rate: {values["update_rate"]:.6g}')
-    for key in ('accelerometer_noise_density', 'accelerometer_random_walk',
-                'gyroscope_noise_density', 'gyroscope_random_walk'):
-        value = values.get(key)
-        lines.append(f'{key}: {value:.6e}' if value is not None else f'{key}: null')
-    Path(path).write_text('\n'.join(lines) + '\n', encoding='utf-8')
+from .json_report import analysis_to_json
+from .kalibr import write_kalibr_yaml
 
 
 def write_results_csv(path, analysis, denoised=None):
@@ -66,10 +44,11 @@ def _cell(value):
 
 
 def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/imu/data_raw',
-                  extra=None):
+                  extra=None, exports=None):
     """Write every report file into ``out_dir`` atomically; returns the list of file names.
 
-    ``extra(staging_dir)`` may write more files (e.g. a bag) into the staging folder first.
+    ``extra(staging_dir)`` may write more files (e.g. a bag) into the staging folder first;
+    ``exports = (names, inflate)`` writes those exporters' files into ``export/``.
     """
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -84,6 +63,9 @@ def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/im
         for sensor in ('gyro', 'accel'):
             plots.plot_adev(staging / f'adev_{sensor}.png', analysis, sensor, denoised)
         plots.plot_timeseries(staging / 'timeseries.png', analysis, raw)
+        if exports and exports[0]:
+            from .exporters import write_exports
+            write_exports(staging, analysis, exports[0], inflate=exports[1], topic=topic)
         out_dir.mkdir(exist_ok=True)
         names = sorted(os.listdir(staging))
         for name in names:

@@ -1,0 +1,98 @@
+"""The numbers every exporter starts from: a fitted term per axis, inflated, or its upper limit.
+
+One place for the rules the Kalibr file introduced and every exporter shares:
+
+* values are the fitted continuous-time coefficients (SI, :mod:`imu_allan.core.units`);
+* a term the fit did not select is replaced by its 95 % upper limit
+  (:meth:`imu_allan.core.fit.FittedModel.upper_limit`) and remembered, so the file can mark it;
+* ``inflate = (white, walk)`` multiplies the standard deviations: ``white`` the white noise N,
+  ``walk`` the bias terms (random walk K, bias instability B);
+* a single-valued key takes the worst (largest) axis of its sensor; which axis, and whether it
+  was an upper limit, is recorded per key for the file header.
+"""
+
+import math
+
+from ..core.units import AXES, sensor_of
+
+#: Which inflation factor (index into ``inflate``) scales each term; others are not inflated.
+INFLATED_BY = {'white_noise': 0, 'rate_random_walk': 1, 'bias_instability': 1}
+#: Upper bound of an inflation factor (users report 10-100x; above 1000 is a typo).
+MAX_INFLATE = 1000.0
+
+
+def check_inflate(inflate):
+    """Return ``(white, walk)`` from a number or a pair; ValueError unless 0 < f <= 1000."""
+    if isinstance(inflate, (int, float)):
+        inflate = (inflate, inflate)
+    white, walk = (float(f) for f in inflate)
+    for factor in (white, walk):
+        if not (math.isfinite(factor) and 0.0 < factor <= MAX_INFLATE):
+            raise ValueError(f'inflation factor {factor:g} must be > 0 and <= {MAX_INFLATE:g}')
+    return white, walk
+
+
+class ExportValues:
+    """Per-axis values of a fitted model, ready for an exporter (SI, continuous time).
+
+    ``fitted`` is a :class:`~imu_allan.core.fit.FittedModel` or an
+    :class:`~imu_allan.core.analysis.Analysis` (its ``fit`` is used).
+    """
+
+    def __init__(self, fitted, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw'):
+        """Collect from ``fitted``; ``rate_hz`` defaults to the rate the model was fitted at."""
+        analysis = fitted if hasattr(fitted, 'fit') else None
+        self.fit = fitted.fit if analysis is not None else fitted
+        self.fitted_rate_hz = float(self.fit.rate_hz)
+        self.rate_hz = float(rate_hz) if rate_hz else self.fitted_rate_hz
+        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
+            raise ValueError(f'rate {rate_hz!r} Hz must be a positive number')
+        self.inflate = check_inflate(inflate)
+        self.source = source or getattr(analysis, 'source', None) or 'fitted model'
+        self.topic = topic
+        #: key -> {'axes': [axis, ...], 'upper': [axis, ...]} for the header
+        self.used = {}
+
+    def axes(self, sensor):
+        """Fitted axes of ``'gyro'`` or ``'accel'``, in the package's order."""
+        return [a for a in AXES if a in self.fit.axes and sensor_of(a) == sensor]
+
+    def value(self, axis, term, param='value'):
+        """``(value, is_upper_limit)`` of one term on one axis, inflated; NaN if unknown."""
+        factor = self.inflate[INFLATED_BY[term]] if term in INFLATED_BY else 1.0
+        value = self.fit.value(axis, term, param) if axis in self.fit.axes else math.nan
+        if math.isfinite(value):
+            return value * factor, False
+        if axis not in self.fit.axes or param != 'value':
+            return math.nan, False
+        limit = self.fit.upper_limit(axis, term)
+        return limit * factor, math.isfinite(limit)
+
+    def _record(self, key, axes, upper):
+        self.used[key] = {'axes': list(axes), 'upper': [a for a, u in zip(axes, upper) if u]}
+
+    def worst(self, sensor, term, key):
+        """The largest value over the sensor's axes (None if none is known), for ``key``."""
+        best = None
+        for axis in self.axes(sensor):
+            value, upper = self.value(axis, term)
+            if math.isfinite(value) and (best is None or value > best[0]):
+                best = (value, axis, upper)
+        if best is None:
+            self._record(key, [], [])
+            return None
+        self._record(key, [best[1]], [best[2]])
+        return best[0]
+
+    def per_axis(self, sensor, term, key):
+        """Values for the x, y, z axes of ``sensor`` (None where an axis is missing)."""
+        axes = [f'{sensor}_{c}' for c in 'xyz']
+        pairs = [self.value(a, term) for a in axes]
+        out = [v if math.isfinite(v) else None for v, _ in pairs]
+        self._record(key, [a for a, (v, _) in zip(axes, pairs) if math.isfinite(v)],
+                     [u for v, u in pairs if math.isfinite(v)])
+        return out
+
+    def upper_limit_keys(self):
+        """Keys (with axes) written as 95 % upper limits because the term was not detected."""
+        return {k: u['upper'] for k, u in self.used.items() if u['upper']}

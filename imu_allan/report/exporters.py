@@ -1,0 +1,560 @@
+"""Exporters: the fitted noise model in the keys, units and time base each consumer reads.
+
+Which consumer wants what (keys, units, continuous-time density or per-sample value, and the
+line of its source where it converts) is documented in ``docs/exports.md``; each builder below
+cites that source line too.  The rules every file shares live in
+:mod:`imu_allan.report.export_values`: fitted continuous-time SI values, a term the fit did
+not select written as its 95 % upper limit and marked, ``inflate = (white, walk)`` on the
+standard deviations, the worst axis where the format has one number per sensor.
+
+Every file starts with the same header (:func:`header_lines`; an ``imu_allan`` list of lines
+in JSON): software version, input, rate, time base and conversion, axis rule, inflation and
+the keys written as upper limits.
+
+Registry
+--------
+:data:`EXPORTERS` maps a name to an :class:`Exporter`::
+
+    Exporter(name, files, consumer, time_base, conversion, build, render)
+
+``build(values) -> dict`` turns an :class:`~imu_allan.report.export_values.ExportValues` into
+the data the file holds (that dict is what :func:`export` returns); ``render(data, header,
+values)`` returns ``{file name: text}`` for the files in ``files`` (``header``: the comment
+lines of :func:`header_lines`, to be written first).  Adding a consumer (for example Gazebo's
+SDF ``<imu>`` element and PX4's gazebo_imu_plugin block) is two functions and one call in the
+module that defines them::
+
+    from imu_allan.report.exporters import Exporter, register
+    register(Exporter('gazebo', ('gazebo_imu.sdf',), 'Gazebo (gz-sensors)', 'per sample',
+                      'stddev = N sqrt(f); dynamic_bias_stddev = sigma sqrt(2 / tau_c)',
+                      build=_gazebo_build, render=_gazebo_render))
+
+plus that module's name in :data:`PLUGINS` below, so that ``--export`` and ``all`` see it.  A
+builder asks ``values.worst(sensor, term, key)`` or ``values.per_axis(sensor, term, key)``
+(and ``values.value(axis, term, param)`` for Gauss-Markov parameters); the header's axis rule
+and upper-limit marks follow from those calls.
+"""
+
+from dataclasses import dataclass
+import importlib
+import json
+import math
+from pathlib import Path
+from typing import Callable
+
+from ..errors import InputError
+from .export_values import check_inflate, ExportValues
+
+#: Modules that register more exporters when imported (e.g. ``'imu_allan.report.sim_models'``).
+PLUGINS = ()
+EXPORT_DIR = 'export'
+#: Standard gravity written where a consumer wants a gravity magnitude (m/s^2).
+GRAVITY = 9.80665
+
+
+@dataclass(frozen=True)
+class Exporter:
+    """One consumer's file format (see the module docstring)."""
+
+    name: str
+    files: tuple
+    consumer: str
+    time_base: str            # 'continuous' or 'per sample'
+    conversion: str           # how N and K become the written numbers (f = rate in Hz)
+    build: Callable
+    render: Callable
+    per_axis: bool = False    # True: one number per axis; False: the worst axis per sensor
+
+
+EXPORTERS = {}
+
+
+def register(exporter):
+    """Add (or replace) an exporter in the registry."""
+    EXPORTERS[exporter.name] = exporter
+    return exporter
+
+
+def _load_plugins():
+    for module in PLUGINS:
+        try:
+            importlib.import_module(module)
+        except ImportError:  # a plugin not merged (yet): its names are simply not offered
+            pass
+
+
+def exporter_names():
+    """Registered exporter names, in registration order."""
+    _load_plugins()
+    return list(EXPORTERS)
+
+
+def parse_names(text, option='--export'):
+    """``'kalibr,vins'`` or ``'all'`` -> list of names; InputError on an unknown name."""
+    known = exporter_names()
+    names = [n.strip() for n in str(text).split(',') if n.strip()]
+    if not names:
+        raise InputError(option, 'needs a comma-separated list of exporter names or "all"')
+    if 'all' in names:
+        return known
+    unknown = [n for n in names if n not in EXPORTERS]
+    if unknown:
+        raise InputError(option, f'unknown exporter {", ".join(map(repr, unknown))} '
+                                 f'(known: {", ".join(known)}, all)')
+    return list(dict.fromkeys(names))
+
+
+def parse_inflate(text, option='--inflate'):
+    """``'2'`` or ``'2,10'`` -> ``(white, walk)``; InputError unless 0 < factor <= 1000."""
+    parts = [p.strip() for p in str(text).split(',')]
+    try:
+        if len(parts) not in (1, 2):
+            raise ValueError
+        factors = [float(p) for p in parts]
+    except ValueError:
+        raise InputError(option, f'expected WHITE or WHITE,WALK (numbers), got {text!r}') from None
+    try:
+        return check_inflate(factors * 2 if len(factors) == 1 else factors)
+    except ValueError as exc:
+        raise InputError(option, str(exc)) from None
+
+
+def add_arguments(parser):
+    """The ``--export`` and ``--inflate`` options of ``analyze`` (one-line errors, exit 2)."""
+    import argparse
+
+    def checked(parse):
+        def convert(text):
+            try:
+                return parse(text)
+            except InputError as exc:
+                raise argparse.ArgumentTypeError(exc.problem) from None
+        return convert
+    parser.add_argument('--export', metavar='NAMES', type=checked(parse_names),
+                        help='with --out: write consumer files into DIR/export/ (comma list '
+                             f'of {", ".join(exporter_names())}, or all; docs/exports.md)')
+    parser.add_argument('--inflate', metavar='WHITE[,WALK]', type=checked(parse_inflate),
+                        default=(1.0, 1.0),
+                        help='multiply the exported white-noise and bias standard deviations '
+                             '(default 1: no inflation; 0 < factor <= 1000)')
+
+
+# ----------------------------------------------------------------------------- header
+
+
+def _version():
+    from .. import __version__
+    return __version__
+
+
+def header_lines(exporter, values):
+    """The provenance every file starts with, as lines without the comment marker."""
+    if exporter.per_axis:
+        axis_rule = 'per axis (x, y, z)'
+    else:
+        axis_rule = 'worst (largest) axis per sensor: ' + ', '.join(
+            f'{k} from {u["axes"][0]}' for k, u in values.used.items() if u['axes'])
+    white, walk = values.inflate
+    inflation = ('none (x1)' if white == walk == 1.0 else
+                 f'white noise x{white:g}, bias (random walk, instability) x{walk:g} '
+                 '(standard deviations)')
+    lines = [f'{exporter.consumer} IMU noise parameters from imu_allan {_version()}.',
+             f'input: {values.source}',
+             f'rate: {values.rate_hz:g} Hz',
+             f'time base: {exporter.time_base}; conversion (f = rate in Hz, N white noise, '
+             f'K rate random walk, B bias instability; SI): {exporter.conversion}',
+             f'axes: {axis_rule}',
+             f'inflation: {inflation}']
+    if values.rate_hz != values.fitted_rate_hz:
+        lines.append(f'warning: model measured at {values.fitted_rate_hz:g} Hz, converted for '
+                     f'{values.rate_hz:g} Hz: valid only if the IMU filters to the new band '
+                     'before decimating (Kalibr wiki "IMU Noise Model")')
+    for key, axes in values.upper_limit_keys().items():
+        lines.append(f'{key}: not detected on {", ".join(axes)}: its 95 % upper limit is '
+                     'written (UPPER LIMIT)')
+    for key in [k for k, u in values.used.items() if not u['axes']]:
+        lines.append(f'{key}: not measured (no such axis in the input): null')
+    return lines
+
+
+# ----------------------------------------------------------------------------- writers
+
+
+def _num(value):
+    """A float as text both PyYAML and OpenCV read as a real (always a dot and an exponent)."""
+    return 'null' if value is None else f'{value:.6e}'
+
+
+def _rate(value):
+    return repr(float(value))
+
+
+def _yaml_lines(data, indent=0):
+    """Minimal YAML (block mappings, flow lists) readable by PyYAML and OpenCV FileStorage."""
+    pad = ' ' * indent
+    lines = []
+    for key, value in data.items():
+        if isinstance(value, dict):
+            lines.append(f'{pad}{key}:')
+            lines += _yaml_lines(value, indent + 2)
+        elif isinstance(value, list) and value and isinstance(value[0], list):
+            lines.append(f'{pad}{key}:')
+            lines += [f'{pad}  - [{", ".join(_num(v) for v in row)}]' for row in value]
+        elif isinstance(value, list):
+            lines.append(f'{pad}{key}: [{", ".join(_num(v) for v in value)}]')
+        elif isinstance(value, bool) or isinstance(value, int):
+            lines.append(f'{pad}{key}: {int(value)}')
+        elif isinstance(value, str):
+            lines.append(f'{pad}{key}: {json.dumps(value)}')
+        elif key in ('update_rate', 'IMU.Frequency', 'imu_update_rate', 'SampleRate'):
+            lines.append(f'{pad}{key}: {_rate(value)}')
+        else:
+            lines.append(f'{pad}{key}: {_num(value)}')
+    return lines
+
+
+def _comments(header, marker='#'):
+    return [f'{marker} {line}' for line in header]
+
+
+def _yaml_file(name, opencv=False):
+    """Render a dict as YAML with the header; OpenCV files start with ``%YAML:1.0``."""
+    def render(data, header, values=None):
+        lines = ['%YAML:1.0'] if opencv else []
+        lines += _comments(header) + _yaml_lines(data)
+        return {name: '\n'.join(lines) + '\n'}
+    return render
+
+
+def _var(value):
+    return None if value is None else value * value
+
+
+#: The four numbers most consumers take, in the order :func:`_worst_four` names them.
+_FOUR = (('gyro', 'white_noise'), ('gyro', 'rate_random_walk'), ('accel', 'white_noise'),
+         ('accel', 'rate_random_walk'))
+
+
+def _worst_four(values, keys, convert=None):
+    """Worst-axis gyro N, gyro K, accel N, accel K under ``keys`` (``convert(term, value)``)."""
+    out = {}
+    for key, (sensor, term) in zip(keys, _FOUR):
+        value = values.worst(sensor, term, key)
+        out[key] = value if value is None or convert is None else convert(term, value)
+    return out
+
+
+# ----------------------------------------------------------------------------- Kalibr
+
+
+def _kalibr_build(values):
+    from .kalibr import kalibr_values
+    data, _ = kalibr_values(values)
+    data.pop('upper_limits')
+    return {'rostopic': values.topic, **data}
+
+
+def _kalibr_render(data, header, values):
+    from .kalibr import kalibr_values, kalibr_yaml_text
+    return {'kalibr_imu.yaml': kalibr_yaml_text(data, kalibr_values(values)[1], data['rostopic'],
+                                                header)}
+
+
+register(Exporter(
+    'kalibr', ('kalibr_imu.yaml',), 'Kalibr (imu.yaml)', 'continuous',
+    '*_noise_density = N, *_random_walk = K; Kalibr itself uses N sqrt(f) per sample '
+    '(kalibr_common/ConfigReader.py:473,491)',
+    _kalibr_build, _kalibr_render))
+
+
+# ----------------------------------------------------------------------------- OpenVINS
+
+_IDENTITY = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+
+
+def _openvins_build(values):
+    # ov_msckf/src/core/VioManagerOptions.h:159-162 reads these four under imu0;
+    # ov_msckf/src/state/Propagator.cpp:463-466 divides by dt (continuous densities).
+    imu0 = {'T_i_b': [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0],
+                      [0.0, 0.0, 0.0, 1.0]],
+            **_worst_four(values, ('gyroscope_noise_density', 'gyroscope_random_walk',
+                                   'accelerometer_noise_density', 'accelerometer_random_walk')),
+            'rostopic': values.topic, 'time_offset': 0.0, 'update_rate': values.rate_hz,
+            'model': 'kalibr', 'Tw': _IDENTITY, 'R_IMUtoGYRO': _IDENTITY, 'Ta': _IDENTITY,
+            'R_IMUtoACC': _IDENTITY, 'Tg': [[0.0] * 3 for _ in range(3)]}
+    return {'imu0': imu0}
+
+
+register(Exporter(
+    'openvins', ('openvins_imu.yaml',), 'OpenVINS (kalibr_imu_chain.yaml)', 'continuous',
+    'noise_density = N, random_walk = K; OpenVINS uses sigma^2/dt per step '
+    '(ov_msckf/src/state/Propagator.cpp:463-466)',
+    _openvins_build, _yaml_file('openvins_imu.yaml', opencv=True)))
+
+
+# ----------------------------------------------------------------------------- VINS
+
+
+def _vins_build(values):
+    # vins_estimator/src/factor/integration_base.h: noise = diag(ACC_N^2, GYR_N^2, ACC_N^2,
+    # GYR_N^2, ACC_W^2, GYR_W^2) with no dt; V carries 0.5 dt for the two (previous and current
+    # sample) white terms and dt for the bias terms.  Per step the angle gets
+    # 2 (0.5 dt)^2 GYR_N^2 = 0.5 dt^2 GYR_N^2 (continuous: N^2 dt, so GYR_N = N sqrt(2 f)) and
+    # the bias dt^2 GYR_W^2 (continuous: K^2 dt, so GYR_W = K sqrt(f)).
+    root = math.sqrt(values.rate_hz)
+
+    def per_sample(term, value):
+        return value * root * (math.sqrt(2.0) if term == 'white_noise' else 1.0)
+    return {**_worst_four(values, ('gyr_n', 'gyr_w', 'acc_n', 'acc_w'), per_sample),
+            'g_norm': GRAVITY, 'imu': 1, 'imu_topic': values.topic}
+
+
+register(Exporter(
+    'vins', ('vins_fusion.yaml',), 'VINS-Fusion / VINS-Mono', 'per sample (discrete sigma)',
+    '*_n = N sqrt(2 f) (midpoint integration counts each sample twice with weight 1/2, '
+    'vins_estimator/src/factor/integration_base.h), *_w = K sqrt(f) (bias step dt * *_w); '
+    'the often-quoted "Kalibr-style" raw N and K are 14x and 10x smaller at 100 Hz',
+    _vins_build, _yaml_file('vins_fusion.yaml', opencv=True)))
+
+
+# ----------------------------------------------------------------------------- ORB-SLAM3
+
+
+def _orbslam3_build(values):
+    # src/Tracking.cc (ParseIMUParamFile, newParameterLoader): sf = sqrt(freq);
+    # IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf, Naw/sf): the file holds continuous densities.
+    return {**_worst_four(values, ('IMU.NoiseGyro', 'IMU.GyroWalk', 'IMU.NoiseAcc',
+                                   'IMU.AccWalk')),
+            'IMU.Frequency': values.rate_hz}
+
+
+register(Exporter(
+    'orbslam3', ('orbslam3_imu.yaml',), 'ORB-SLAM3 (IMU.* of the settings file)', 'continuous',
+    'Noise* = N, *Walk = K; ORB-SLAM3 uses N sqrt(f) per sample and K / sqrt(f) per step '
+    '(src/Tracking.cc, IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf, Naw/sf))',
+    _orbslam3_build, _yaml_file('orbslam3_imu.yaml', opencv=True)))
+
+
+# ----------------------------------------------------------------------------- Basalt
+
+
+def _basalt_build(values):
+    # basalt-headers calibration.hpp: dicrete_time_accel_noise_std() = accel_noise_std *
+    # sqrt(imu_update_rate); include/basalt/linearization/imu_block.hpp:74-77 weighs the bias
+    # residual by 1 / (bias_std sqrt(dt)): continuous densities, per axis.
+    calib = {'imu_update_rate': values.rate_hz,
+             'accel_noise_std': values.per_axis('accel', 'white_noise', 'accel_noise_std'),
+             'gyro_noise_std': values.per_axis('gyro', 'white_noise', 'gyro_noise_std'),
+             'accel_bias_std': values.per_axis('accel', 'rate_random_walk', 'accel_bias_std'),
+             'gyro_bias_std': values.per_axis('gyro', 'rate_random_walk', 'gyro_bias_std')}
+    return {'value0': calib}
+
+
+def _basalt_render(data, header, values=None):
+    out = dict(data)
+    out['imu_allan'] = header
+    return {'basalt_imu.json': json.dumps(out, indent=2) + '\n'}
+
+
+register(Exporter(
+    'basalt', ('basalt_imu.json',), 'Basalt (calibration JSON)', 'continuous',
+    '*_noise_std = N, *_bias_std = K; Basalt uses noise_std sqrt(f) per sample '
+    '(basalt-headers calibration.hpp) and bias_std sqrt(dt) per step (imu_block.hpp:74-77)',
+    _basalt_build, _basalt_render, per_axis=True))
+
+
+# ----------------------------------------------------------------------------- GTSAM
+
+
+def _diag(values3):
+    if any(v is None for v in values3):
+        return None
+    return [[values3[i] if i == j else 0.0 for j in range(3)] for i in range(3)]
+
+
+#: GTSAM's integrationCovariance is not a sensor property (its examples use 1e-8 I).
+GTSAM_INTEGRATION_COVARIANCE = 1e-8
+
+
+def _gtsam_build(values):
+    # gtsam/navigation/ImuFactor.cpp:76-83: B (aCov / dt) B^T, "(1/dt) allows to pass from
+    # continuous time noise to discrete time noise"; CombinedImuFactor.cpp:157-178:
+    # dt * biasAccCovariance.  Variances (sigma^2) of continuous densities, per axis.
+    def cov(sensor, term, key):
+        return _diag([_var(v) for v in values.per_axis(sensor, term, key)])
+    return {'gyroscopeCovariance': cov('gyro', 'white_noise', 'gyroscopeCovariance'),
+            'accelerometerCovariance': cov('accel', 'white_noise', 'accelerometerCovariance'),
+            'biasOmegaCovariance': cov('gyro', 'rate_random_walk', 'biasOmegaCovariance'),
+            'biasAccCovariance': cov('accel', 'rate_random_walk', 'biasAccCovariance'),
+            'integrationCovariance': _diag([GTSAM_INTEGRATION_COVARIANCE] * 3),
+            'gravity': GRAVITY}
+
+
+_GTSAM_SETTERS = (('gyroscopeCovariance', 'setGyroscopeCovariance'),
+                  ('accelerometerCovariance', 'setAccelerometerCovariance'),
+                  ('biasOmegaCovariance', 'setBiasOmegaCovariance'),
+                  ('biasAccCovariance', 'setBiasAccCovariance'),
+                  ('integrationCovariance', 'setIntegrationCovariance'))
+
+
+def _gtsam_render(data, header, values=None):
+    yaml_text = _yaml_file('gtsam_imu.yaml')(data, header)['gtsam_imu.yaml']
+    lines = ['r"""GTSAM PreintegrationCombinedParams from imu_allan (run: python gtsam_imu.py).',
+             ''] + header + ['', 'Covariances are continuous-time variances (sigma^2), not '
+                             'sigma; integrationCovariance', 'is not a sensor property (the '
+                             'GTSAM examples use 1e-8 I).', '"""', '',
+                             'import gtsam', 'import numpy as np', '',
+                             f'params = gtsam.PreintegrationCombinedParams.MakeSharedU('
+                             f'{data["gravity"]!r})']
+    for key, setter in _GTSAM_SETTERS:
+        matrix = data[key]
+        if matrix is None:
+            lines.append(f'# {key}: not measured')
+            continue
+        diag = ', '.join(_num(matrix[i][i]) for i in range(3))
+        lines.append(f'params.{setter}(np.diag([{diag}]))')
+    lines += ['', "if __name__ == '__main__':", '    print(params)']
+    return {'gtsam_imu.yaml': yaml_text, 'gtsam_imu.py': '\n'.join(lines) + '\n'}
+
+
+register(Exporter(
+    'gtsam', ('gtsam_imu.yaml', 'gtsam_imu.py'), 'GTSAM (PreintegrationCombinedParams)',
+    'continuous', 'covariance = N^2 I and K^2 I per axis (variances); GTSAM divides by dt '
+    '(gtsam/navigation/ImuFactor.cpp:76-83, CombinedImuFactor.cpp:157-178)',
+    _gtsam_build, _gtsam_render, per_axis=True))
+
+
+# ----------------------------------------------------------------------------- LIO-SAM
+
+
+def _lio_sam_build(values):
+    # src/imuPreintegration.cpp:214-217: accelerometerCovariance = imuAccNoise^2 I ("acc white
+    # noise in continuous"); :225, :374-375: bias BetweenFactor sigma sqrt(deltaTij) *
+    # imuAccBiasN: continuous densities.
+    params = {**_worst_four(values, ('imuGyrNoise', 'imuGyrBiasN', 'imuAccNoise', 'imuAccBiasN')),
+              'imuGravity': GRAVITY}
+    return {'/**': {'ros__parameters': params}}
+
+
+register(Exporter(
+    'lio_sam', ('lio_sam_imu.yaml',), 'LIO-SAM (params.yaml, ros2 branch layout)', 'continuous',
+    'imu*Noise = N, imu*BiasN = K, through GTSAM (src/imuPreintegration.cpp:214-217, 225); '
+    'ROS 1 users put the same keys under "lio_sam:"',
+    _lio_sam_build, _yaml_file('lio_sam_imu.yaml')))
+
+
+# ----------------------------------------------------------------------------- FAST-LIO
+
+
+def _fast_lio_build(values):
+    # src/IMU_Processing.hpp:280-284 puts the values on the diagonal of Q; IKFoM
+    # esekfom.hpp:381: P = F P F^T + (dt f_w) Q (dt f_w)^T, so per step the velocity gets
+    # dt^2 acc_cov (continuous: N^2 dt -> acc_cov = N^2 f) and the bias dt^2 b_acc_cov
+    # (continuous: K^2 dt -> b_acc_cov = K^2 f): per-sample variances.
+    mapping = _worst_four(values, ('gyr_cov', 'b_gyr_cov', 'acc_cov', 'b_acc_cov'),
+                          lambda term, value: value * value * values.rate_hz)
+    return {'/**': {'ros__parameters': {'mapping': mapping}}}
+
+
+register(Exporter(
+    'fast_lio', ('fast_lio_imu.yaml',), 'FAST-LIO (mapping.*, ROS2 branch layout)',
+    'per sample (discrete variances)',
+    '*_cov = N^2 f, b_*_cov = K^2 f ((m/s^2)^2, (rad/s)^2; src/IMU_Processing.hpp:280-284 and '
+    'IKFoM esekfom.hpp:381 multiply by dt^2 per step)',
+    _fast_lio_build, _yaml_file('fast_lio_imu.yaml')))
+
+
+# ----------------------------------------------------------------------------- MATLAB
+
+
+def _matlab_build(values):
+    # gyroparams / accelparams: NoiseDensity (rad/s)/sqrt(Hz) = N, RandomWalk (rad/s)*sqrt(Hz)
+    # = K (MathWorks answer 1631045), BiasInstability rad/s = B, as MathWorks' example
+    # "Inertial Sensor Noise Analysis Using Allan Variance" reads them off allanvar.
+    out = {'SampleRate': values.rate_hz}
+    for sensor, name in (('gyro', 'gyroparams'), ('accel', 'accelparams')):
+        out[name] = {'NoiseDensity': values.per_axis(sensor, 'white_noise',
+                                                     f'{name}.NoiseDensity'),
+                     'RandomWalk': values.per_axis(sensor, 'rate_random_walk',
+                                                   f'{name}.RandomWalk'),
+                     'BiasInstability': values.per_axis(sensor, 'bias_instability',
+                                                        f'{name}.BiasInstability')}
+        gm = {}
+        for axis in values.axes(sensor):
+            sigma, _ = values.value(axis, 'gauss_markov', 'sigma')
+            if math.isfinite(sigma):
+                gm[axis] = {'sigma': sigma, 'tau_c': values.value(axis, 'gauss_markov',
+                                                                  'tau_c')[0]}
+        if gm:
+            out[name]['gauss_markov'] = gm
+    return out
+
+
+def _matlab_vector(values3):
+    return '[' + ' '.join('NaN' if v is None else _num(v) for v in values3) + ']'
+
+
+def _matlab_render(data, header, values=None):
+    lines = _comments(header, '%') + [
+        '% NoiseDensity = N, RandomWalk = K (rate random walk), BiasInstability = B: the reading',
+        '% of MathWorks\' example "Inertial Sensor Noise Analysis Using Allan Variance".',
+        '% Check the NoiseType convention of your release (default "double-sided").',
+        f'fs = {_rate(data["SampleRate"])};']
+    for name, var in (('gyroparams', 'gyro'), ('accelparams', 'accel')):
+        params = data[name]
+        args = ', '.join(f"'{key}', {_matlab_vector(params[key])}"
+                         for key in ('NoiseDensity', 'RandomWalk', 'BiasInstability'))
+        lines.append(f'{var} = {name}({args});')
+        for axis, gm in params.get('gauss_markov', {}).items():
+            phi = math.exp(-1.0 / (data['SampleRate'] * gm['tau_c']))
+            lines.append(f'% {axis}: fitted first-order Gauss-Markov sigma {_num(gm["sigma"])}, '
+                         f'tau_c {gm["tau_c"]:.6g} s; R2023b+: BiasInstability = sigma with '
+                         f"BiasInstabilityCoefficients = struct('Numerator', "
+                         f"{math.sqrt(1 - phi * phi):.6e}, 'Denominator', [1 {-phi:.9f}])")
+    lines.append("imu = imuSensor('accel-gyro', 'SampleRate', fs, 'Gyroscope', gyro, "
+                 "'Accelerometer', accel);")
+    return {'matlab_imu.m': '\n'.join(lines) + '\n'}
+
+
+register(Exporter(
+    'matlab', ('matlab_imu.m',), 'MATLAB Navigation / Sensor Fusion Toolbox (imuSensor)',
+    'continuous', 'NoiseDensity = N, RandomWalk = K, BiasInstability = B, per axis',
+    _matlab_build, _matlab_render, per_axis=True))
+
+
+# ----------------------------------------------------------------------------- API
+
+
+def _prepare(fitted, name, rate_hz, inflate, source, topic):
+    _load_plugins()
+    if name not in EXPORTERS:
+        raise ValueError(f'unknown exporter {name!r} (known: {", ".join(EXPORTERS)})')
+    exporter = EXPORTERS[name]
+    values = ExportValues(fitted, rate_hz, inflate, source, topic)
+    data = exporter.build(values)
+    return exporter, values, data
+
+
+def export(fitted, name, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw'):
+    """The data one exporter writes, as a dict (SI; time base as the consumer wants it).
+
+    ``fitted`` is a FittedModel (from :func:`imu_allan.fit_noise_model`) or an Analysis;
+    ``rate_hz`` the IMU rate the consumer runs at (default: the rate of the fit);
+    ``inflate`` a factor or ``(white, walk)`` on the standard deviations.
+    """
+    return _prepare(fitted, name, rate_hz, inflate, source, topic)[2]
+
+
+def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
+                  topic='/imu/data_raw'):
+    """Write the named exporters' files into ``folder/export/``; return their relative paths."""
+    target = Path(folder) / EXPORT_DIR
+    target.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name in names:
+        exporter, values, data = _prepare(fitted, name, rate_hz, inflate, source, topic)
+        for file_name, text in exporter.render(data, header_lines(exporter, values),
+                                               values).items():
+            (target / file_name).write_text(text, encoding='utf-8')
+            written.append(f'{EXPORT_DIR}/{file_name}')
+    return written
