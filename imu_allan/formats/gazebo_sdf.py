@@ -8,7 +8,7 @@ Two simulators, read from their own source:
   each sample, white noise of std ``stddev`` (PER SAMPLE) plus a bias that is a first-order
   Gauss-Markov process driven by ``dynamic_bias_stddev`` (a continuous DRIVING density, not the
   bias's std) with correlation time ``dynamic_bias_correlation_time``, then rounds to
-  ``precision`` (ignored below 1e-6, :130-107).  The bias starts at the turn-on value drawn
+  ``precision`` (ignored below 1e-6, :103-107).  The bias starts at the turn-on value drawn
   from ``bias_mean`` / ``bias_stddev`` (:85-99).
 * **PX4 SITL** (PX4-SITL_gazebo-classic ``gazebo_imu_plugin``): one ``<plugin>`` block with
   ``gyroscopeNoiseDensity`` (continuous N: the plugin multiplies by 1/sqrt(dt),
@@ -35,8 +35,11 @@ from dataclasses import dataclass, field
 import math
 from xml.etree import ElementTree
 
+import numpy as np
+
 from ..core import gauss_markov as gm
 from ..core.model import NoiseModel
+from ..core.terms import gauss_markov_shape
 from ..core.units import AXES, is_gyro, si_unit
 from ..errors import InputError
 
@@ -292,7 +295,7 @@ class SimImu:
                 noise = holder.find('noise')
                 old = self.params[axis]
                 values, lines = gazebo_values(final[axis], rate, tau_range,
-                                              precision=old['precision'])
+                                              precision=old['precision'] or None)
                 _set_children(noise, values)
                 lines = [f'{axis}: ' + _steps_text(steps[axis], axis, final[axis])] + lines
                 _comment_before(holder, noise, lines)
@@ -411,7 +414,9 @@ def gazebo_values(axis_terms, rate_hz, tau_range, precision=None, inflate=(1.0, 
                      f'1/tau^2 angle-quantization slope'
                      + (' (below 1e-6: gz-sensors ignores it)'
                         if precision <= GZ_MIN_PRECISION else ''))
-    if white < 0:
+    if 'white_noise' not in axis_terms:
+        lines.append('white noise not detected (no upper limit either): stddev 0')
+    elif white < 0:
         lines.append('the white noise is below the rounding noise of precision: stddev 0')
     values = {'stddev': math.sqrt(max(white, 0.0)) * inflate[0]}
     fit = gm.best_gauss_markov(axis_terms, tau_range, rate_hz)
@@ -431,9 +436,6 @@ def gazebo_values(axis_terms, rate_hz, tau_range, precision=None, inflate=(1.0, 
 
 def _gm_weight(fit, tau_range):
     """Mean Gauss-Markov AVAR over the band (which axis's bias is the worst)."""
-    import numpy as np
-
-    from ..core.terms import gauss_markov_shape
     tau = np.geomspace(tau_range[0], tau_range[1], 24)
     return float(np.mean(fit.sigma ** 2 * gauss_markov_shape(tau, fit.tau_c)))
 
