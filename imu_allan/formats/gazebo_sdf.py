@@ -522,11 +522,16 @@ def _serialize(root, fragment):
 # Writers (exporters ``gazebo`` and ``px4``)
 
 
-def _model_input(fitted, rate_hz):
-    """(terms per axis, rate, tau range, upper limits, source) of an Analysis / fit / model."""
+def _model_input(fitted, rate_hz, source=None):
+    """(terms per axis, rate, tau range, upper limits, source) of an Analysis / fit / model.
+
+    95 % upper limits of undetected white noise and random walk come from an Analysis's
+    ``upper_limits`` or a fit's ``upper_limit(axis, term)`` method, whichever exists.
+    """
     upper = getattr(fitted, 'upper_limits', None) or {}
-    source = getattr(fitted, 'source', None)
+    source = source or getattr(fitted, 'source', None)
     fit = getattr(fitted, 'fit', fitted)
+    limit_of = getattr(fit, 'upper_limit', None)
     result = getattr(fitted, 'result', None) or getattr(fit, 'result', None)
     model = getattr(fit, 'model', fit)
     if not isinstance(model, NoiseModel):
@@ -541,7 +546,12 @@ def _model_input(fitted, rate_hz):
     terms, marked = {}, {}
     for axis in model.axes:
         axis_terms = copy.deepcopy(model.terms[axis])
-        limits = upper.get(axis, {})
+        limits = dict(upper.get(axis, {}))
+        if callable(limit_of) and not limits:
+            for term in ('white_noise', 'rate_random_walk'):
+                value = limit_of(axis, term) if term not in axis_terms else math.nan
+                if math.isfinite(value):
+                    limits[term] = value
         if 'white_noise' not in axis_terms and 'white_noise' in limits:
             axis_terms['white_noise'] = {'value': limits['white_noise']}
             marked.setdefault(axis, []).append('white_noise')
@@ -561,7 +571,7 @@ def _header(kind, source, rate, tau_range, inflate, extra):
         f'Inflation: {infl}. SI units.']
 
 
-def export_gazebo(fitted, rate_hz=None, inflate=1.0):
+def export_gazebo(fitted, rate_hz=None, inflate=1.0, source=None):
     """Gazebo (gz-sensors) SDF ``<sensor type="imu">`` with one ``<noise>`` per axis.
 
     Parameters
@@ -573,6 +583,8 @@ def export_gazebo(fitted, rate_hz=None, inflate=1.0):
         Sample rate the per-sample stddev refers to (default: the fit's).
     inflate : float or (float, float)
         White-noise and bias factors (default 1: none).
+    source : str, optional
+        The input named in the header (default: the Analysis's).
 
     Returns
     -------
@@ -585,7 +597,7 @@ def export_gazebo(fitted, rate_hz=None, inflate=1.0):
 
     """
     inflate = _inflation(inflate)
-    terms, rate, tau_range, marked, source = _model_input(fitted, rate_hz)
+    terms, rate, tau_range, marked, source = _model_input(fitted, rate_hz, source)
     head = _header('Gazebo (gz-sensors)', source, rate, tau_range, inflate, [
         f'stddev is PER SAMPLE at {rate:.6g} Hz: stddev = N sqrt(f) (N the continuous white '
         f'noise density); keep <update_rate> at {rate:.6g} or scale stddev by sqrt(f_new / f).',
@@ -620,14 +632,14 @@ def export_gazebo(fitted, rate_hz=None, inflate=1.0):
     return out, text
 
 
-def export_px4(fitted, rate_hz=None, inflate=1.0):
+def export_px4(fitted, rate_hz=None, inflate=1.0, source=None):
     """PX4 SITL ``gazebo_imu_plugin`` block: continuous densities, worst axis per sensor.
 
     Same arguments as :func:`export_gazebo`; ``values`` is ``{plugin key: value}`` plus
     ``rate_hz`` and ``upper_limits``.
     """
     inflate = _inflation(inflate)
-    terms, rate, tau_range, marked, source = _model_input(fitted, rate_hz)
+    terms, rate, tau_range, marked, source = _model_input(fitted, rate_hz, source)
     head = _header('PX4 SITL gazebo_imu_plugin', source, rate, tau_range, inflate, [
         '*NoiseDensity = N, continuous (the plugin multiplies by 1/sqrt(dt), '
         'gazebo_imu_plugin.cpp:198); it runs at the physics step, no rate needed.',

@@ -277,6 +277,17 @@ def test_export_header_and_upper_limits(fitted):
     assert values['gyroscopeRandomWalk'] == pytest.approx(fitted.value('gyro_x',
                                                                        'rate_random_walk'))
 
+    class FitWithLimits:  # a fit offering upper_limit(axis, term), as the exporters' path does
+        model = NoiseModel({'gyro_x': {'white_noise': {'value': 1e-3}}})
+        rate_hz = RATE
+        result = fitted.result
+
+        def upper_limit(self, axis, term):
+            return 3e-5 if term == 'rate_random_walk' else math.nan
+
+    values, text = gazebo_sdf.export_gazebo(FitWithLimits(), source='other.bag')
+    assert values['upper_limits'] == {'gyro_x': ['rate_random_walk']} and 'other.bag' in text
+
 
 # ---------------------------------------------------------------------------------------------
 # The simulator's file as the model under test: hidden effects named, corrected.sdf closer
