@@ -169,6 +169,7 @@ def bench_node(seconds=35.0, rate=1000.0):
                        ('allan node + covariance_topic',
                         [exe, '--ros-args', '-p', f'rate_hz:={rate}',
                          '-p', 'publish_period:=10.0', '-p', 'covariance_topic:=imu/data_cov'])):
+        cycles.clear()
         # the republished stream goes to a subscriber in its own process (as an estimator)
         reader = subprocess.Popen(
             [sys.executable, '-c', _EMPTY_SUBSCRIBER, '--ros-args', '-r',

@@ -67,14 +67,18 @@ def _gauss_markov(rng, n, drive, tau, dt, bias0, first_step):
     return lfilter([1.0], [1.0, -phi], w) + bias0 * decay
 
 
-def gz_noise_params(path_or_text):
-    """{axis: {field: float}} of the first <imu> element (fields gz-sensors reads)."""
+def _first(path_or_text, tag):
+    """The first ``tag`` element of an XML text or file (the root itself if it is one)."""
     text = path_or_text
     if not str(text).lstrip().startswith('<'):
         with open(text, encoding='utf-8') as stream:
             text = stream.read()
-    root = ElementTree.fromstring(text)
-    imu = root if root.tag == 'imu' else next(root.iter('imu'))
+    return next(ElementTree.fromstring(text).iter(tag))
+
+
+def gz_noise_params(path_or_text):
+    """{axis: {field: float}} of the first <imu> element (fields gz-sensors reads)."""
+    imu = _first(path_or_text, 'imu')
     out = {}
     for axis, path in GZ_PATHS.items():
         noise = imu.find(f'{path}/noise')
@@ -113,12 +117,7 @@ def gz_simulate(params, axes, n, rate_hz, seed):
 
 def px4_params(path_or_text):
     """{key: float} of the gazebo_imu_plugin block (keys present only)."""
-    text = path_or_text
-    if not str(text).lstrip().startswith('<'):
-        with open(text, encoding='utf-8') as stream:
-            text = stream.read()
-    root = ElementTree.fromstring(text)
-    plugin = root if root.tag == 'plugin' else next(root.iter('plugin'))
+    plugin = _first(path_or_text, 'plugin')
     return {c.tag: float(c.text) for c in plugin
             if isinstance(c.tag, str) and c.tag.startswith(('gyroscope', 'accelerometer'))}
 
