@@ -12,6 +12,11 @@ and publishes every ``publish_period`` seconds:
 * ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share) and each axis
   against the noise budget (OK / WARN / ERROR / STALE).
 
+With ``covariance_topic`` set, every ``imu/data_raw`` message is also republished there as it
+is drained, its angular-velocity and linear-acceleration covariance diagonals set to the live
+per-sample variance N^2 rate_hz of the latest coefficients (robot_localization reads these),
+patched in the serialized bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`).
+
 The numerics are :class:`imu_allan.core.online.OnlineAllan` (stamp checks, stationarity
 gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
 code, so the numbers agree for the same samples.  Messages are not handled one by one: the
