@@ -11,9 +11,13 @@ Sections (each prints its numbers):
    ratio of the spreads (how much wider an honest interval would be).
 3. ``node``: CPU share of the built ``allan`` executable while this process publishes 6-axis
    Imu messages at 1 kHz, side by side with a plain rclpy subscriber that does nothing, and the
-   node's publish-cycle time (from its diagnostics).  Needs the colcon-built package.
+   node's publish-cycle time (from its diagnostics); also with ``covariance_topic`` set (every
+   message republished with live covariances, received here).  Needs the colcon-built package.
+4. ``covariance``: cost of patching the covariance diagonals in 50-message batches of CDR
+   bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`).
 
-Usage: ``python bench/bench_online.py [estimator|accuracy|node ...]`` (default: all).
+Usage: ``python bench/bench_online.py [estimator|accuracy|node|covariance ...]`` (default:
+all).
 """
 
 import os
@@ -161,12 +165,23 @@ def bench_node(seconds=35.0, rate=1000.0):
     for label, cmd in (('empty rclpy subscriber', [sys.executable, '-c', _EMPTY_SUBSCRIBER]),
                        ('allan node (publish_period 10 s)',
                         [exe, '--ros-args', '-p', f'rate_hz:={rate}',
-                         '-p', 'publish_period:=10.0'])):
+                         '-p', 'publish_period:=10.0']),
+                       ('allan node + covariance_topic',
+                        [exe, '--ros-args', '-p', f'rate_hz:={rate}',
+                         '-p', 'publish_period:=10.0', '-p', 'covariance_topic:=imu/data_cov'])):
+        cycles.clear()
+        # the republished stream goes to a subscriber in its own process (as an estimator)
+        reader = subprocess.Popen(
+            [sys.executable, '-c', _EMPTY_SUBSCRIBER, '--ros-args', '-r',
+             'imu/data_raw:=imu/data_cov'], env=env, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL) if 'covariance' in label else None
         proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
         try:
             deadline = time.monotonic() + 30
-            while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+            while (pub.get_subscription_count() == 0 or (
+                    reader is not None and node.count_subscribers('imu/data_cov') == 0)) \
+                    and time.monotonic() < deadline:
                 rclpy.spin_once(node, timeout_sec=0.1)
             time.sleep(1.0)
             cpu0, wall0 = _cpu_seconds(proc.pid), time.monotonic()
@@ -199,17 +214,34 @@ def bench_node(seconds=35.0, rate=1000.0):
             print(f'  {label:34s}: {share:5.1f} % of one core ({i / (wall1 - wall0):.0f} msg/s '
                   f'sent){extra}')
         finally:
-            proc.terminate()
-            proc.wait(timeout=10)
+            for p in (proc, reader):
+                if p is not None:
+                    p.terminate()
+                    p.wait(timeout=10)
     node.destroy_node()
     rclpy.try_shutdown()
 
 
+def bench_covariance(n=200_000, batch=50):
+    """Per-message cost of patching covariance diagonals in CDR bytes (the node's republish)."""
+    from imu_allan.formats.imu_cdr import encode_imu, set_covariance_diagonals
+    rows, _ = encode_imu(np.arange(n) / 1000.0, np.zeros((n, 6)))
+    blobs = [r.tobytes() for r in rows]
+    variances = np.full(6, 1e-4)
+    start = time.perf_counter()
+    for i in range(0, n, batch):
+        set_covariance_diagonals(blobs[i:i + batch], variances)
+    dt = time.perf_counter() - start
+    print(f'covariance: set_covariance_diagonals in batches of {batch}: {dt / n * 1e6:.2f} us '
+          f'per message ({100 * dt / (n / 1000.0):.2f} % of one core at 1 kHz)')
+
+
 def main():
     """Run the selected sections (all by default)."""
-    sections = sys.argv[1:] or ['estimator', 'accuracy', 'node']
+    sections = sys.argv[1:] or ['estimator', 'accuracy', 'node', 'covariance']
     for section in sections:
-        {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node}[section]()
+        {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node,
+         'covariance': bench_covariance}[section]()
 
 
 if __name__ == '__main__':

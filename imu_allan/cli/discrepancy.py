@@ -2,12 +2,13 @@
 
 Usage::
 
-    discrepancy INPUT [--model MODEL.yaml | --terms white_noise,bias_instability]
+    discrepancy INPUT [--model MODEL.yaml|SDF | --terms white_noise,bias_instability]
                 [--json] [--out DIR] [--topic T] [--format FMT] [--sims K] [--seed S]
 
 Reads the recording through :func:`imu_allan.formats.readers.read_samples`, runs the workflow of
 :mod:`imu_allan.core.discrepancy` and prints a summary (or the JSON report with ``--json``).
-``--out DIR`` writes ``report.json``, ``final_model.yaml`` and PNG plots.  Bad input: one line
+``--out DIR`` writes ``report.json``, ``final_model.yaml`` and PNG plots (and ``corrected.sdf``
+for a Gazebo / PX4 SDF model, :mod:`imu_allan.formats.gazebo_sdf`).  Bad input: one line
 on stderr naming the file and the problem, exit status 2.
 """
 
@@ -30,8 +31,10 @@ def build_parser():
                         help='recording: rosbag2 folder/.db3/.mcap, ROS 1 .bag, CSV, thesis '
                              'log or raw 3DM-GX3-25 capture')
     start = parser.add_mutually_exclusive_group()
-    start.add_argument('--model', metavar='MODEL.yaml',
-                       help="starting noise model file (the simulator's format, SI units)")
+    start.add_argument('--model', metavar='MODEL',
+                       help='starting noise model: a model YAML (SI units), or a Gazebo '
+                            '<imu> SDF / world or PX4 gazebo_imu_plugin block (then --out '
+                            'also writes corrected.sdf)')
     start.add_argument('--terms', metavar='T1,T2',
                        help='start from only these terms fitted to the data (default: '
                             'white_noise,bias_instability)')
@@ -59,7 +62,7 @@ def _fail(message):
 def main(argv=None):
     """Entry point; returns the exit status."""
     args = build_parser().parse_args(argv)
-    from imu_allan.core.discrepancy import run_samples
+    from imu_allan.core.discrepancy import run_samples, sample_rate
     from imu_allan.core.model import ModelError, NoiseModel
     from imu_allan.errors import InputError
 
@@ -71,13 +74,21 @@ def main(argv=None):
         if not terms:
             return _fail('--terms: give at least one term, e.g. white_noise,bias_instability')
     try:
-        model = NoiseModel.from_yaml(args.model) if args.model else None
+        from imu_allan.formats import gazebo_sdf
+        # a Gazebo <imu> / PX4 plugin SDF: read now, converted at the data's rate below
+        sim = gazebo_sdf.read_sim_model(args.model) \
+            if args.model and gazebo_sdf.looks_like_sdf(args.model) else None
+        model = NoiseModel.from_yaml(args.model) if args.model and sim is None else None
         from imu_allan.formats.readers import read_samples
         samples = read_samples(args.input, args.format, args.topic)
         if samples.n < 20:
             raise InputError(args.input, f'only {samples.n} samples: too short')
+        if sim is not None:
+            model, sim_notes = sim.noise_model(sample_rate(samples.t))
         result = run_samples(samples, model=model, terms=terms, n_sims=args.sims,
                              seed=args.seed, max_steps=args.max_steps)
+        if sim is not None:
+            result.notes[:0] = sim_notes
     except (InputError, ModelError) as exc:
         return _fail(str(exc))
     except ValueError as exc:  # data the workflow cannot use (too short, no time stamps ...)
@@ -103,6 +114,10 @@ def main(argv=None):
                 os.path.join(args.out, 'final_model.yaml'),
                 header=f'discrepancy workflow result for {source}')
             write_plots(result, args.out)
+            if sim is not None:  # the simulator's own file with the missing effects added
+                with open(os.path.join(args.out, gazebo_sdf.CORRECTED_FILE), 'w',
+                          encoding='utf-8') as f:
+                    f.write(sim.corrected(result, source))
         except OSError as exc:
             return _fail(f'{args.out}: cannot write ({exc.strerror or exc})')
     try:

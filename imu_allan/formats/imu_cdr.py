@@ -34,6 +34,8 @@ _GYRO_OFF = 13
 _ACCEL_OFF = 25
 _TAIL = 37 * 8
 _ORI_COV = 4  # index of orientation_covariance[0] in the 37-double tail
+# Indices of the angular-velocity and linear-acceleration covariance diagonals (xx, yy, zz).
+_COV_DIAGONALS = np.array([[16, 20, 24], [28, 32, 36]])
 
 
 def _cdr_layout(slen):
@@ -111,6 +113,54 @@ def decode_rows(rows, ros1):
         data[sel, :3] = _take_f8(sub, start + 8 * _GYRO_OFF, 3)
         data[sel, 3:] = _take_f8(sub, start + 8 * _ACCEL_OFF, 3)
     return ok, t, data
+
+
+def set_covariance_diagonals(blobs, variances):
+    """Serialized CDR Imu messages with new angular-velocity / linear-acceleration variances.
+
+    Parameters
+    ----------
+    blobs : sequence of bytes
+        Serialized ``sensor_msgs/Imu`` (as a raw subscription takes them).
+    variances : array_like
+        Shape (6,), per-sample variances in AXES order: (rad/s)^2 then (m/s^2)^2.  NaN keeps
+        that element as it is.
+
+    Returns
+    -------
+    list of bytes
+        The messages in the same order, patched in bulk with numpy: the three diagonal
+        elements of each covariance are set; off-diagonal elements and the orientation are
+        kept, and a covariance whose element 0 is -1 ("not provided", sensor_msgs/Imu) stays
+        as it is.  Messages not in the little-endian CDR layout pass unchanged.
+
+    """
+    variances = np.asarray(variances, dtype=float).reshape(2, 3)
+    out = list(blobs)
+    lengths = np.fromiter((len(b) for b in out), dtype=np.int64, count=len(out))
+    for length in np.unique(lengths):
+        length = int(length)
+        if length < 16 + _TAIL:
+            continue
+        idx = np.flatnonzero(lengths == length)
+        rows = np.frombuffer(b''.join([out[i] for i in idx]), dtype=np.uint8)
+        rows = rows.reshape(idx.size, length).copy()
+        slen = _u32(rows, 12)
+        good = (rows[:, 0] == 0) & (rows[:, 1] == 1)
+        for s in np.unique(slen[good]):
+            start, total = _cdr_layout(int(s))
+            if total != length:
+                continue
+            sel = np.flatnonzero(good & (slen == s))
+            tail = rows[sel, start:start + _TAIL].view('<f8')
+            for diag, var in zip(_COV_DIAGONALS, variances):
+                provided = tail[:, diag[0]] != -1.0
+                tail[:, diag] = np.where(provided[:, None] & ~np.isnan(var), var, tail[:, diag])
+            rows[sel, start:start + _TAIL] = tail.view(np.uint8)
+        joined = rows.tobytes()
+        for j, i in enumerate(idx):
+            out[i] = joined[j * length:(j + 1) * length]
+    return out
 
 
 def decode_at(u8, off, length, ros1):

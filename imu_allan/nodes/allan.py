@@ -12,6 +12,11 @@ and publishes every ``publish_period`` seconds:
 * ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share) and each axis
   against the noise budget (OK / WARN / ERROR / STALE).
 
+With ``covariance_topic`` set, every ``imu/data_raw`` message is also republished there as it
+is drained, its angular-velocity and linear-acceleration covariance diagonals set to the live
+per-sample variance N^2 rate_hz of the latest coefficients (robot_localization reads these),
+patched in the serialized bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`).
+
 The numerics are :class:`imu_allan.core.online.OnlineAllan` (stamp checks, stationarity
 gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
 code, so the numbers agree for the same samples.  Messages are not handled one by one: the
@@ -24,15 +29,18 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from ..core import health as hm
 from ..core.model import NoiseModel
 from ..core.online import OnlineAllan, StagedEstimate
-from ..core.units import AXES, TERM_PARAMETERS
+from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 from ..formats.imu_adapter import cdr_to_arrays
+from ..formats.imu_cdr import set_covariance_diagonals
 from ..report.coeffs_layout import (
     COEFF_LABELS,
     coefficient_table,
@@ -91,6 +99,11 @@ PARAMETERS = [
     Param('rate_tolerance', 0.1, 'WARN when the measured rate differs by more than this fraction',
           (0.0, 10.0)),
     Param('hardware_id', '', 'hardware_id of the diagnostic statuses'),
+    Param('covariance_topic', '', 'republish every imu/data_raw message here with the angular-'
+                                  'velocity and linear-acceleration covariance diagonals set to '
+                                  'the live per-sample variance N^2 rate_hz (the driver values '
+                                  'until the first estimate; empty: off; read-only)',
+          read_only=True),
     Param('drain_period', 0.05, 'seconds between taking the queued messages (read-only)',
           (0.001, 1.0), read_only=True),
     Param('queue_depth', 5000, 'subscription queue depth, messages (read-only; >= rate x '
@@ -182,6 +195,11 @@ class AllanNode(Node):
         self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
         self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._pub_cov = self.create_publisher(
+            Imu, self.params['covariance_topic'], qos_profile_sensor_data,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
+            if self.params['covariance_topic'] else None
+        self._cov_variance = None  # per-sample N^2 f per axis, once estimated
         self._last_arrival = None
         self._cycle = None
         self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
@@ -223,6 +241,8 @@ class AllanNode(Node):
             self._last_arrival = time.monotonic()
             t, data = cdr_to_arrays(msgs)
             self.pipeline.feed(t, data)
+            if self._pub_cov is not None:
+                self._republish(msgs)
         if self._cycle is not None:
             self._advance_cycle()
 
@@ -252,6 +272,9 @@ class AllanNode(Node):
             table = coefficient_table(fitted, AXES) if fitted is not None else None
             if table is not None:
                 self._pub_coeffs.publish(multiarray(table, COEFF_LABELS))
+                # robot_localization reads per-message variances: N^2 f (NaN: keep the driver's)
+                self._cov_variance = discrete_white_std(
+                    table[:, IEEE_TERMS.index('white_noise'), 0], self.params['rate_hz']) ** 2
             self._cycle = None
             self._cycle_cpu += time.perf_counter() - start
             self.last_cycle = {'cycle_total_s': self._cycle_cpu,
@@ -260,6 +283,13 @@ class AllanNode(Node):
             self._pub_diag.publish(self._diagnostics(result, table))
         else:
             self._cycle_cpu += time.perf_counter() - start
+
+    def _republish(self, msgs):
+        """Each raw message on covariance_topic, its diagonals patched in bulk (bytes)."""
+        if self._cov_variance is not None:
+            msgs = set_covariance_diagonals(msgs, self._cov_variance)
+        for blob in msgs:
+            self._pub_cov.publish(blob)
 
     def _load_model(self):
         """The reference noise model for the discrepancy check (validated on set)."""

@@ -42,6 +42,8 @@ class ExportValues:
     def __init__(self, fitted, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw'):
         """Collect from ``fitted``; ``rate_hz`` defaults to the rate the model was fitted at."""
         analysis = fitted if hasattr(fitted, 'fit') else None
+        #: the Analysis when one was given (its band and upper limits), else None
+        self.analysis = analysis
         self.fit = fitted.fit if analysis is not None else fitted
         self.fitted_rate_hz = float(self.fit.rate_hz)
         self.rate_hz = float(rate_hz) if rate_hz else self.fitted_rate_hz

@@ -29,14 +29,13 @@ module that defines them::
                       'stddev = N sqrt(f); dynamic_bias_stddev = sigma sqrt(2 / tau_c)',
                       build=_gazebo_build, render=_gazebo_render))
 
-plus that module's name in :data:`PLUGINS` below, so that ``--export`` and ``all`` see it.  A
+plus an import of that module at the end of this one, so that ``--export`` and ``all`` see it.  A
 builder asks ``values.worst(sensor, term, key)`` or ``values.per_axis(sensor, term, key)``
 (and ``values.value(axis, term, param)`` for Gauss-Markov parameters); the header's axis rule
 and upper-limit marks follow from those calls.
 """
 
 from dataclasses import dataclass
-import importlib
 import json
 import math
 from pathlib import Path
@@ -45,8 +44,6 @@ from typing import Callable
 from ..errors import InputError
 from .export_values import check_inflate, ExportValues
 
-#: Modules that register more exporters when imported (e.g. ``'imu_allan.report.sim_models'``).
-PLUGINS = ()
 EXPORT_DIR = 'export'
 #: Standard gravity written where a consumer wants a gravity magnitude (m/s^2).
 GRAVITY = 9.80665
@@ -75,17 +72,8 @@ def register(exporter):
     return exporter
 
 
-def _load_plugins():
-    for module in PLUGINS:
-        try:
-            importlib.import_module(module)
-        except ImportError:  # a plugin not merged (yet): its names are simply not offered
-            pass
-
-
 def exporter_names():
     """Registered exporter names, in registration order."""
-    _load_plugins()
     return list(EXPORTERS)
 
 
@@ -526,7 +514,6 @@ register(Exporter(
 
 
 def _prepare(fitted, name, rate_hz, inflate, source, topic):
-    _load_plugins()
     if name not in EXPORTERS:
         raise ValueError(f'unknown exporter {name!r} (known: {", ".join(EXPORTERS)})')
     exporter = EXPORTERS[name]
@@ -558,3 +545,7 @@ def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
             (target / file_name).write_text(text, encoding='utf-8')
             written.append(f'{EXPORT_DIR}/{file_name}')
     return written
+
+
+# Exporters defined elsewhere register themselves on import (at the end: they import this).
+from . import sim_exporters  # noqa: E402, F401, I001

@@ -106,3 +106,42 @@ def test_cdr_to_arrays_equals_the_message_adapter_on_rclpy_bytes():
     t, d = cdr_to_arrays([serialize_message(m) for m in msgs])
     np.testing.assert_array_equal(t, t_ref)
     np.testing.assert_array_equal(d, d_ref)
+
+
+def test_covariance_diagonals_patched_in_bytes_as_rclpy_reads_them():
+    """set_covariance_diagonals: rclpy deserializes exactly the intended messages.
+
+    Diagonals set, off-diagonals and orientation kept, a -1 ("not provided") matrix and NaN
+    entries left alone, order and every other field unchanged, over several frame_id lengths.
+    """
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import Imu
+
+    from imu_allan.formats.imu_cdr import set_covariance_diagonals
+    rng = np.random.default_rng(13)
+    msgs = []
+    for i, frame in enumerate(['imu_link', 'a', 'imu', 'base_imu_frame_0'] * 5):
+        m = Imu()
+        m.header.frame_id = frame
+        m.header.stamp.sec, m.header.stamp.nanosec = 1_700_000_000 + i, 1000 * i
+        m.orientation_covariance = [-1.0] + [0.0] * 8
+        m.angular_velocity_covariance = rng.normal(size=9).tolist()
+        m.linear_acceleration_covariance = rng.normal(size=9).tolist()
+        if i % 4 == 3:
+            m.linear_acceleration_covariance[0] = -1.0
+        m.angular_velocity.x = float(i)
+        msgs.append(m)
+    variances = [1e-4, 2e-4, np.nan, 3e-3, 4e-3, 5e-3]
+    blobs = set_covariance_diagonals([serialize_message(m) for m in msgs], variances)
+    for i, (m, blob) in enumerate(zip(msgs, blobs)):
+        got = deserialize_message(blob, Imu)
+        want_w = np.array(m.angular_velocity_covariance)
+        want_w[[0, 4]] = variances[:2]
+        want_a = np.array(m.linear_acceleration_covariance)
+        if i % 4 != 3:
+            want_a[[0, 4, 8]] = variances[3:]
+        np.testing.assert_array_equal(got.angular_velocity_covariance, want_w)
+        np.testing.assert_array_equal(got.linear_acceleration_covariance, want_a)
+        assert list(got.orientation_covariance) == list(m.orientation_covariance)
+        assert (got.header.frame_id, got.header.stamp.nanosec, got.angular_velocity.x) == \
+            (m.header.frame_id, m.header.stamp.nanosec, m.angular_velocity.x)

@@ -409,17 +409,21 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
                              steps, initial_gaps, gaps, snapshots, n_sims, start, notes)
 
 
-def run_samples(samples, **kwargs):
-    """:func:`run_discrepancy` on a :class:`~imu_allan.formats.samples.Samples` recording.
-
-    The sample rate is the median of the time-stamp differences.
-    """
-    dt = np.diff(np.asarray(samples.t, dtype=float))
+def sample_rate(t):
+    """Sample rate (Hz) of time stamps ``t`` (s): 1 / the median increasing difference."""
+    dt = np.diff(np.asarray(t, dtype=float))
     dt = dt[np.isfinite(dt) & (dt > 0)]
     if dt.size == 0:
         raise ValueError('time stamps do not increase: cannot find the sample rate')
-    rate = 1.0 / float(np.median(dt))
-    return run_discrepancy(samples.data, rate, axes=samples.axes, **kwargs)
+    return 1.0 / float(np.median(dt))
+
+
+def run_samples(samples, **kwargs):
+    """:func:`run_discrepancy` on a :class:`~imu_allan.formats.samples.Samples` recording.
+
+    The sample rate is :func:`sample_rate` of the time stamps.
+    """
+    return run_discrepancy(samples.data, sample_rate(samples.t), axes=samples.axes, **kwargs)
 
 
 def gap_summary(model, result, alpha=ALPHA):
