@@ -48,8 +48,9 @@ def test_kernel_choice_by_size():
 
 
 def test_short_record_does_not_import_numba():
-    """A one-minute record in a fresh interpreter never imports numba (0.5-1 s to import and
-    load the kernel, more than the whole estimate takes with numpy).
+    """A one-minute record in a fresh interpreter never imports numba.
+
+    Importing it and loading the kernel take 0.5-1 s, more than the whole estimate with numpy.
     """
     code = ('import sys; import numpy as np; from imu_allan import allan_deviation; '
             'allan_deviation(np.random.default_rng(0).normal(size=(6000, 6)), 100.0); '
