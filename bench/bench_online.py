@@ -25,6 +25,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
+from benchlib import header  # noqa: E402
 import numpy as np  # noqa: E402
 
 from imu_allan.core.allan import allan_deviation  # noqa: E402
@@ -207,6 +208,7 @@ def bench_node(seconds=35.0, rate=1000.0):
 
 def main():
     """Run the selected sections (all by default)."""
+    header('bench_online')
     sections = sys.argv[1:] or ['estimator', 'accuracy', 'node']
     for section in sections:
         {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node}[section]()
