@@ -31,32 +31,33 @@ from imu_allan.formats.samples import Samples
 # functions analyze_samples calls for the estimate and the fit are wrapped to time them.
 _STEPS = r"""
 import sys, time
-t0 = time.perf_counter()
+clock = time.process_time if sys.argv[2] == 'cpu' else time.perf_counter
+t0 = clock()
 from imu_allan.cli import analyze
 from imu_allan.core import analysis
 from imu_allan.formats.readers import read_samples
-from imu_allan.report.json_report import analysis_to_json, console_summary
+from imu_allan.report.json_report import analysis_to_json
 import json
-t1 = time.perf_counter()
+t1 = clock()
 spent = {'estimate': 0.0, 'fit': 0.0}
 def timed(fn, key):
     def run(*args, **kwargs):
-        s = time.perf_counter()
+        s = clock()
         try:
             return fn(*args, **kwargs)
         finally:
-            spent[key] += time.perf_counter() - s
+            spent[key] += clock() - s
     return run
 analysis.allan_deviation = timed(analysis.allan_deviation, 'estimate')
 analysis.fit_noise_model = timed(analysis.fit_noise_model, 'fit')
 analysis._kalibr_upper_limits = timed(analysis._kalibr_upper_limits, 'fit')
 samples = read_samples(sys.argv[1])
-t2 = time.perf_counter()
+t2 = clock()
 result = analysis.analyze_samples(samples, analyze._options(analyze.build_parser().parse_args(
     [sys.argv[1]])))
-t3 = time.perf_counter()
+t3 = clock()
 text = json.dumps(analysis_to_json(result))
-t4 = time.perf_counter()
+t4 = clock()
 other = t3 - t2 - spent['estimate'] - spent['fit']
 print(f'{t1 - t0:.3f} {t2 - t1:.3f} {spent["estimate"]:.3f} {spent["fit"]:.3f} {other:.3f} '
       f'{t4 - t3:.3f}')
@@ -95,15 +96,17 @@ def bench_csv(tmp):
     start = min(_run([sys.executable, '-c', 'pass'])[0] for _ in range(5))
     entry = min(_run([sys.executable, '-c', 'import importlib.metadata as m; '
                       "m.distribution('imu-allan').entry_points"])[0] for _ in range(3))
-    steps = [[float(v) for v in _run([sys.executable, '-c', _STEPS, str(path)])[2].stdout.split()]
-             for _ in range(3)]
-    best = np.min(np.array(steps), axis=0)
     print(f'analyze: one-minute CSV (6000 x 6), --json: {wall:.2f} s wall, {cpu:.2f} s CPU '
           '(best of 5)')
-    print(f'analyze:   interpreter start {start:.3f} s, entry script (importlib.metadata) '
-          f'{entry - start:.3f} s, imports {best[0]:.3f} s, reading {best[1]:.3f} s, '
-          f'estimate {best[2]:.3f} s, fit {best[3]:.3f} s, checks {best[4]:.3f} s, '
-          f'report {best[5]:.3f} s')
+    for clock in ('wall', 'cpu'):
+        steps = [_run([sys.executable, '-c', _STEPS, str(path), clock])[2].stdout.split()
+                 for _ in range(3)]
+        best = np.min(np.array(steps, dtype=float), axis=0)
+        print(f'analyze:   {clock}: imports {best[0]:.3f} s, reading {best[1]:.3f} s, '
+              f'estimate {best[2]:.3f} s, fit {best[3]:.3f} s, checks {best[4]:.3f} s, '
+              f'report {best[5]:.3f} s')
+    print(f'analyze:   wall: interpreter start {start:.3f} s, entry script '
+          f'(importlib.metadata) {entry - start:.3f} s')
     goal(f'analyze: one-minute CSV --json {wall:.2f} s wall ({cpu:.2f} s CPU; goal < 1 s wall)',
          wall < 1.0)
 
