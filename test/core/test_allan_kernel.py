@@ -46,11 +46,11 @@ def test_fast_avar_equals_reference(n, axes, ms):
 def test_fast_phase_equals_reference():
     """The compiled phase equals the numpy cumulative sum to rounding.
 
-    Two ranges of rows are integrated in parallel, then joined.  It equals the reference up to
-    a drift k * delta from the mean's rounding (summed in another
-    order; |delta| < 1e-14 x the mean) and a rounding noise of 1e-13 of the largest phase
-    value, measured ~1e-15.  The drift cancels in every second difference; a join carrying
-    the column sums' rounding had left a 1e-9 step, which does not.
+    Two ranges of rows are integrated in parallel, then joined.  The result equals the reference
+    up to a drift k * delta from the mean's rounding (summed in another order; |delta| < 1e-14
+    x the mean) and a rounding noise of 1e-13 of the largest phase value (measured ~1e-15).
+    The drift cancels in every second difference; a join carrying the column sums' rounding
+    had left a 1e-9 step, which does not.
     """
     data = np.random.default_rng(3).normal(size=(40_001, 6)) * 0.01 + [0, 0, 0, 0, 0, 9.8]
     ref = _phase(data)
