@@ -13,6 +13,8 @@ import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
+from benchlib import header  # noqa: E402
+
 from imu_allan.core.allan import allan_deviation  # noqa: E402
 from imu_allan.core.discrepancy import run_discrepancy  # noqa: E402
 from imu_allan.core.model import thesis_gx3_25_model  # noqa: E402
@@ -24,6 +26,7 @@ HOURS = 2.0
 
 def main():
     """Run the benchmark and print the timing."""
+    header('bench_discrepancy')
     model = thesis_gx3_25_model()
     model = model.with_term('gyro_x', 'rate_random_walk', {'value': 2.5e-5})
     model = model.with_term('gyro_z', 'rate_random_walk', {'value': 2.5e-5})

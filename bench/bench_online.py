@@ -29,6 +29,7 @@ import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
+from benchlib import header  # noqa: E402
 import numpy as np  # noqa: E402
 
 from imu_allan.core.allan import allan_deviation  # noqa: E402
@@ -238,6 +239,7 @@ def bench_covariance(n=200_000, batch=50):
 
 def main():
     """Run the selected sections (all by default)."""
+    header('bench_online')
     sections = sys.argv[1:] or ['estimator', 'accuracy', 'node', 'covariance']
     for section in sections:
         {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node,

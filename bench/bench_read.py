@@ -15,11 +15,15 @@ import sys
 import tempfile
 import time
 
+from benchlib import goal, header
 import numpy as np
 
 from imu_allan.formats.bag_reader import read_bag
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.samples import Samples
+
+#: Goals of the fast path, messages per wall-clock second.
+GOALS = {'mcap': 1e6, 'sqlite3': 2.5e6}
 
 
 def _timed(fn, repeat=1):
@@ -42,6 +46,7 @@ def main():
     t = 1.7e9 + np.arange(n) / 400.0
     data = rng.normal(0.0, 0.01, size=(n, 6))
     data[:, 5] += 9.81
+    header('bench_read')
     print('bench_read: Imu messages, 324 B CDR each; rates in messages/s (wall | CPU)')
     with tempfile.TemporaryDirectory(prefix='bench_read_') as tmp:
         cases = [('mcap', n, False), ('mcap', n, True), ('sqlite3', n, False),
@@ -64,6 +69,10 @@ def main():
             print(f'  {label:10s} generic {count / gw / 1e3:5.0f} k | {count / gc / 1e3:5.0f} k   '
                   f'fast {count / fw / 1e6:5.2f} M | {count / fc / 1e6:5.2f} M   '
                   f'speed-up x{gw / fw:4.0f} | x{gc / fc:4.0f}   identical: {same}')
+            if storage in GOALS:
+                goal(f'read: {label} fast path {count / fw / 1e6:.2f} M messages/s wall '
+                     f'({count / fc / 1e6:.2f} M/s CPU; goal >= {GOALS[storage] / 1e6:g} M/s, '
+                     'identical numbers)', same and count / fw >= GOALS[storage])
             del fast, gen
 
 

@@ -155,48 +155,30 @@ def avar_reference(data, ms):
     return out
 
 
-_KERNEL = []
+#: Second differences (samples x axes x averaging times) below which the numpy reference is
+#: used: it finishes (~150-300 M/s) before numba would be imported and the compiled kernel
+#: loaded (0.5-1 s once per process), which decides the run time of short records (a
+#: one-minute CSV at 100 Hz: ~1e6).
+SMALL_WORK = 5e7
 
 
-def _kernel():
-    """Compile (or load from numba's cache) the parallel AVAR kernel on first use.
+def avar_function(work):
+    """The AVAR implementation for ``work`` second differences: numpy reference or compiled.
 
-    numba is imported here, not at module import, so commands that never compute a deviation
-    (``--help``, bad input) start fast.
+    Both take ``(data, ms)`` and return the same numbers (the tests compare them); the
+    compiled one lives in :mod:`.allan_kernel`, imported here on first use so that commands
+    that never compute a long deviation (``--help``, short records) never import numba.
     """
-    if not _KERNEL:
-        import numba
-
-        @numba.njit(fastmath=True, cache=True, inline='never')
-        def sum_sq_second_diff(xa, m):  # pragma: no cover - compiled
-            # Three views indexed from 0, in a function of its own: LLVM vectorises this form;
-            # inlined into the parallel loop, or indexed at k + 2m, k + m, k, it ran 3x slower.
-            n = xa.shape[0] - 2 * m
-            x2, x1, x0 = xa[2 * m:], xa[m:], xa
-            s = 0.0
-            for k in range(n):
-                d = x2[k] - 2.0 * x1[k] + x0[k]
-                s += d * d
-            return s
-
-        @numba.njit(parallel=True, cache=True)
-        def avar_kernel(x, ms):  # pragma: no cover - compiled; compared with avar_reference
-            n_axes, n_phase = x.shape
-            n_tau = ms.shape[0]
-            out = np.empty((n_tau, n_axes))
-            for job in numba.prange(n_axes * n_tau):
-                a = job // n_tau
-                i = job % n_tau
-                m = ms[i]
-                out[i, a] = sum_sq_second_diff(x[a], m) / (2.0 * m * m * (n_phase - 2 * m))
-            return out
-        _KERNEL.append(avar_kernel)
-    return _KERNEL[0]
+    if work < SMALL_WORK:
+        return avar_reference
+    from . import allan_kernel
+    return allan_kernel.avar
 
 
 def avar_fast(data, ms):
-    """Overlapping AVAR like :func:`avar_reference`, compiled and parallel over axes x taus."""
-    return _kernel()(_phase(data), np.ascontiguousarray(ms, dtype=np.int64))
+    """Overlapping AVAR like :func:`avar_reference`, compiled and multi-threaded."""
+    from . import allan_kernel
+    return allan_kernel.avar(data, ms)
 
 
 def identify_noise(tau, avar):
@@ -242,7 +224,8 @@ def allan_deviation(data, rate_hz, taus=None, points_per_decade=DEFAULT_POINTS_P
     axes : sequence of str, optional
         Column names (default: the first n_axes of the package axis order).
     fast : bool
-        Use the compiled estimator (identical to the numpy reference within rounding).
+        Use the compiled estimator for long records (:func:`avar_function`; identical to the
+        numpy reference within rounding); False: always the numpy reference.
 
     Returns
     -------
@@ -274,5 +257,6 @@ def allan_deviation(data, rate_hz, taus=None, points_per_decade=DEFAULT_POINTS_P
             raise ValueError(f'averaging time {tau_in[2 * ms > n][0]:g} s needs at least '
                              f'{2 * int(ms[2 * ms > n][0])} samples, record has {n}')
         ms = np.unique(ms)
-    avar = (avar_fast if fast else avar_reference)(data, ms)
+    avar_of = avar_function(data.size * ms.size) if fast else avar_reference
+    avar = avar_of(data, ms)
     return AllanResult.from_avar(ms, avar, n, rate_hz, axes)

@@ -1,9 +1,9 @@
 """The simulator exporters: Gazebo's SDF ``<imu>`` noise and PX4 SITL's gazebo_imu_plugin.
 
 Registered in :mod:`imu_allan.report.exporters` (``--export gazebo,px4``); the files and their
-conversions are :func:`imu_allan.formats.gazebo_sdf.export_gazebo` and ``export_px4``, which
-write their own provenance header (the simulators' terms need more explanation than the
-common header gives).
+conversions are :func:`imu_allan.formats.gazebo_sdf.export_gazebo` and ``export_px4``.  Each
+file starts with the common provenance header (an XML comment), then the writer's own notes on
+the simulator's terms.
 """
 
 from ..formats.gazebo_sdf import export_gazebo, export_px4, GAZEBO_FILE, PX4_FILE
@@ -18,9 +18,10 @@ def _exporter(name, file_name, consumer, conversion, write, per_axis):
     def build(values):
         return write(_source(values), values.rate_hz, values.inflate, values.source)[0]
 
-    def render(_data, _header, values):
-        return {file_name: write(_source(values), values.rate_hz, values.inflate,
-                                 values.source)[1]}
+    def render(_data, header, values):
+        text = write(_source(values), values.rate_hz, values.inflate, values.source)[1]
+        lines = ''.join(f'  {line.replace("--", "- -")}\n' for line in header)
+        return {file_name: f'<!--\n{lines}-->\n{text}'}
     return register(Exporter(name, (file_name,), consumer, 'per sample' if per_axis else
                              'continuous', conversion, build, render, per_axis=per_axis))
 

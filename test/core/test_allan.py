@@ -5,13 +5,16 @@ Greenhall-Riley EDF values of anchors 10.2, and allantools itself on random data
 """
 
 import math
+import subprocess
+import sys
 
 import allantools
 import numpy as np
 import pytest
 
 from imu_allan import allan_deviation
-from imu_allan.core.allan import avar_fast, avar_reference, identify_noise, tau_grid
+from imu_allan.core import allan_kernel
+from imu_allan.core.allan import avar_fast, avar_function, avar_reference, identify_noise, tau_grid
 from imu_allan.core.edf import chi2_interval, edf_oadev
 
 NBS14_FREQ = [892, 809, 823, 798, 671, 644, 883, 903, 677]
@@ -36,6 +39,26 @@ def test_fast_path_equals_reference():
     data = rng.standard_normal((50_000, 3)) * [1e-3, 2e-3, 3e-2] + [0.0, 0.1, 9.81]
     ms = tau_grid(50_000, 20, 4)
     np.testing.assert_allclose(avar_fast(data, ms), avar_reference(data, ms), rtol=1e-10)
+
+
+def test_kernel_choice_by_size():
+    """Short records take the numpy reference, long ones the compiled kernel."""
+    assert avar_function(6000 * 6 * 25) is avar_reference       # one minute at 100 Hz
+    assert avar_function(360_000 * 6 * 43) is allan_kernel.avar  # one hour
+
+
+def test_short_record_does_not_import_numba():
+    """A one-minute record in a fresh interpreter never imports numba.
+
+    Importing it and loading the kernel take 0.5-1 s, more than the whole estimate with numpy.
+    """
+    code = ('import sys; import numpy as np; from imu_allan import allan_deviation; '
+            'allan_deviation(np.random.default_rng(0).normal(size=(6000, 6)), 100.0); '
+            "print('numba' in sys.modules)")
+    proc = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == 'False'
 
 
 def test_agrees_with_allantools_oadev():

@@ -42,6 +42,7 @@ from .workflow import (
     gap_summary,
     run_discrepancy,
     run_samples,
+    sample_rate,
     start_model,
     Step,
 )
@@ -49,4 +50,5 @@ from .workflow import (
 __all__ = ['ALPHA', 'AxisFit', 'Band', 'Candidate', 'DEFAULT_START', 'DiscrepancyResult',
            'evaluate_candidates', 'excursion_band', 'fit_terms', 'FitProblem', 'Gap',
            'gap_summary', 'improvement_test', 'measure_gap', 'model_band', 'pool_simulations',
-           'position_range', 'run_discrepancy', 'run_samples', 'start_model', 'Step']
+           'position_range', 'run_discrepancy', 'run_samples', 'sample_rate', 'start_model',
+           'Step']

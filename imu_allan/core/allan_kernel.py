@@ -1,0 +1,217 @@
+"""Compiled overlapping Allan variance (numba), imported by :mod:`imu_allan.core.allan` on use.
+
+Compiled once per install: the kernels are module-level functions with ``cache=True``, which
+numba keys by this file and the function names, so the machine code compiled by the first
+process is loaded by every later one.  (Functions defined inside another function never hit
+that cache: their closure is part of the key and differs in every process.)  Where this
+package's ``__pycache__`` cannot be written (a read-only install), numba falls back to the user
+cache directory (``~/.cache/numba``, or ``$NUMBA_CACHE_DIR`` when set), and a one-line warning
+says where the compiled code went; where no directory is writable at all, the warning says the
+kernel is compiled in every process and how to avoid it.
+
+Speed (``bench/bench_allan.py``, ``docs/benchmarks.md``): the second differences
+x_{k+2m} - 2 x_{k+m} + x_k of all averaging times are summed block by block, :data:`BLOCK`
+phase points at a time (32 KiB, the L1 data cache), every averaging time per block and four at
+a time sharing the x_k stream.  One pass over an axis thus reads each phase point from memory
+once and the 2 m_max window behind the block from the L2/L3 caches, where one pass per averaging
+time streamed the whole phase from memory about 100 times.  Sums of at most BLOCK terms are
+added to the totals, which keeps the float64 rounding of the long sums small.  The work is cut
+into (axis, range of k) jobs run on threads (the kernels release the GIL), which balances
+better than a static split when other processes share the cores.
+"""
+
+from concurrent.futures import ThreadPoolExecutor
+import logging
+import os
+
+import numba
+import numpy as np
+
+#: Phase points per block (32 KiB of float64: the L1 data cache of current x86 cores).
+BLOCK = 4096
+
+_LOG = logging.getLogger(__name__)
+_UNCACHED = []  # kernels compiled without a disk cache (no writable cache directory)
+
+
+def _jit(**options):
+    """``numba.njit(cache=True, **options)``; without the cache if no directory is writable."""
+    def wrap(fn):
+        try:
+            return numba.njit(cache=True, **options)(fn)
+        except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+            _UNCACHED.append(fn.__name__)
+            return numba.njit(**options)(fn)
+    return wrap
+
+
+@_jit(fastmath=True, nogil=True, inline='never')
+def _sum_one(xa, m, k0, k1):  # pragma: no cover - compiled; tested against avar_reference
+    # Three views indexed from 0 in a function of its own: the form LLVM vectorises.
+    x2, x1, x0 = xa[k0 + 2 * m:], xa[k0 + m:], xa[k0:]
+    s = 0.0
+    for k in range(k1 - k0):
+        d = x2[k] - 2.0 * x1[k] + x0[k]
+        s += d * d
+    return s
+
+
+@_jit(fastmath=True, nogil=True, inline='never')
+def _sum_four(xa, ma, mb, mc, md, k0, k1):  # pragma: no cover - compiled
+    # Four averaging times in one loop: x_k is loaded once for the four (9 loads per 4 terms
+    # instead of 12) and four accumulators hide the add latency.
+    x0 = xa[k0:]
+    a1, a2 = xa[k0 + ma:], xa[k0 + 2 * ma:]
+    b1, b2 = xa[k0 + mb:], xa[k0 + 2 * mb:]
+    c1, c2 = xa[k0 + mc:], xa[k0 + 2 * mc:]
+    d1, d2 = xa[k0 + md:], xa[k0 + 2 * md:]
+    sa = sb = sc = sd = 0.0
+    for k in range(k1 - k0):
+        v = x0[k]
+        da = a2[k] - 2.0 * a1[k] + v
+        db = b2[k] - 2.0 * b1[k] + v
+        dc = c2[k] - 2.0 * c1[k] + v
+        dd = d2[k] - 2.0 * d1[k] + v
+        sa += da * da
+        sb += db * db
+        sc += dc * dc
+        sd += dd * dd
+    return sa, sb, sc, sd
+
+
+@_jit(nogil=True)
+def _axis_range(xa, ms, k_lo, k_hi, acc):  # pragma: no cover - compiled
+    # acc[t] += sum of squared second differences at ms[t] (ascending) for k in [k_lo, k_hi).
+    n_phase = xa.shape[0]
+    n_tau = ms.shape[0]
+    for k0 in range(k_lo, k_hi, BLOCK):
+        k1 = min(k0 + BLOCK, k_hi)
+        for i0 in range(0, n_tau, 4):
+            if i0 + 3 < n_tau:
+                # The group's common range: k < n_phase - 2 m of its largest m.
+                k1g = min(k1, n_phase - 2 * ms[i0 + 3])
+                if k1g > k0:
+                    sa, sb, sc, sd = _sum_four(xa, ms[i0], ms[i0 + 1], ms[i0 + 2], ms[i0 + 3],
+                                               k0, k1g)
+                    acc[i0] += sa
+                    acc[i0 + 1] += sb
+                    acc[i0 + 2] += sc
+                    acc[i0 + 3] += sd
+                lo, top = max(k0, k1g), i0 + 3
+            else:
+                lo, top = k0, n_tau
+            for t in range(i0, top):  # the shorter averaging times run further
+                k1t = min(k1, n_phase - 2 * ms[t])
+                if k1t > lo:
+                    acc[t] += _sum_one(xa, ms[t], lo, k1t)
+
+
+@_jit(nogil=True)
+def _column_sums(y, k_lo, k_hi):  # pragma: no cover - compiled
+    # Sums of BLOCK rows added to the totals: the rounding error of a long sum of values with a
+    # large mean (accelerometers: 9.8) stays ~1e-16 relative instead of growing with n.
+    total = np.zeros(y.shape[1])
+    part = np.zeros(y.shape[1])
+    for k in range(k_lo, k_hi):
+        for a in range(y.shape[1]):
+            part[a] += y[k, a]
+        if (k - k_lo) % BLOCK == BLOCK - 1 or k == k_hi - 1:
+            total += part
+            part[:] = 0.0
+    return total
+
+
+@_jit(nogil=True)
+def _integrate(y, mean, k_lo, k_hi, x):  # pragma: no cover - compiled
+    # x[a, k + 1] = sum_{j=k_lo..k} (y[j, a] - mean[a]): one row-major pass.
+    run = np.zeros(y.shape[1])
+    for k in range(k_lo, k_hi):
+        for a in range(y.shape[1]):
+            run[a] += y[k, a] - mean[a]
+            x[a, k + 1] = run[a]
+
+
+_POOL = []
+
+
+def _map(fn, jobs):
+    """Run ``fn`` over ``jobs`` on one thread per core (inline on a single core)."""
+    workers = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else 1
+    if workers < 2 or len(jobs) < 2:
+        return [fn(job) for job in jobs]
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(workers, thread_name_prefix='imu_allan_avar'))
+    return list(_POOL[0].map(fn, jobs))
+
+
+def _cuts(n, parts):
+    return [n * c // parts for c in range(parts + 1)]
+
+
+def phase(data):
+    """Phase (A, n + 1) of rate samples (n, A), de-meaned, x_0 = 0: as ``allan._phase``.
+
+    Row-major passes over the samples, each split in two ranges of rows: the column sums, the
+    running sums of each range, then the first range's end value added to the second range
+    (exactly what running on would have given, up to rounding; a start value derived from
+    the column sums instead would carry their rounding as a step into the phase).
+    """
+    y = np.ascontiguousarray(data, dtype=np.float64)
+    n, n_axes = y.shape
+    cut = _cuts(n, 2)
+    sums = _map(lambda c: _column_sums(y, cut[c], cut[c + 1]), [0, 1])
+    mean = (sums[0] + sums[1]) / n
+    x = np.empty((n_axes, n + 1))
+    x[:, 0] = 0.0
+    _map(lambda c: _integrate(y, mean, cut[c], cut[c + 1], x), [0, 1])
+    x[:, cut[1] + 1:] += x[:, cut[1]:cut[1] + 1]
+    return x
+
+
+def avar(data, ms):
+    """Overlapping AVAR (T, A) of rate samples (n, A): as ``allan.avar_reference``, compiled.
+
+    ``ms``: averaging factors, 1 <= m <= n / 2, any order.
+    """
+    x = phase(data)
+    n_axes, n_phase = x.shape
+    ms = np.asarray(ms, dtype=np.int64)
+    order = np.argsort(ms)
+    sms = np.ascontiguousarray(ms[order])
+    if sms.size == 0:
+        return np.zeros((0, n_axes))
+    if sms[0] < 1 or 2 * sms[-1] > n_phase - 1:
+        raise ValueError(f'averaging factors must be in 1 .. {(n_phase - 1) // 2}')
+    k_max = n_phase - 2 * int(sms[0])
+    chunks = -(-8 // n_axes)  # at least 8 jobs: balance on a shared machine
+    cut = _cuts(k_max, chunks)
+    part = np.zeros((n_axes, chunks, sms.size))
+
+    def job(index):
+        a, c = divmod(index, chunks)
+        _axis_range(x[a], sms, cut[c], cut[c + 1], part[a, c])
+    _map(job, list(range(n_axes * chunks)))
+    _note_compilation()
+    out = np.empty((sms.size, n_axes))
+    out[order] = part.sum(axis=1).T / (2.0 * sms * sms * (n_phase - 2 * sms))[:, None]
+    return out
+
+
+_NOTED = []
+
+
+def _note_compilation():
+    """Warn once if the kernel could not be cached in this package's own ``__pycache__``."""
+    if _NOTED:
+        return
+    _NOTED.append(True)
+    if _UNCACHED:
+        _LOG.warning('imu_allan: no writable cache directory for numba (set NUMBA_CACHE_DIR '
+                     'to one): the Allan kernel is compiled in every process (~2 s)')
+        return
+    stats = _axis_range.stats
+    own = os.path.join(os.path.dirname(os.path.abspath(__file__)), '__pycache__')
+    chosen = os.environ.get('NUMBA_CACHE_DIR')  # the user's choice: nothing to report
+    if stats.cache_misses and not chosen and os.path.abspath(stats.cache_path) != own:
+        _LOG.warning('imu_allan: compiled the Allan kernel into %s (once: %s is not '
+                     'writable)', stats.cache_path, own)
