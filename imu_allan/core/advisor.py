@@ -434,7 +434,7 @@ class StagedAdvice:
         return self.done
 
 
-def advise(result, fitted, targets=None, grid=None):
+def advise(result, fitted, targets=None, grid=None, undetected=True):
     """The :class:`Advice` for a record's AllanResult and its FittedModel.
 
     Parameters
@@ -447,9 +447,11 @@ def advise(result, fitted, targets=None, grid=None):
         Relative 68.3 % half-width per term (default :data:`DEFAULT_TARGETS`).
     grid : callable, optional
         ``grid(n)`` -> averaging factors of a record of n samples (default: ``analyze``'s).
+    undetected : bool
+        Also give the upper limits and detection times of undetected terms.
 
     """
-    staged = StagedAdvice(result, fitted, targets, grid)
+    staged = StagedAdvice(result, fitted, targets, grid, undetected)
     while not staged.step():
         pass
     return staged.advice

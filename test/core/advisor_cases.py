@@ -53,17 +53,22 @@ def analyse(model, n, seed, terms):
     return result, fit_noise_model(result, terms=terms)
 
 
-def cases(models=MODELS, seeds=SEEDS):
-    """Yield one row per (model, seed, term): predicted time and achieved half-width."""
+def cases(models=MODELS, seeds=SEEDS, skip=()):
+    """Yield one row per (model, seed, term): predicted time and achieved half-width.
+
+    Terms in ``skip`` are left out (the test leaves out white noise: its 1/sqrt(T) forecast
+    is the easy case, and every case costs a long record).
+    """
     for name, axis_terms, terms, base_s in models:
         model = NoiseModel({'gyro_x': axis_terms}, RATE_HZ)
         n0 = int(base_s * RATE_HZ)
         for seed in seeds:
             result, fitted = analyse(model, n0, seed, terms)
-            fitted_terms = [t for t in fitted.model.terms.get('gyro_x', {}) if t in axis_terms]
+            fitted_terms = [t for t in fitted.model.terms.get('gyro_x', {})
+                            if t in axis_terms and t not in skip]
             targets = {t: TARGET_FRACTION * rel_halfwidth(fitted, 'gyro_x', t)
                        for t in fitted_terms}
-            advice = advise(result, fitted, targets)
+            advice = advise(result, fitted, targets, undetected=False)
             for term in fitted_terms:
                 entry = advice.axes['gyro_x'][term]
                 row = {'model': name, 'seed': seed, 'term': term, 'base_s': base_s,

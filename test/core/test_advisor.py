@@ -82,15 +82,16 @@ def test_the_prediction_comes_true():
     """Achieved half-width within a factor 1.5 of the target for >= 80 % of the cases.
 
     Cases: white + B, white + K, white + B + K and white + Gauss-Markov, seeds 1 and 2 (the
-    table in docs/method.md runs three), each fitted term of the model; the target is half
+    table in docs/method.md runs three and includes white noise), each fitted term of the
+    model but white noise (the easy 1/sqrt(T) case); the target is half
     the base record's relative half-width and the longer record has a new seed.  Why the
     tolerance is fair: the achieved half-width is itself estimated from one record: it divides
     by the fitted value (which scatters by the target itself, 5-15 %), and the term selection
     of the longer record is random too; a factor 1.5 leaves room for that, while a forecast
     off by more than ~2.3x in time (1.5^2 for a 1/sqrt(T) term) fails the case.
     """
-    rows = list(cases(seeds=SEEDS[:2]))
-    assert len(rows) >= 14
+    rows = list(cases(seeds=SEEDS[:2], skip=('white_noise',)))
+    assert len(rows) >= 8
     ok = [r for r in rows if r['ok']]
     assert len(ok) >= 0.8 * len(rows), [(r['model'], r['term'], r['ratio']) for r in rows]
     assert all(r['more_s'] > 0 for r in rows)
