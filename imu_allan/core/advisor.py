@@ -14,7 +14,9 @@ their EDF.  For a record of n' samples the averaging times are the grid of that 
 n' / min_clusters) and the EDFs are Greenhall's for n' samples (:func:`~.edf.edf_oadev`, noise
 type identified on the model curve as :func:`~.allan.identify_noise` does on data).  Evaluating
 the covariance with the fitted model's own curve on that grid predicts the half-width a record
-of n' samples would give; the smallest n' that meets a target is found by bisection in log n'.
+of n' samples would give.  Scaled so that at the current length it equals the fit's own
+half-width (they differ only by the grid and the noise identification, a few %), the smallest
+n' that meets a target is found by bisection in log n'.
 
 Two alternatives (term sets S and S') are told apart when the selection criterion
 chi^2 + k x penalty (fit.py) of the worse exceeds the better's by SEPARATION_MARGIN (10, "very
@@ -24,7 +26,8 @@ margin.  The time until it separates: each alternative in turn is taken as the t
 curve at n' is fitted with the other one (noise-free, so chi^2 is the non-centrality lambda of
 the criterion difference); separated when lambda - 2 sqrt(lambda) (one standard deviation of
 the noisy difference below its mean) exceeds the margin for both.  An undetected term at its
-upper limit is detected once its noise-free criterion gain exceeds the penalty of one term.
+95 % upper limit (delta chi^2 = 4 on the data) is detected once that gain, grown as the
+noise-free forecast grows, exceeds the penalty of one term.
 """
 
 from dataclasses import dataclass, field
@@ -38,6 +41,7 @@ from ..errors import InputError
 from . import terms as _terms
 from .allan import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
 from .edf import edf_oadev
+
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
 from .fit import _fit_terms, _Problem, _shape_columns, SELECTION_PENALTY, upper_limit
 from .units import IEEE_TERMS, TERM_PARAMETERS
@@ -158,7 +162,7 @@ def analysis_grid(points_per_decade=DEFAULT_POINTS_PER_DECADE,
 
 
 def factor_grid_of(ms, min_clusters):
-    """``grid(n)`` for a fixed factor list (the online estimator): factors spanned n/min_clusters."""
+    """``grid(n)`` for a fixed factor list (the online estimator): m <= n / min_clusters."""
     ms = np.asarray(ms, dtype=np.int64)
     return lambda n: ms[ms * int(min_clusters) <= n]
 
@@ -350,12 +354,11 @@ class _AxisAdvisor:
                 continue
             pair = (a, b)
             times = []
+            start = _nonlinear(alt_fit.terms)
             for truth, names, key in ((axis_terms, alt_names, 'fit'),
                                       (alt_fit.terms, chosen, other)):
-                def ok(n, truth=truth, names=names, key=key):
-                    gap = self.forecast.criterion_gap(n, truth, key, names,
-                                                      _nonlinear(alt_fit.terms))
-                    return _separated(gap)
+                def ok(n, truth=truth, names=names, key=key, start=start):
+                    return _separated(self.forecast.criterion_gap(n, truth, key, names, start))
                 times.append((yield from _crossing(ok, self.n, n_max)))
             if any(t is None for t in times):
                 self.unresolved.append(Unresolved(self.axis, pair, None, 'not separated '

@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from core.advisor_cases import cases, RATE_HZ, rel_halfwidth, SEEDS, TOLERANCE
+from core.advisor_cases import cases, RATE_HZ, rel_halfwidth, SEEDS
 from imu_allan.core import health
 from imu_allan.core.advisor import (
     Advice,
