@@ -357,8 +357,14 @@ class _AxisAdvisor:
             start = _nonlinear(alt_fit.terms)
             for truth, names, key in ((axis_terms, alt_names, 'fit'),
                                       (alt_fit.terms, chosen, other)):
-                def ok(n, truth=truth, names=names, key=key, start=start):
-                    return _separated(self.forecast.criterion_gap(n, truth, key, names, start))
+                # If the noise-free gap says "separated" already, the data were unlucky: grow
+                # the measured gap as the forecast grows instead (never 0 for an open pair).
+                gap0 = self.forecast.criterion_gap(self.n, truth, key, names, start)
+                scale = max(abs(alt_crit - crit), 1.0) / gap0 if _separated(gap0) else 1.0
+
+                def ok(n, truth=truth, names=names, key=key, scale=scale, start=start):
+                    return _separated(scale * self.forecast.criterion_gap(n, truth, key, names,
+                                                                          start))
                 times.append((yield from _crossing(ok, self.n, n_max)))
             if any(t is None for t in times):
                 self.unresolved.append(Unresolved(self.axis, pair, None, 'not separated '
