@@ -73,7 +73,7 @@ def format_duration(seconds):
 
 
 def _words(term):
-    return term.replace('_', ' ')
+    return 'Gauss-Markov' if term == 'gauss_markov' else term.replace('_', ' ')
 
 
 def _percent(rel):
@@ -90,7 +90,7 @@ def advice_sentence(advice):
     pair_max = max((u.more_s for u in advice.unresolved if u.more_s), default=0.0)
     if limiting is not None and limiting[0] >= pair_max:
         term = limiting[1]
-        axes = sorted({a for a, t, _ in detected if t == term})
+        axes = [a for a, t, _ in detected if t == term]  # package axis order
         where = 'on all axes' if len(axes) == len(advice.axes) else 'on ' + ', '.join(axes)
         clauses.append(f'record {format_duration(record)} more to pin {_words(term)} to '
                        f'{_percent(advice.targets[term])} {where}')
