@@ -7,6 +7,11 @@ import sys
 
 import pytest
 
+# Single-threaded BLAS, as the nodes and commands set it (nodes/__init__.py): on this shared
+# 2-core machine a threaded 40x40 triangular solve took 3 ms instead of 0.17 ms, which made the
+# fit-heavy tests ~10x slower.  Set before any test module imports numpy.
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / 'shared' / 'data'
 EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim')

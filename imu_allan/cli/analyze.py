@@ -59,6 +59,10 @@ def build_parser():
                    help='parallel processes for several inputs (default: cores)')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     add_export_arguments(p)
+    p.add_argument('--target', metavar='TERM=REL,...', default='',
+                   help='precision targets of the recording advice: relative 68.3 %% '
+                        'half-width per term, e.g. bias_instability=0.05 (default '
+                        'white_noise=0.02, bias_instability=0.10, other terms 0.25)')
     return p
 
 
@@ -80,6 +84,8 @@ def _options(args):
     for term in terms or []:
         if term not in ALL_TERMS:
             raise InputError('--terms', f'unknown term {term!r} (known: {", ".join(ALL_TERMS)})')
+    from ..core.advisor import parse_targets
+    args.targets = parse_targets(args.target, '--target')
     return AnalysisOptions(terms=terms, points_per_decade=args.points_per_decade,
                            min_clusters=args.min_clusters, replace_outliers=args.replace_outliers,
                            tau_max=args.tau_max, rate_hz=args.rate, allow_jumps=args.allow_jumps,
@@ -124,6 +130,9 @@ def run_one(path, args, options, progress=None):
     analysis = analyze_samples(samples, options)
     denoised = None
     report = analysis_to_json(analysis)
+    from ..report.advice import advice_sentence, advice_to_json, compute_advice
+    advice = compute_advice(analysis, options, args.targets)
+    report['advice'] = advice_to_json(advice)
     if args.denoise:
         step('denoising')
         den_samples, denoised = _denoised_analysis(samples, analysis, options)
@@ -148,7 +157,7 @@ def run_one(path, args, options, progress=None):
                 _write_denoised_bag(path, real_fmt, samples, den_samples, staging)
         report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
                                             extra=extra, exports=(args.export, args.inflate))
-    return report, console_summary(analysis)
+    return report, console_summary(analysis) + '\n' + advice_sentence(advice)
 
 
 def _worker(job):

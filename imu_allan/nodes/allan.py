@@ -9,8 +9,10 @@ and publishes every ``publish_period`` seconds:
   detected;
 * ``imu/allan_deviation`` (std_msgs/Float64MultiArray): dims ``row`` (7: tau, gyro_x .. accel_z)
   x ``tau`` (T);
-* ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share) and each axis
-  against the noise budget (OK / WARN / ERROR / STALE).
+* ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share), each axis
+  against the noise budget (OK / WARN / ERROR / STALE) and the recording advice (OK when every
+  precision target is met, WARN with the longest additional recording time otherwise;
+  :mod:`imu_allan.core.advisor`, recomputed every ``advice_period`` s in steps).
 
 With ``covariance_topic`` set, every ``imu/data_raw`` message is also republished there as it
 is drained, its angular-velocity and linear-acceleration covariance diagonals set to the live
@@ -35,6 +37,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from ..core import health as hm
+from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
 from ..core.model import NoiseModel
 from ..core.online import OnlineAllan, StagedEstimate
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
@@ -104,6 +107,12 @@ PARAMETERS = [
                                   'the live per-sample variance N^2 rate_hz (the driver values '
                                   'until the first estimate; empty: off; read-only)',
           read_only=True),
+    Param('targets', '', 'recording advice targets TERM=REL,...: relative 68.3 % half-widths '
+                         'over the defaults (white_noise=0.02, bias_instability=0.10, others '
+                         '0.25)'),
+    Param('advice_period', 60.0, 'seconds between recording-advice updates (each costs about '
+                                 'a second of CPU, run in steps between drains)',
+          (0.1, 86400.0)),
     Param('drain_period', 0.05, 'seconds between taking the queued messages (read-only)',
           (0.001, 1.0), read_only=True),
     Param('queue_depth', 5000, 'subscription queue depth, messages (read-only; >= rate x '
@@ -152,6 +161,7 @@ def check_parameters(p):
     from ..core.health import NoiseBudget
     from ..core.model import ModelError, NoiseModel
     parse_terms(p['terms'])
+    parse_targets(p['targets'], 'targets')
     NoiseBudget.from_yaml(p['budget_file'] or None)
     if p['model_file']:
         try:
@@ -202,6 +212,8 @@ class AllanNode(Node):
         self._cov_variance = None  # per-sample N^2 f per axis, once estimated
         self._last_arrival = None
         self._cycle = None
+        self._advice, self._advice_due = None, 0.0
+        self._advice_status = advice_health(None, f'{self.get_name()}: recording advice')
         self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
                            'cycle_wall_s': math.nan}
         self._drain_timer = self.create_timer(self.params['drain_period'], self.drain)
@@ -245,6 +257,8 @@ class AllanNode(Node):
                 self._republish(msgs)
         if self._cycle is not None:
             self._advance_cycle()
+        elif self._advice is not None:
+            self._advance_advice()
 
     def publish(self):
         """Start a publish cycle: freeze the sums; the steps run between drains."""
@@ -280,6 +294,7 @@ class AllanNode(Node):
             self.last_cycle = {'cycle_total_s': self._cycle_cpu,
                                'cycle_max_step_s': self._cycle_max_step,
                                'cycle_wall_s': time.monotonic() - self._cycle_wall}
+            self._start_advice(result, fitted)
             self._pub_diag.publish(self._diagnostics(result, table))
         else:
             self._cycle_cpu += time.perf_counter() - start
@@ -290,6 +305,28 @@ class AllanNode(Node):
             msgs = set_covariance_diagonals(msgs, self._cov_variance)
         for blob in msgs:
             self._pub_cov.publish(blob)
+    def _start_advice(self, result, fitted):
+        """Start the recording advice on a finished estimate (at most every advice_period)."""
+        now = time.monotonic()
+        if self._advice is not None or fitted is None or now < self._advice_due:
+            return
+        self._advice_due = now + self.params['advice_period']
+        if self.params['window_s'] > 0:  # a sliding window does not grow with recording
+            self._advice_status = hm.Health(self._advice_status.name, hm.OK,
+                                            'no advice with a sliding window (window_s > 0)')
+            return
+        est = self.pipeline.estimator
+        self._advice = StagedAdvice(result, fitted, parse_targets(self.params['targets']),
+                                    factor_grid_of(est.ms, est.min_clusters), undetected=False)
+
+    def _advance_advice(self):
+        """Advice steps for up to STEP_BUDGET_S; its status is ready when they are done."""
+        start = time.perf_counter()
+        while not self._advice.step() and time.perf_counter() - start < STEP_BUDGET_S:
+            pass
+        if self._advice.done:
+            self._advice_status = advice_health(self._advice.advice, self._advice_status.name)
+            self._advice = None
 
     def _load_model(self):
         """The reference noise model for the discrepancy check (validated on set)."""
@@ -316,6 +353,7 @@ class AllanNode(Node):
             **self.last_cycle,
         })
         records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
+        records.append(self._advice_status)
         if self.model is not None:  # the discrepancy check: gap and effect per axis
             records += hm.discrepancy_health(self.model, result, AXES, prefix)
         array = DiagnosticArray()

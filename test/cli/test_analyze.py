@@ -23,7 +23,7 @@ def sim_csv(tmp_path_factory):
 
 
 def test_json_report_follows_the_contract(sim_csv):
-    proc = run_command('analyze', sim_csv, '--json')
+    proc = run_command('analyze', sim_csv, '--json', '--target', 'bias_instability=0.05')
     assert proc.returncode == 0, proc.stderr
     report = json.loads(proc.stdout)  # --json prints the report and nothing else
     assert report['n_samples'] == 180_000
@@ -47,6 +47,22 @@ def test_json_report_follows_the_contract(sim_csv):
             assert math.isfinite(term['value'])
     assert report['verdict']['static'] is True
     assert report['kalibr']['update_rate'] == pytest.approx(100.0)
+    # The recording advice (issue 12): white noise is pinned to 2 % by 30 min; bias
+    # instability to the asked 5 % needs more; JSON without NaN.
+    advice = report['advice']
+    json.dumps(advice, allow_nan=False)
+    assert advice['targets']['bias_instability'] == 0.05
+    assert advice['targets']['white_noise'] == 0.02
+    assert list(advice['axes']) == list(report['axes'])
+    for axis, terms in advice['axes'].items():
+        assert set(terms) == set(report['axes'][axis]['terms'])
+        assert set(terms['white_noise']) == {'rel_halfwidth', 'more_s'}
+        assert terms['white_noise']['rel_halfwidth'] < 0.02
+        assert terms['white_noise']['more_s'] == 0.0
+    b_times = [t['bias_instability']['more_s'] for t in advice['axes'].values()
+               if 'bias_instability' in t]
+    assert b_times and max(b_times) > 0
+    assert advice['record_more_s'] >= max(b_times)
 
 
 def test_console_report_shows_si_and_conventional_units(sim_csv):
@@ -55,6 +71,9 @@ def test_console_report_shows_si_and_conventional_units(sim_csv):
     assert 'deg/sqrt(h)' in proc.stdout and 'rad/s/sqrt(Hz)' in proc.stdout
     assert 'm/s/sqrt(h)' in proc.stdout and 'continuous-time' in proc.stdout
     assert 'verdict: static' in proc.stdout
+    advice = proc.stdout.strip().splitlines()[-1]  # ends with one sentence to act on
+    assert advice.startswith('advice: ') and advice.endswith('.'), advice
+    assert 'record about' in advice or 'no need to record longer' in advice
 
 
 def _bad(tmp_path, name, text):
@@ -93,6 +112,16 @@ def test_bad_input_one_line_exit_2(tmp_path, name, content, needle):
         assert str(path) in lines[0] and needle in lines[0].lower(), lines[0]
         assert 'Traceback' not in proc.stderr
         assert proc.stdout == ''  # no report, no NaN output
+
+
+@pytest.mark.parametrize('target, needle', [('bias_instability=5', 'outside'),
+                                             ('drift=0.1', "unknown term 'drift'"),
+                                             ('white_noise=abc', 'not a number')])
+def test_bad_target_one_line_exit_2(sim_csv, target, needle):
+    proc = run_command('analyze', sim_csv, '--target', target)
+    assert proc.returncode == 2 and proc.stdout == ''
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and '--target' in lines[0] and needle in lines[0], proc.stderr
 
 
 def test_missing_file_and_bad_arguments(tmp_path):

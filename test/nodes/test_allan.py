@@ -98,6 +98,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
 
     cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=1.0',
            '-p', f'budget_file:={loose}', '-p', 'queue_depth:=40000',
+           '-p', 'targets:=bias_instability=0.05', '-p', 'advice_period:=2.0',
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
     proc = subprocess.Popen(cmd, env=ros_env(DOMAIN), stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True)
@@ -169,6 +170,20 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
         assert levels == [b'\x00'] * 6, [status(last, f'{a} noise').message for a in AXES]
         stream = values(status(last, 'IMU stream'))
         assert stream['gaps_total'] == '0' and stream['out_of_order_total'] == '0'
+
+        # 3b. The recording advice (issue 12): after 300 s, bias instability to the asked 5 %
+        #     needs more recording: WARN with the time, per-term times as key-values.
+        def advised():
+            return any(status(m, 'recording advice').level != b'\x03' for _, m in diags)
+        assert spin_until(executor, advised, 30), 'no recording advice published'
+        advice = next(status(m, 'recording advice') for _, m in reversed(diags)
+                      if status(m, 'recording advice').level != b'\x03')
+        assert advice.name == 'allan: recording advice'
+        kv = values(advice)
+        assert advice.level == b'\x01' and advice.message.startswith('record '), advice.message
+        assert float(kv['record_more_s']) > 0
+        assert float(kv['gyro_x.white_noise.more_s']) == 0.0
+        assert float(kv['gyro_x.white_noise.rel_halfwidth']) < 0.02
 
         client = node.create_client(SetParameters, '/allan/set_parameters')
         assert client.wait_for_service(timeout_sec=10)
@@ -247,7 +262,10 @@ def test_allan_help_without_ros():
 @pytest.mark.parametrize('param, words', [('rate_hz:=-5.0', 'rate_hz'),
                                           ('budget_file:=/nonexistent/b.yaml',
                                            '/nonexistent/b.yaml: cannot read budget file'),
-                                          ('terms:=white,bias', 'unknown noise term(s) white')])
+                                          ('terms:=white,bias', 'unknown noise term(s) white'),
+                                          ('targets:=bias_instability=7',
+                                           'targets: bias_instability: relative half-width 7 '
+                                           'outside')])
 def test_allan_bad_parameter_one_line_exit_2(param, words):
     """A bad parameter at start: one line on stderr naming it, exit status 2, no traceback."""
     out = subprocess.run([executable('allan'), '--ros-args', '-p', param], capture_output=True,

@@ -1,0 +1,503 @@
+"""The recording advisor: how much longer to record until each noise term is known well enough.
+
+ROS-free.  For every axis and fitted term it gives the relative precision now (68.3 %
+half-width / value) and the predicted additional recording time, under the same conditions,
+until that precision reaches a target; it names the pairs of terms the data cannot yet tell
+apart, with the time until they separate; and for a term not detected, the time after which
+a term at its current 95 % upper limit would be detected.
+
+Method (no new data needed)
+---------------------------
+The fit's intervals come from the GLS covariance of the squared coefficients
+(:mod:`imu_allan.core.fit`), which depends only on the model AVAR curve, the averaging times and
+their EDF.  For a record of n' samples the averaging times are the grid of that record (up to
+n' / min_clusters) and the EDFs are Greenhall's for n' samples (:func:`~.edf.edf_oadev`, noise
+type identified on the model curve as :func:`~.allan.identify_noise` does on data).  Evaluating
+the covariance with the fitted model's own curve on that grid predicts the half-width a record
+of n' samples would give.  Scaled so that at the current length it equals the fit's own
+half-width (they differ only by the grid and the noise identification, a few %), the smallest
+n' that meets a target is found by bisection in log n'.
+
+Two alternatives (term sets S and S') are told apart when the selection criterion
+chi^2 + k x penalty (fit.py) of the worse exceeds the better's by SEPARATION_MARGIN (10, "very
+strong" evidence on the BIC scale of Kass & Raftery (1995), "Bayes factors", JASA 90, 773).  A
+pair is *unresolved* when, on the data, swapping one term for the other stays within that
+margin.  The time until it separates: each alternative in turn is taken as the truth and its
+curve at n' is fitted with the other one (noise-free, so chi^2 is the non-centrality lambda of
+the criterion difference); separated when lambda - 2 sqrt(lambda) (one standard deviation of
+the noisy difference below its mean) exceeds the margin for both.  An undetected term at its
+95 % upper limit (delta chi^2 = 4 on the data) is detected once that gain, grown as the
+noise-free forecast grows, exceeds the penalty of one term.
+"""
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+from scipy.linalg import solve_triangular
+from scipy.optimize import minimize_scalar
+
+from ..errors import InputError
+from . import terms as _terms
+from .allan import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
+from .edf import edf_oadev
+
+# The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
+from .fit import _fit_terms, _Problem, _shape_columns, SELECTION_PENALTY, upper_limit
+from .units import IEEE_TERMS, TERM_PARAMETERS
+
+#: Default targets: relative 68.3 % half-width per term (main parameter; sigma for
+#: Gauss-Markov).  The one place these numbers live.
+DEFAULT_TARGETS = {'white_noise': 0.02, 'quantization': 0.25, 'bias_instability': 0.10,
+                   'rate_random_walk': 0.25, 'rate_ramp': 0.25, 'gauss_markov': 0.25}
+#: Accepted range of a target (relative half-width).
+TARGET_RANGE = (0.001, 1.0)
+#: Pairs of terms a short record may not tell apart.
+PAIRS = (('bias_instability', 'rate_random_walk'), ('quantization', 'white_noise'),
+         ('gauss_markov', 'bias_instability'))
+#: Criterion difference (chi^2 units) that separates two alternatives (Kass & Raftery 1995).
+SEPARATION_MARGIN = 10.0
+#: Delta chi^2 of the 95 % upper limit of an undetected term (fit.upper_limit).
+UPPER_LIMIT_DELTA_CHI2 = 4.0
+#: Longest record considered, as a multiple of the current one.
+HORIZON = 1.0e4
+#: Bisection steps in log n (10 steps over a factor 1e4: 0.9 % resolution in time).
+_BISECTIONS = 10
+
+
+def parse_targets(text, where='--target'):
+    """Targets from ``'bias_instability=0.05,white_noise=0.01'`` merged over the defaults.
+
+    Raises :class:`InputError` naming ``where`` for an unknown term, a non-number or a value
+    outside :data:`TARGET_RANGE`.
+    """
+    targets = dict(DEFAULT_TARGETS)
+    for item in str(text or '').split(','):
+        item = item.strip()
+        if not item:
+            continue
+        term, sep, value = item.partition('=')
+        term = term.strip()
+        if not sep:
+            raise InputError(where, f'{item!r} is not TERM=REL (e.g. bias_instability=0.05)')
+        if term not in DEFAULT_TARGETS:
+            raise InputError(where, f'unknown term {term!r} (known: '
+                                    f'{", ".join(DEFAULT_TARGETS)})')
+        try:
+            rel = float(value)
+        except ValueError:
+            raise InputError(where, f'{term}: {value.strip()!r} is not a number') from None
+        if not TARGET_RANGE[0] <= rel <= TARGET_RANGE[1]:
+            raise InputError(where, f'{term}: relative half-width {rel:g} outside '
+                                    f'[{TARGET_RANGE[0]:g}, {TARGET_RANGE[1]:g}]')
+        targets[term] = rel
+    return targets
+
+
+@dataclass
+class TermAdvice:
+    """One term of one axis: precision now and the additional time to the target, s.
+
+    ``more_s`` is 0 when the target is met and None when no prediction is possible
+    (``reason`` says why).  For an undetected term, ``rel_halfwidth`` is None, ``upper_limit``
+    the 95 % limit (SI) and ``more_s`` the time after which a term that large would be
+    detected.
+    """
+
+    rel_halfwidth: float
+    more_s: float
+    reason: str = None
+    detected: bool = True
+    upper_limit: float = None
+
+
+@dataclass
+class Unresolved:
+    """A pair of terms the data cannot yet separate on an axis, and the time until they do."""
+
+    axis: str
+    terms: tuple
+    more_s: float
+    reason: str = None
+
+
+@dataclass
+class Advice:
+    """Advice for a whole record: targets, per-axis terms, unresolved pairs."""
+
+    targets: dict
+    duration_s: float
+    axes: dict = field(default_factory=dict)
+    unresolved: list = field(default_factory=list)
+
+    @property
+    def record_more_s(self):
+        """Longest finite additional time over the detected terms and unresolved pairs, s."""
+        times = [a.more_s for terms in self.axes.values() for a in terms.values()
+                 if a.detected and a.more_s is not None]
+        times += [u.more_s for u in self.unresolved if u.more_s is not None]
+        return max(times, default=0.0)
+
+
+def analysis_grid(points_per_decade=DEFAULT_POINTS_PER_DECADE,
+                  min_clusters=DEFAULT_MIN_CLUSTERS, m_max=None):
+    """``grid(n)``: averaging factors of a record of n samples, as dense as ``analyze``'s.
+
+    The points are 10^(k / points_per_decade) up to n / min_clusters: the same density and
+    span as :func:`~.allan.tau_grid`, but anchored at m = 1 so that records of different
+    length share their factors (the sampled flicker shape is cached per factor); the last
+    point is the longest factor itself.
+    """
+    def grid(n):
+        top = int(n // max(int(min_clusters), 2))
+        top = top if m_max is None else min(top, int(m_max))
+        if top < 1:
+            return np.zeros(0, dtype=np.int64)
+        k = np.arange(int(math.floor(math.log10(top) * points_per_decade)) + 1)
+        ms = np.round(10.0 ** (k / points_per_decade)).astype(np.int64)
+        # the longest averaging time itself, as tau_grid has it: it informs slow terms most
+        ms = ms[ms < top * 10.0 ** (-0.5 / points_per_decade)]
+        return np.unique(np.append(ms, top))
+    return grid
+
+
+def factor_grid_of(ms, min_clusters):
+    """``grid(n)`` for a fixed factor list (the online estimator): m <= n / min_clusters."""
+    ms = np.asarray(ms, dtype=np.int64)
+    return lambda n: ms[ms * int(min_clusters) <= n]
+
+
+def _main_param(term):
+    return TERM_PARAMETERS[term][0]
+
+
+def _n_params(names):
+    return sum(len(TERM_PARAMETERS[t]) for t in names)
+
+
+def _nonlinear(axis_terms):
+    return {t: p[TERM_PARAMETERS[t][1]] for t, p in axis_terms.items()
+            if len(TERM_PARAMETERS[t]) > 1}
+
+
+def _rel_halfwidth(coef, sd):
+    """Relative half-width of sqrt(c) for the fit's interval [sqrt(c - sd), sqrt(c + sd)]."""
+    lo = math.sqrt(max(coef - sd, 0.0))
+    return (math.sqrt(coef + sd) - lo) / (2.0 * math.sqrt(coef))
+
+
+class _Forecast:
+    """Noise-free problems of records of n samples from a model curve (cached by n)."""
+
+    def __init__(self, rate_hz, grid):
+        self.rate_hz = rate_hz
+        self.grid = grid
+        self._cache = {}
+
+    def problem(self, n, axis_terms, key):
+        """The fit's problem for a record of ``n`` samples whose AVAR is the model's."""
+        cached = self._cache.get((n, key))
+        if cached is not None:
+            return cached
+        ms = self.grid(n)
+        if ms.size < 2:
+            return None
+        tau = ms / self.rate_hz
+        avar = _terms.model_avar(axis_terms, tau, self.rate_hz)
+        alpha = identify_noise(tau, avar[:, None])[:, 0]
+        edf = np.array([edf_oadev(int(a), int(m), int(n) + 1) for a, m in zip(alpha, ms)])
+        problem = _Problem(tau, avar, edf, alpha, self.rate_hz)
+        self._cache[(n, key)] = problem
+        return problem
+
+    def rel_halfwidths(self, n, axis_terms):
+        """Predicted relative half-width of every term of ``axis_terms`` at n samples."""
+        problem = self.problem(n, axis_terms, 'fit')
+        if problem is None or problem.tau.size < len(axis_terms):
+            return {}
+        names = list(axis_terms)
+        shapes = _shape_columns(problem, names, _nonlinear(axis_terms))
+        g = solve_triangular(problem.chol(problem.avar), shapes, lower=True,
+                             check_finite=False)
+        try:
+            cov = np.linalg.inv(g.T @ g)
+        except np.linalg.LinAlgError:
+            return {}
+        out = {}
+        for j, term in enumerate(names):
+            value = axis_terms[term][_main_param(term)]
+            sd = math.sqrt(max(cov[j, j], 0.0))
+            out[term] = _rel_halfwidth(value * value, sd) if value > 0 else math.inf
+        return out
+
+    def criterion_gap(self, n, truth, key, other_names, start=None):
+        """Noise-free criterion of ``other_names`` fitted to the ``truth`` curve minus truth's.
+
+        ``start`` holds starting values of nonlinear parameters (tau_c) of ``other_names``.
+        """
+        problem = self.problem(n, truth, key)
+        if problem is None:
+            return 0.0
+        penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
+        return (_best_chi2(problem, other_names, start or {})
+                + (_n_params(other_names) - _n_params(truth)) * penalty)
+
+
+def _best_chi2(problem, names, start):
+    """Smallest GLS chi^2 of ``names`` (one nonlinear parameter profiled near ``start``)."""
+    nonlinear = [t for t in names if len(TERM_PARAMETERS[t]) > 1]
+    if not nonlinear:
+        return problem.solve(_shape_columns(problem, names, {}))[1]
+    name = nonlinear[0]
+    centre = math.log(start.get(name) or math.sqrt(problem.tau[0] * problem.tau[-1]))
+
+    def chi2(log_p):
+        return problem.solve(_shape_columns(problem, names, {name: math.exp(log_p)}))[1]
+    best = minimize_scalar(chi2, bounds=(centre - 2.0, centre + 2.0), method='bounded',
+                           options={'xatol': 0.02})
+    return min(float(best.fun), chi2(centre))
+
+
+def _crossing(ok, n0, n_max):
+    """Smallest n in [n0, n_max] with ``ok(n)`` (assumed monotone), by bisection in log n.
+
+    A generator (it yields between evaluations so a node can interleave other work); returns
+    n, or None when even n_max does not satisfy ``ok``.
+    """
+    if ok(n0):
+        return n0
+    yield
+    if not ok(n_max):
+        return None
+    lo, hi = math.log(n0), math.log(n_max)
+    for _ in range(_BISECTIONS):
+        yield
+        mid = 0.5 * (lo + hi)
+        if ok(int(round(math.exp(mid)))):
+            hi = mid
+        else:
+            lo = mid
+    return int(math.ceil(math.exp(hi)))
+
+
+def _separated(gap):
+    """A noise-free criterion gap big enough to exceed the margin even 1 sd below its mean."""
+    return gap - 2.0 * math.sqrt(max(gap, 0.0)) >= SEPARATION_MARGIN
+
+
+class _AxisAdvisor:
+    """Advice for one axis, computed in small steps (:meth:`steps` is a generator)."""
+
+    def __init__(self, result, fitted, axis, targets, grid, undetected=True):
+        self.axis = axis
+        self.undetected = undetected
+        self.targets = targets
+        j = result.axis_index(axis)
+        self.data = (result.tau, result.avar[:, j], result.edf[:, j], result.alpha[:, j])
+        self.rate_hz = result.rate_hz
+        self.n = int(result.n_samples)
+        self.fit = fitted.fits[axis]
+        self.forecast = _Forecast(result.rate_hz, grid)
+        self.terms = {}
+        self.unresolved = []
+
+    def _more_s(self, n):
+        return None if n is None else max(n - self.n, 0) / self.rate_hz
+
+    def steps(self):
+        """Generator: one forecast evaluation per step; fills :attr:`terms`, :attr:`unresolved`."""
+        axis_terms = self.fit.terms
+        n_max = int(self.n * HORIZON)
+        for term, params in axis_terms.items():
+            target = self.targets.get(term)
+            if target is None:
+                continue
+            main = _main_param(term)
+            value = params[main]
+            lo, hi = self.fit.intervals[term][main]
+            rel = (hi - lo) / (2.0 * value) if value > 0 else math.inf
+            if rel <= target:
+                self.terms[term] = TermAdvice(rel, 0.0)
+                continue
+
+            # Scaled so that the forecast at the current length is the fit's own half-width
+            # (they differ only by the grid and the noise identification, by a few %).
+            now = self.forecast.rel_halfwidths(self.n, axis_terms).get(term, math.nan)
+            scale = rel / now if now > 0 else 1.0
+
+            def ok(n, term=term, target=target, scale=scale):
+                return scale * self.forecast.rel_halfwidths(n, axis_terms).get(
+                    term, math.inf) <= target
+            n_hit = yield from _crossing(ok, self.n, n_max)
+            self.terms[term] = TermAdvice(rel, self._more_s(n_hit), None if n_hit else
+                                          f'not reached within {HORIZON:g} x the record')
+        yield from self._pairs(axis_terms, n_max)
+        if self.undetected:
+            yield from self._undetected(axis_terms, n_max)
+
+    def _data_criterion(self, names):
+        fit = _fit_terms(_Problem(*self.data, self.rate_hz), names)
+        penalty = SELECTION_PENALTY * math.log(max(fit.n_points, 2))
+        return fit, fit.chi2 + _n_params(list(fit.terms)) * penalty
+
+    def _pairs(self, axis_terms, n_max):
+        chosen = list(axis_terms)
+        _, crit = self._data_criterion(chosen)
+        for a, b in PAIRS:
+            if (a in chosen) == (b in chosen):
+                continue
+            have, other = (a, b) if a in chosen else (b, a)
+            alt_names = [other if t == have else t for t in chosen]
+            alt_fit, alt_crit = self._data_criterion(alt_names)
+            yield
+            if other not in alt_fit.terms or abs(alt_crit - crit) >= SEPARATION_MARGIN:
+                continue
+            pair = (a, b)
+            times = []
+            start = _nonlinear(alt_fit.terms)
+            for truth, names, key in ((axis_terms, alt_names, 'fit'),
+                                      (alt_fit.terms, chosen, other)):
+                # If the noise-free gap says "separated" already, the data were unlucky: grow
+                # the measured gap as the forecast grows instead (never 0 for an open pair).
+                gap0 = self.forecast.criterion_gap(self.n, truth, key, names, start)
+                scale = max(abs(alt_crit - crit), 1.0) / gap0 if _separated(gap0) else 1.0
+
+                def ok(n, truth=truth, names=names, key=key, scale=scale, start=start):
+                    return _separated(scale * self.forecast.criterion_gap(n, truth, key, names,
+                                                                          start))
+                times.append((yield from _crossing(ok, self.n, n_max)))
+            if any(t is None for t in times):
+                self.unresolved.append(Unresolved(self.axis, pair, None, 'not separated '
+                                                  f'within {HORIZON:g} x the record'))
+            else:
+                self.unresolved.append(Unresolved(self.axis, pair, self._more_s(max(times))))
+
+    def _undetected(self, axis_terms, n_max):
+        chosen = list(axis_terms)
+        for term in IEEE_TERMS:
+            if term in chosen or term not in self.targets or not chosen:
+                continue
+            limit = upper_limit(*self.data, self.rate_hz, chosen + [term], term,
+                                UPPER_LIMIT_DELTA_CHI2)
+            yield
+            if not math.isfinite(limit):
+                self.terms[term] = TermAdvice(None, None, 'no upper limit from these data',
+                                              detected=False)
+                continue
+            truth = {**axis_terms, term: {'value': limit}}
+            key = 'with_' + term
+            # Scale the noise-free gain so that it is the measured 4 (the limit's delta chi^2)
+            # now: its growth with n is what the forecast knows.
+            gain0 = self.forecast.criterion_gap(self.n, truth, key, chosen) + self._penalty(
+                self.n, truth, key)
+            if not gain0 > 0:
+                self.terms[term] = TermAdvice(None, None, 'the term does not change the '
+                                              'model curve', detected=False, upper_limit=limit)
+                continue
+
+            def ok(n, truth=truth, key=key, gain0=gain0):
+                gain = self.forecast.criterion_gap(n, truth, key, chosen) + self._penalty(
+                    n, truth, key)
+                return UPPER_LIMIT_DELTA_CHI2 * gain / gain0 >= self._penalty(n, truth, key)
+            n_hit = yield from _crossing(ok, self.n, n_max)
+            self.terms[term] = TermAdvice(None, self._more_s(n_hit), None if n_hit else
+                                          f'not detected within {HORIZON:g} x the record',
+                                          detected=False, upper_limit=limit)
+
+    def _penalty(self, n, truth, key):
+        problem = self.forecast.problem(n, truth, key)
+        return SELECTION_PENALTY * math.log(max(problem.tau.size, 2)) if problem else 0.0
+
+
+class StagedAdvice:
+    """Advice for every fitted axis in short steps (for a node between message drains).
+
+    ``step()`` runs one forecast evaluation; when :attr:`done`, :attr:`advice` holds the
+    :class:`Advice`.  :func:`advise` runs all steps at once.  ``undetected=False`` skips the
+    upper limits and detection times of undetected terms (half the work; the node's status
+    does not use them).
+    """
+
+    def __init__(self, result, fitted, targets=None, grid=None, undetected=True):
+        targets = dict(DEFAULT_TARGETS if targets is None else targets)
+        grid = grid or analysis_grid()
+        self.advice = Advice(targets, result.n_samples / result.rate_hz)
+        self._axes = [_AxisAdvisor(result, fitted, axis, targets, grid, undetected)
+                      for axis in fitted.axes if fitted.fits[axis].terms]
+        self._gen = self._run()
+        self.done = False
+
+    def _run(self):
+        for adv in self._axes:
+            yield from adv.steps()
+            self.advice.axes[adv.axis] = adv.terms
+            self.advice.unresolved.extend(adv.unresolved)
+
+    def step(self):
+        """Run the next step; return :attr:`done`."""
+        if not self.done:
+            try:
+                next(self._gen)
+            except StopIteration:
+                self.done = True
+        return self.done
+
+
+def advise(result, fitted, targets=None, grid=None, undetected=True):
+    """The :class:`Advice` for a record's AllanResult and its FittedModel.
+
+    Parameters
+    ----------
+    result : AllanResult
+        The measured Allan variance (its EDF and record length).
+    fitted : FittedModel
+        The fit of ``result``.
+    targets : dict, optional
+        Relative 68.3 % half-width per term (default :data:`DEFAULT_TARGETS`).
+    grid : callable, optional
+        ``grid(n)`` -> averaging factors of a record of n samples (default: ``analyze``'s).
+    undetected : bool
+        Also give the upper limits and detection times of undetected terms.
+
+    """
+    staged = StagedAdvice(result, fitted, targets, grid, undetected)
+    while not staged.step():
+        pass
+    return staged.advice
+
+
+def advice_health(advice, name='recording advice'):
+    """A :class:`~.health.Health` record of the advice (the allan node's status).
+
+    OK when every target is met and no pair is unresolved; WARN naming the longest additional
+    time otherwise; STALE while there is no advice (``advice`` None).  Key-values: per detected
+    term ``<axis>.<term>.more_s`` and ``.rel_halfwidth``, per unresolved pair
+    ``<axis>.<a>_vs_<b>.more_s`` (s; NaN: no prediction) and ``record_more_s``.
+    """
+    from .health import Health, OK, STALE, WARN
+    if advice is None:
+        return Health(name, STALE, 'no estimate yet (collecting still samples)', {})
+    values = {'record_more_s': advice.record_more_s, 'recorded_s': advice.duration_s}
+    waits = []
+    for axis, terms in advice.axes.items():
+        for term, entry in terms.items():
+            if entry.detected:
+                more = math.nan if entry.more_s is None else entry.more_s
+                values[f'{axis}.{term}.more_s'] = more
+                values[f'{axis}.{term}.rel_halfwidth'] = entry.rel_halfwidth
+                waits.append((more, f'{axis} {term} to {advice.targets[term]:g}'))
+    for u in advice.unresolved:
+        more = math.nan if u.more_s is None else u.more_s
+        values[f'{u.axis}.{u.terms[0]}_vs_{u.terms[1]}.more_s'] = more
+        waits.append((more, f'{u.axis} {u.terms[0]} vs {u.terms[1]}'))
+    open_items = [(m, what) for m, what in waits if not m == 0.0]
+    if not open_items:
+        return Health(name, OK, f'every precision target is met ({advice.duration_s:.0f} s '
+                                f'recorded)', values)
+    finite = [(m, what) for m, what in open_items if math.isfinite(m)]
+    if finite:
+        more, what = max(finite)
+        message = f'record {more:.0f} s ({more / 3600:.2g} h) more ({what})'
+    else:
+        message = 'targets not reachable: ' + ', '.join(what for _, what in open_items)
+    return Health(name, WARN, message, values)
