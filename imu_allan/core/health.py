@@ -25,9 +25,8 @@ import math
 import os
 
 import numpy as np
-import yaml
 
-from ..errors import InputError
+from .model import as_mapping, as_number, ModelError, read_yaml_file
 from .units import AXES, conventional, IEEE_TERMS, sensor_of, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -59,62 +58,48 @@ class NoiseBudget:
 
     @classmethod
     def from_dict(cls, data, where='budget'):
-        """Build from the file layout; raise :class:`InputError` naming ``where`` on problems."""
+        """Build from the file layout (the schema of :mod:`imu_allan.core.model`).
+
+        Raises :class:`~imu_allan.core.model.ModelError` (an InputError) naming ``where``.
+        """
+        where = str(where)
         if not isinstance(data, dict):
-            raise InputError(where, 'expected a mapping with gyro/accel/axes entries')
-        unknown = set(data) - {'gyro', 'accel', 'axes', 'warn_ratio', 'error_ratio',
-                               'description'}
+            raise ModelError(where, 'expected a mapping with gyro/accel/axes entries')
+        unknown = set(map(str, data)) - {'gyro', 'accel', 'axes', 'warn_ratio', 'error_ratio',
+                                         'description'}
         if unknown:
-            raise InputError(where, f'unknown key(s) {", ".join(sorted(unknown))}')
-        ratios = {}
-        for key, default in (('warn_ratio', 1.0), ('error_ratio', 2.0)):
-            try:
-                ratios[key] = float(data.get(key, default))
-            except (TypeError, ValueError):
-                raise InputError(where, f'{key} is not a number') from None
-            if not math.isfinite(ratios[key]) or ratios[key] <= 0:
-                raise InputError(where, f'{key} must be a positive number')
+            raise ModelError(where, f'unknown key(s) {", ".join(sorted(unknown))[:120]}')
+        ratios = {key: as_number(data.get(key, default), where, key, low_open=True)
+                  for key, default in (('warn_ratio', 1.0), ('error_ratio', 2.0))}
         if ratios['error_ratio'] < ratios['warn_ratio']:
-            raise InputError(where, 'error_ratio must be >= warn_ratio')
-        axes_section = data.get('axes') or {}
-        if not isinstance(axes_section, dict):
-            raise InputError(where, 'axes must be a mapping of axis name to terms')
+            raise ModelError(where, 'error_ratio must be >= warn_ratio')
+        sensors = {s: as_mapping(data.get(s), where, s) for s in ('gyro', 'accel')}
+        axes_section = as_mapping(data.get('axes'), where, 'axes')
         for axis in axes_section:
             if axis not in AXES:
-                raise InputError(where, f'unknown axis {axis!r} (known: {", ".join(AXES)})')
+                raise ModelError(where, f'unknown axis {str(axis)[:40]!r} (known: '
+                                        f'{", ".join(AXES)})')
         limits = {}
         for axis in AXES:
-            merged = {**(data.get(sensor_of(axis)) or {}), **(axes_section.get(axis) or {})}
+            merged = {**sensors[sensor_of(axis)],
+                      **as_mapping(axes_section.get(axis), where, f'axes.{axis}')}
             checked = {}
             for term, value in merged.items():
                 if term not in IEEE_TERMS:
-                    raise InputError(where, f'{axis}: unknown or unbudgetable term {term!r} '
-                                     f'(known: {", ".join(IEEE_TERMS)})')
-                try:
-                    value = float(value)
-                except (TypeError, ValueError):
-                    raise InputError(where, f'{axis}.{term} is not a number') from None
-                if not math.isfinite(value) or value <= 0:
-                    raise InputError(where, f'{axis}.{term} must be a positive number')
-                checked[term] = value
+                    raise ModelError(where, f'{axis}: unknown or unbudgetable term '
+                                            f'{str(term)[:40]!r} (known: {", ".join(IEEE_TERMS)})')
+                checked[term] = as_number(value, where, f'{axis}.{term}', low_open=True)
             if checked:
                 limits[axis] = checked
         if not limits:
-            raise InputError(where, 'budget names no term for any axis')
-        return cls(limits, ratios['warn_ratio'], ratios['error_ratio'], str(where))
+            raise ModelError(where, 'budget names no term for any axis')
+        return cls(limits, ratios['warn_ratio'], ratios['error_ratio'], where)
 
     @classmethod
     def from_yaml(cls, path=None):
         """Load a budget file (default: the packaged 3DM-GX3-25 datasheet budget)."""
         path = path or DEFAULT_BUDGET_FILE
-        try:
-            with open(path, encoding='utf-8') as stream:
-                data = yaml.safe_load(stream)
-        except OSError as exc:
-            raise InputError(path, f'cannot read budget file ({exc.strerror})') from None
-        except yaml.YAMLError as exc:
-            raise InputError(path, f'not valid YAML ({str(exc).splitlines()[0]})') from None
-        return cls.from_dict(data, where=str(path))
+        return cls.from_dict(read_yaml_file(path, 'budget'), where=str(path))
 
     def limit(self, axis, term):
         """Budget of a term on an axis, or NaN when not budgeted."""

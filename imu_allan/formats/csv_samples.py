@@ -8,7 +8,10 @@ are ignored. Writing uses Python's shortest round-trip float repr, so write -> r
 same float64 values bit for bit.
 """
 
+import contextlib
+import os
 import re
+import tempfile
 
 import numpy as np
 
@@ -18,6 +21,43 @@ from .samples import Samples
 
 _NAME = re.compile(r'^[A-Za-z_][A-Za-z0-9_.]*$')
 _BLOCK = 100_000  # rows formatted per write call (bounds memory for long recordings)
+
+#: Sample rates an IMU recording can have, Hz.  A ``t`` column whose median step gives a rate
+#: below this range in seconds is in another unit: the one of ms, us, ns that lands in it.
+IMU_RATE_HZ = (0.5, 50_000.0)
+_TIME_UNITS = (('ms', 1e-3), ('us', 1e-6), ('ns', 1e-9))
+_EPOCH_S = (1.0e9, 4.1e9)  # Unix time in s from 2001 to 2099: tells the unit of absolute stamps
+
+
+def _time_scale(path, t):
+    """Seconds per unit of the ``t`` column, and a warning when it is not 1 (s).
+
+    The median step must give an IMU rate (:data:`IMU_RATE_HZ`).  If it does in seconds, t is
+    seconds.  Otherwise the units ms, us, ns that do are candidates; absolute Unix stamps
+    decide between several; one candidate is converted with a warning, none or several is an
+    error that says why.
+    """
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if steps.size == 0:
+        return 1.0, None
+    step = float(np.median(steps))
+    low, high = IMU_RATE_HZ
+    if 1.0 / step >= low:
+        return 1.0, None
+    fits = [(n, k) for n, k in _TIME_UNITS if low <= 1.0 / (step * k) <= high]
+    epoch = [(n, k) for n, k in fits if _EPOCH_S[0] <= abs(t[0]) * k <= _EPOCH_S[1]]
+    fits = epoch if len(epoch) == 1 else fits
+    said = f'the t column steps by a median of {step:g}, which in seconds is {1.0 / step:.3g} Hz'
+    if len(fits) == 1:
+        name, scale = fits[0]
+        return scale, (f'{said}: t read as {name} ({1.0 / (step * scale):.6g} Hz) and '
+                       'converted to seconds')
+    if not fits:
+        raise InputError(path, f'{said}, and no unit (ms, us, ns) gives an IMU rate '
+                               f'({low:g} to {high:g} Hz): write t in seconds')
+    choices = ' or '.join(f'{n} ({1.0 / (step * k):.4g} Hz)' for n, k in fits)
+    raise InputError(path, f'{said}: not seconds; {choices}? write t in seconds')
 
 
 def _parse_header(path, line, lineno):
@@ -114,8 +154,12 @@ def read_csv(path):
     axes = tuple(a for a in AXES if a in col)
     data = np.column_stack([col[a] for a in axes]) if table.shape[0] else np.zeros((0, len(axes)))
     extra = {n: np.ascontiguousarray(col[n]) for n in names if n != 't' and n not in AXES}
-    return Samples(t=np.ascontiguousarray(col['t']), data=np.ascontiguousarray(data), axes=axes,
-                   source=str(path), extra=extra)
+    t = np.ascontiguousarray(col['t'])
+    scale, note = _time_scale(path, t)
+    if note:
+        t = t * scale
+    return Samples(t=t, data=np.ascontiguousarray(data), axes=axes, source=str(path),
+                   extra=extra, warnings=[note] if note else [])
 
 
 def write_csv(path, samples):
@@ -126,13 +170,24 @@ def write_csv(path, samples):
     names = ['t', *samples.axes, *extra]
     columns = [t, *(data[:, j] for j in range(data.shape[1])),
                *(np.asarray(v, dtype=np.float64) for v in extra.values())]
+    # Written beside the target and renamed into place: a full disk or an interruption never
+    # leaves a half-written CSV under the user's name.
+    folder = os.path.dirname(os.path.abspath(path))
+    tmp = None
     try:
-        with open(path, 'w', encoding='utf-8', newline='\n') as f:
+        fd, tmp = tempfile.mkstemp(prefix=f'.{os.path.basename(path)}.', dir=folder)
+        with open(fd, 'w', encoding='utf-8', newline='\n') as f:
             f.write(','.join(names) + '\n')
             for start in range(0, t.shape[0], _BLOCK):
                 # repr() is Python's shortest string that reads back to the same float64.
                 cols = [list(map(repr, c[start:start + _BLOCK].tolist())) for c in columns]
                 f.write('\n'.join(map(','.join, zip(*cols))))
                 f.write('\n')
+        os.replace(tmp, path)
+        tmp = None
     except OSError as err:
-        raise InputError(path, f'cannot write: {err.strerror}') from None
+        raise InputError(path, f'cannot write: {err.strerror or err}') from None
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)

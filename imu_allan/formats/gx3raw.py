@@ -14,6 +14,7 @@ columns ``mag_x, mag_y, mag_z``.
 
 import numpy as np
 
+from ..core.preprocess import nominal_interval
 from ..core.units import AXES, GYRO_AXES, STANDARD_GRAVITY
 from ..device.gx3_protocol import decode_records, GAUSS_TO_TESLA, TICKS_PER_SECOND, TimerUnwrapper
 from ..device.gx3_stream import StreamParser
@@ -71,10 +72,11 @@ def read_gx3raw(path, gravity=STANDARD_GRAVITY):
         warnings.append(f'device timer reset {resets} time(s): bridged with the previous '
                         'sample spacing')
     steps = np.diff(ticks)
-    if steps.size:
-        nominal = float(np.median(steps))
+    if np.any(steps > 0):
+        # The device timer ticks evenly: lost packets show as steps of whole intervals.
+        nominal = nominal_interval(steps[steps > 0])
         gaps = steps[steps > 1.5 * nominal]
-        if gaps.size and nominal > 0:
+        if gaps.size:
             lost = int(np.sum(np.round(gaps / nominal) - 1))
             warnings.append(f'{gaps.size} gap(s) in the device timer: about {lost} '
                             'packet(s) missing')

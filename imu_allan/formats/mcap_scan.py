@@ -34,6 +34,16 @@ def lz4_decompress(data):
 
 
 _DECOMPRESS = {'': bytes, 'zstd': _zstd_decompress, 'lz4': lz4_decompress}
+
+
+def decompress_chunk(compression, data, size):
+    """The records of a chunk (bytes); ValueError for an unknown compression or wrong size."""
+    if compression not in _DECOMPRESS:
+        raise ValueError(f'unknown chunk compression {compression!r}')
+    raw = _DECOMPRESS[compression](data)
+    if len(raw) != size:
+        raise ValueError('chunk size mismatch')
+    return raw
 _MCAP_OPS = frozenset(range(0x01, 0x11))  # record opcodes of MCAP v0 (0x80-0xFF: private)
 
 
@@ -55,6 +65,7 @@ class McapScan:
         self.warnings = []
         self.complete = False
         self.chunk_offsets = []
+        self.chunks_without_crc = 0  # chunks whose writer stored no CRC: content unverifiable
 
     def _wanted(self, cid):
         ch = self.channels.get(cid)
@@ -245,6 +256,7 @@ class McapScan:
                 base = p
             if crc and crc32(inner[base:base + usize]) != crc:
                 raise ValueError('chunk checksum mismatch')
+            self.chunks_without_crc += not crc
         except Exception as err:  # any decoding failure means this chunk is unreadable
             self.warnings.append(f'corrupt chunk at byte {pos} skipped ({err})')
             return
