@@ -257,7 +257,8 @@ class StampMonitor:
 
 
 def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
-                  excluded_share=math.nan, max_excluded_share=0.5, name='IMU stream'):
+                  excluded_share=math.nan, max_excluded_share=0.5, name='IMU stream',
+                  rejected=None):
     """Health of the input stream: stamps, rate and motion-gate exclusions.
 
     Parameters
@@ -276,6 +277,9 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
         Share of decided samples the stationarity gate left out (0-1), NaN when gating is off.
     max_excluded_share : float
         WARN above this share: the estimate is starved (the IMU is moving most of the time).
+    rejected : dict, optional
+        ``{axis: n}`` samples rejected since the last report as NaN, inf or non-physical
+        (``OnlineAllan.take_rejected``): WARN with the counts.
 
     """
     rate = recent['rate_hz'] if math.isfinite(recent['rate_hz']) else monitor.measured_rate()
@@ -308,6 +312,12 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
     if math.isfinite(excluded_share) and excluded_share > max_excluded_share:
         level = WARN
         problems.append(f'{100 * excluded_share:.0f} % of samples excluded as motion')
+    for axis, n in (rejected or {}).items():
+        values[f'rejected_recent.{axis}'] = n
+    if rejected:
+        level = WARN
+        problems.append('samples rejected as NaN, inf or non-physical: ' +
+                        ', '.join(f'{a} {n}' for a, n in rejected.items()))
     return Health(name, level, '; '.join(problems) if problems else 'ok', values)
 
 
