@@ -85,10 +85,10 @@ def _parse_header(path, line, lineno):
 
 
 def _locate_bad(path, lines, first, names):
-    """Find the first bad data line (slow path, only used to word an error)."""
+    """Find the first bad data line of a block whose first line is ``first`` (for the error)."""
     k = len(names)
-    for lineno in range(first, len(lines) + 1):
-        text = lines[lineno - 1].strip()
+    for lineno, text in enumerate(lines, start=first):
+        text = text.strip()
         if not text or text.startswith('#'):
             continue
         cells = text.split(',')
@@ -104,6 +104,61 @@ def _locate_bad(path, lines, first, names):
                 raise InputError(path, f'line {lineno}, column {name}: {cell.strip()} '
                                        '(NaN or infinite value)')
     raise InputError(path, 'unreadable numbers')  # pragma: no cover (loadtxt and float agree)
+
+
+#: Lines parsed per numpy call: the text held in memory is one block, not the whole file.
+_ROWS = 100_000
+#: Longest line accepted: a sample line is under 200 characters; this bounds what one read takes
+#: from a file with no line breaks.
+MAX_LINE = 1 << 16
+
+
+def _lines(path, f, lineno):
+    """Yield ``(lineno, line)`` with a length limit on each line."""
+    while True:
+        line = f.readline(MAX_LINE + 1)
+        if not line:
+            return
+        lineno += 1
+        if len(line) > MAX_LINE:
+            raise InputError(path, f'line {lineno}: longer than {MAX_LINE} characters: not a '
+                                   'sample CSV')
+        yield lineno, line
+
+
+def _read_table(path, f):
+    """Header line number, column names and the numeric table in blocks of :data:`_ROWS`."""
+    lines = _lines(path, f, 0)
+    header_no, header = next(((n, ln) for n, ln in lines
+                              if ln.strip() and not ln.lstrip().startswith('#')), (None, None))
+    if header_no is None:
+        raise InputError(path, 'empty file (no CSV header)')
+    names = _parse_header(path, header.rstrip('\r\n'), header_no)
+    blocks, block, first = [], [], header_no + 1
+    for lineno, line in lines:
+        if not block:
+            first = lineno
+        block.append(line)
+        if len(block) == _ROWS:
+            blocks.append(_parse_block(path, block, first, names))
+            block = []
+    if block:
+        blocks.append(_parse_block(path, block, first, names))
+    return header_no, names, [b for b in blocks if b.shape[0]]
+
+
+def _parse_block(path, block, first, names):
+    """One block of lines -> (rows, columns) float64; InputError naming the first bad line."""
+    body = [ln for ln in block if ln.strip() and not ln.lstrip().startswith('#')]
+    if not body:
+        return np.zeros((0, len(names)))
+    try:
+        table = np.loadtxt(body, delimiter=',', dtype=np.float64, ndmin=2)
+    except ValueError:
+        table = None
+    if table is None or table.shape[1] != len(names) or not np.isfinite(table).all():
+        _locate_bad(path, block, first, names)
+    return table
 
 
 def read_csv(path):
@@ -124,32 +179,16 @@ def read_csv(path):
     """
     try:
         with open(path, encoding='utf-8') as f:
-            text = f.read()
+            header_no, names, blocks = _read_table(path, f)
     except FileNotFoundError:
         raise InputError(path, 'no such file') from None
     except UnicodeDecodeError:
         raise InputError(path, 'not a text file (CSV expected)') from None
     except OSError as err:
         raise InputError(path, f'cannot read: {err.strerror}') from None
-    lines = text.splitlines()
-    header_no = next((i + 1 for i, ln in enumerate(lines)
-                      if ln.strip() and not ln.lstrip().startswith('#')), None)
-    if header_no is None:
-        raise InputError(path, 'empty file (no CSV header)')
-    names = _parse_header(path, lines[header_no - 1], header_no)
-    body = [ln for ln in lines[header_no:] if ln.strip() and not ln.lstrip().startswith('#')]
     k = len(names)
-    if body:
-        try:
-            table = np.loadtxt(body, delimiter=',', dtype=np.float64, ndmin=2)
-        except ValueError:
-            _locate_bad(path, lines, header_no + 1, names)
-        if table.shape[1] != k:
-            _locate_bad(path, lines, header_no + 1, names)
-        if not np.isfinite(table).all():
-            _locate_bad(path, lines, header_no + 1, names)
-    else:
-        table = np.zeros((0, k))
+    table = np.concatenate(blocks) if blocks else np.zeros((0, k))
+    del blocks
     col = {name: table[:, i] for i, name in enumerate(names)}
     axes = tuple(a for a in AXES if a in col)
     data = np.column_stack([col[a] for a in axes]) if table.shape[0] else np.zeros((0, len(axes)))
@@ -176,6 +215,9 @@ def write_csv(path, samples):
     tmp = None
     try:
         fd, tmp = tempfile.mkstemp(prefix=f'.{os.path.basename(path)}.', dir=folder)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)  # the mode open() would give, not mkstemp's 0600
         with open(fd, 'w', encoding='utf-8', newline='\n') as f:
             f.write(','.join(names) + '\n')
             for start in range(0, t.shape[0], _BLOCK):

@@ -108,3 +108,25 @@ def test_raw_capture_losses_counted_from_the_device_timer(tmp_path, seed):
     assert any(f'about {lost} packet(s) missing' in w for w in s.warnings)
     timing = check_timing(s.t)  # what the analysis uses
     assert timing.rate_hz == pytest.approx(100.0) and timing.missing_samples == lost
+
+
+def test_csv_read_in_blocks_with_a_line_limit(tmp_path, monkeypatch):
+    """Blocks of lines give the same samples; a bad line in a later block is named exactly.
+
+    A file with no line breaks is refused after MAX_LINE characters, not read whole.
+    """
+    from imu_allan.formats import csv_samples
+    path = _csv(tmp_path / 'a.csv', np.arange(N) / 100.0)
+    whole = read_csv(path)
+    monkeypatch.setattr(csv_samples, '_ROWS', 37)
+    blocked = read_csv(path)
+    assert np.array_equal(whole.t, blocked.t) and np.array_equal(whole.data, blocked.data)
+    lines = path.read_text().splitlines()
+    lines[300] = '3.0,abc'
+    path.write_text('\n'.join(lines) + '\n')
+    with pytest.raises(InputError, match="line 301, column gyro_x: not a number: 'abc'"):
+        read_csv(path)
+    endless = tmp_path / 'endless.csv'
+    endless.write_text('t,gyro_x\n' + '1' * (csv_samples.MAX_LINE + 10))
+    with pytest.raises(InputError, match='line 2: longer than'):
+        read_csv(endless)
