@@ -26,8 +26,8 @@ import os
 
 import numpy as np
 
-from .model import as_mapping, as_number, ModelError, read_yaml_file
-from .units import AXES, conventional, IEEE_TERMS, sensor_of, si_unit
+from .model import as_number, ModelError, per_axis_entries, read_yaml_file
+from .units import AXES, conventional, IEEE_TERMS, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
@@ -63,34 +63,19 @@ class NoiseBudget:
         Raises :class:`~imu_allan.core.model.ModelError` (an InputError) naming ``where``.
         """
         where = str(where)
-        if not isinstance(data, dict):
-            raise ModelError(where, 'expected a mapping with gyro/accel/axes entries')
-        unknown = set(map(str, data)) - {'gyro', 'accel', 'axes', 'warn_ratio', 'error_ratio',
-                                         'description'}
-        if unknown:
-            raise ModelError(where, f'unknown key(s) {", ".join(sorted(unknown))[:120]}')
+        entries = per_axis_entries(data, where, ('warn_ratio', 'error_ratio'))
         ratios = {key: as_number(data.get(key, default), where, key, low_open=True)
                   for key, default in (('warn_ratio', 1.0), ('error_ratio', 2.0))}
         if ratios['error_ratio'] < ratios['warn_ratio']:
             raise ModelError(where, 'error_ratio must be >= warn_ratio')
-        sensors = {s: as_mapping(data.get(s), where, s) for s in ('gyro', 'accel')}
-        axes_section = as_mapping(data.get('axes'), where, 'axes')
-        for axis in axes_section:
-            if axis not in AXES:
-                raise ModelError(where, f'unknown axis {str(axis)[:40]!r} (known: '
-                                        f'{", ".join(AXES)})')
         limits = {}
-        for axis in AXES:
-            merged = {**sensors[sensor_of(axis)],
-                      **as_mapping(axes_section.get(axis), where, f'axes.{axis}')}
-            checked = {}
-            for term, value in merged.items():
+        for axis, merged in entries.items():
+            for term in merged:
                 if term not in IEEE_TERMS:
                     raise ModelError(where, f'{axis}: unknown or unbudgetable term '
                                             f'{str(term)[:40]!r} (known: {", ".join(IEEE_TERMS)})')
-                checked[term] = as_number(value, where, f'{axis}.{term}', low_open=True)
-            if checked:
-                limits[axis] = checked
+            limits[axis] = {term: as_number(value, where, f'{axis}.{term}', low_open=True)
+                            for term, value in merged.items()}
         if not limits:
             raise ModelError(where, 'budget names no term for any axis')
         return cls(limits, ratios['warn_ratio'], ratios['error_ratio'], where)

@@ -139,6 +139,33 @@ def as_number(value, where, name, low=0.0, high=MAX_PARAMETER, low_open=False):
     return number
 
 
+def per_axis_entries(data, where, more_keys=()):
+    """The layout model and budget files share, checked: ``{axis: {term: raw value}}``.
+
+    Top level: ``gyro`` and ``accel`` (defaults for their three axes), ``axes`` (per-axis
+    overrides), ``description`` and ``more_keys``; every section a mapping, axes known.
+    """
+    if not isinstance(data, dict):
+        raise ModelError(where, f'expected a mapping with gyro/accel/axes entries, not '
+                                f'{_kind(data)}')
+    unknown = set(map(str, data)) - {'gyro', 'accel', 'axes', 'description', *more_keys}
+    if unknown:
+        raise ModelError(where, f'unknown key(s) {", ".join(sorted(unknown))[:120]}')
+    sensors = {s: as_mapping(data.get(s), where, s) for s in ('gyro', 'accel')}
+    per_axis = as_mapping(data.get('axes'), where, 'axes')
+    for axis in per_axis:
+        if axis not in AXES:
+            raise ModelError(where, f'unknown axis {str(axis)[:40]!r} (known: '
+                                    f'{", ".join(AXES)})')
+    entries = {}
+    for axis in AXES:
+        merged = {**sensors[sensor_of(axis)],
+                  **as_mapping(per_axis.get(axis), where, f'axes.{axis}')}
+        if merged:
+            entries[axis] = merged
+    return entries
+
+
 def _check_params(axis, term, params, where, rate_hz=None):
     """Validate one term's parameters against the schema; return ``{param: float}``."""
     if term not in TERM_PARAMETERS:
@@ -215,29 +242,12 @@ class NoiseModel:
     def from_dict(cls, data, where='model'):
         """Build from the model-file layout (sensor defaults, then per-axis overrides)."""
         where = str(where)
-        if not isinstance(data, dict):
-            raise ModelError(where, 'expected a mapping with gyro/accel/axes entries, not '
-                                    f'{_kind(data)}')
-        unknown = set(map(str, data)) - {'gyro', 'accel', 'axes', 'rate_hz', 'description',
-                                         'units'}
-        if unknown:
-            raise ModelError(where, f'unknown key(s) {", ".join(sorted(unknown))[:120]}')
+        entries = per_axis_entries(data, where, ('rate_hz', 'units'))
         rate = data.get('rate_hz')
         if rate is not None:
             rate = as_number(rate, where, 'rate_hz', 0.0, MAX_RATE_HZ, low_open=True)
-        sensors = {s: as_mapping(data.get(s), where, s) for s in ('gyro', 'accel')}
-        per_axis = as_mapping(data.get('axes'), where, 'axes')
-        for axis in per_axis:
-            if axis not in AXES:
-                raise ModelError(where, f'unknown axis {str(axis)[:40]!r} (known: '
-                                        f'{", ".join(AXES)})')
-        terms = {}
-        for axis in AXES:
-            merged = {**sensors[sensor_of(axis)],
-                      **as_mapping(per_axis.get(axis), where, f'axes.{axis}')}
-            if merged:
-                terms[axis] = {t: _check_params(axis, t, p, where, rate)
-                               for t, p in merged.items()}
+        terms = {axis: {t: _check_params(axis, t, p, where, rate) for t, p in merged.items()}
+                 for axis, merged in entries.items()}
         return cls(terms, rate)
 
     @classmethod
