@@ -187,17 +187,18 @@ def read_bag(path, topic=None, fast=True):
     where = str(path)
     kind, p = bag_kind(path)
     warnings = []
+    checks = {}
     if kind == 'dir':
         storage, files, compressed, note = _dir_storage(p)
         if storage == 'mcap' and not compressed and fast:
-            chosen, t, data, warnings = _read_mcap_files(where, files, topic)
+            chosen, t, data, warnings = _read_mcap_files(where, files, topic, checks=checks)
         elif storage == 'sqlite3' and not compressed and fast:
             chosen, t, data, warnings = _read_sqlite_files(where, files, topic)
         else:
             chosen, t, data, warnings = _read_generic(where, p, topic)
         warnings = ([note] if note else []) + warnings
     elif kind == 'mcap' and fast:
-        chosen, t, data, warnings = _read_mcap_files(where, [p], topic)
+        chosen, t, data, warnings = _read_mcap_files(where, [p], topic, checks=checks)
     elif kind == 'sqlite3' and fast:
         chosen, t, data, warnings = _read_sqlite_files(where, [p], topic)
     elif kind == 'ros1' and fast:
@@ -211,15 +212,19 @@ def read_bag(path, topic=None, fast=True):
         extra = f' ({"; ".join(warnings)})' if warnings else ''
         raise InputError(path, f'topic {chosen} has no messages{extra}')
     storage = _dir_storage(p)[0] if kind == 'dir' else kind
+    integrity = INTEGRITY.get(storage, '')
+    if checks.get('chunks_without_crc'):
+        integrity = (f'{checks["chunks_without_crc"]} MCAP chunk(s) carry no CRC-32 (their writer '
+                     'stored none): their values could not be verified')
     return Samples(t=t, data=data, axes=AXES, source=f'{where}:{chosen}', warnings=warnings,
-                   integrity=INTEGRITY.get(storage, ''))
+                   integrity=integrity)
 
 
 #: What a reader can verify in each storage (said in the report, so a reader of the report
 #: knows which damage could have gone unnoticed).
 INTEGRITY = {
-    'mcap': 'MCAP chunks checked against their CRC-32 (chunks stored without one are named in '
-            'the warnings); message bytes outside chunks cannot be verified',
+    'mcap': 'MCAP chunks checked against their CRC-32; message bytes outside chunks cannot be '
+            'verified',
     'sqlite3': 'sqlite3 storage has no checksums: a damaged value or stamp inside a message '
                'cannot be detected, only non-physical values and disordered stamps',
     'ros1': 'ROS 1 bags have no checksums: decompression catches most damage in a compressed '
@@ -322,8 +327,11 @@ def _join(ts, ds):
     return np.concatenate(ts), np.concatenate(ds)
 
 
-def _read_mcap_files(where, files, topic, force_generic=False):
-    """Fast path for MCAP storage: scan every file, bulk-decode the chosen topic."""
+def _read_mcap_files(where, files, topic, force_generic=False, checks=None):
+    """Fast path for MCAP storage: scan every file, bulk-decode the chosen topic.
+
+    ``checks`` (a dict) receives ``chunks_without_crc``, the chunks that could not be verified.
+    """
     scans = []
     for f in files:
         scan = McapScan(str(f), topic, force_generic=force_generic)
@@ -350,9 +358,9 @@ def _read_mcap_files(where, files, topic, force_generic=False):
             ds.append(d)
             warnings += scan.collectors[chosen].warnings()
         warnings += scan.warnings
-        if scan.chunks_without_crc:
-            warnings.append(f'{Path(scan.path).name}: {scan.chunks_without_crc} chunk(s) stored '
-                            'without a CRC: their messages could not be verified')
+        if checks is not None:
+            checks['chunks_without_crc'] = (checks.get('chunks_without_crc', 0)
+                                            + scan.chunks_without_crc)
     if not ts:
         return chosen, np.zeros(0), np.zeros((0, 6)), warnings
     return chosen, *_join(ts, ds), warnings
