@@ -60,6 +60,26 @@ def test_own_mcap_writer_stores_chunk_crcs(tmp_path):
         assert sum(1 for _ in reader.messages()) == N
 
 
+def test_mcap_damaged_chunk_named_with_its_lost_messages(tmp_path):
+    """A flipped byte in a chunk: that chunk is skipped (CRC), its loss counted, the rest kept."""
+    samples = _samples()
+    folder = write_imu_bag(tmp_path / 'bag', samples, storage='mcap')
+    src = next(folder.glob('*.mcap'))
+    scan = McapScan(str(src))
+    scan.run()
+    assert len(scan.chunk_offsets) >= 2
+    raw = bytearray(src.read_bytes())
+    first = scan.chunk_offsets[0]
+    raw[first + 500] ^= 0x10
+    bad = tmp_path / 'bad.mcap'
+    bad.write_bytes(bytes(raw))
+    got = read_bag(bad)
+    lost = N - got.n
+    assert 0 < lost < N
+    assert any(f'chunk 1 of {len(scan.chunk_offsets)}: {lost} Imu message(s) lost' in w
+               for w in got.warnings), got.warnings
+
+
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_byte_flips_never_change_the_result_silently(tmp_path, storage):
     """MCAP: every damaged chunk is detected by its CRC; sqlite3 (no checksums) says so."""
