@@ -126,25 +126,71 @@ def _lines(path, f, lineno):
         yield lineno, line
 
 
+class _Columns:
+    """The final arrays (t, data, extra columns) filled block by block: no concatenation.
+
+    The row count is estimated from the file size and the first block's bytes per line, so
+    the arrays are allocated once (grown by doubling if the estimate was short).
+    """
+
+    def __init__(self, names, file_bytes):
+        self.axes = tuple(a for a in AXES if a in names)
+        self.t_col = names.index('t')
+        self.axis_cols = [names.index(a) for a in self.axes]
+        self.extra_cols = {n: i for i, n in enumerate(names) if n != 't' and n not in AXES}
+        self.file_bytes = file_bytes
+        self.n = 0
+        self.t = np.empty(0)
+        self.data = np.empty((0, len(self.axes)))
+        self.extra = {n: np.empty(0) for n in self.extra_cols}
+
+    def add(self, table, block_bytes):
+        """Append a parsed block (rows, columns) that came from ``block_bytes`` of text."""
+        m = table.shape[0]
+        if self.n + m > self.t.shape[0]:
+            estimate = int(self.file_bytes * m / max(block_bytes, 1) * 1.02) + 1
+            self._grow(max(self.n + m, 2 * self.t.shape[0], estimate))
+        rows = slice(self.n, self.n + m)
+        self.t[rows] = table[:, self.t_col]
+        self.data[rows] = table[:, self.axis_cols]
+        for name, i in self.extra_cols.items():
+            self.extra[name][rows] = table[:, i]
+        self.n += m
+
+    def _grow(self, size):
+        def grown(old):
+            new = np.empty((size,) + old.shape[1:])
+            new[:self.n] = old[:self.n]
+            return new
+        self.t, self.data = grown(self.t), grown(self.data)
+        self.extra = {name: grown(col) for name, col in self.extra.items()}
+
+    def arrays(self):
+        """(t, data, extra) with exactly the rows read."""
+        n = self.n
+        return self.t[:n], self.data[:n], {name: col[:n] for name, col in self.extra.items()}
+
+
 def _read_table(path, f):
-    """Header line number, column names and the numeric table in blocks of :data:`_ROWS`."""
+    """Read header and rows in blocks of :data:`_ROWS` lines into :class:`_Columns`."""
     lines = _lines(path, f, 0)
     header_no, header = next(((n, ln) for n, ln in lines
                               if ln.strip() and not ln.lstrip().startswith('#')), (None, None))
     if header_no is None:
         raise InputError(path, 'empty file (no CSV header)')
     names = _parse_header(path, header.rstrip('\r\n'), header_no)
-    blocks, block, first = [], [], header_no + 1
+    columns = _Columns(names, os.fstat(f.fileno()).st_size)
+    block, first = [], header_no + 1
     for lineno, line in lines:
         if not block:
             first = lineno
         block.append(line)
         if len(block) == _ROWS:
-            blocks.append(_parse_block(path, block, first, names))
+            columns.add(_parse_block(path, block, first, names), sum(map(len, block)))
             block = []
     if block:
-        blocks.append(_parse_block(path, block, first, names))
-    return header_no, names, [b for b in blocks if b.shape[0]]
+        columns.add(_parse_block(path, block, first, names), sum(map(len, block)))
+    return columns
 
 
 def _parse_block(path, block, first, names):
@@ -179,26 +225,19 @@ def read_csv(path):
     """
     try:
         with open(path, encoding='utf-8') as f:
-            header_no, names, blocks = _read_table(path, f)
+            columns = _read_table(path, f)
     except FileNotFoundError:
         raise InputError(path, 'no such file') from None
     except UnicodeDecodeError:
         raise InputError(path, 'not a text file (CSV expected)') from None
     except OSError as err:
         raise InputError(path, f'cannot read: {err.strerror}') from None
-    k = len(names)
-    table = np.concatenate(blocks) if blocks else np.zeros((0, k))
-    del blocks
-    col = {name: table[:, i] for i, name in enumerate(names)}
-    axes = tuple(a for a in AXES if a in col)
-    data = np.column_stack([col[a] for a in axes]) if table.shape[0] else np.zeros((0, len(axes)))
-    extra = {n: np.ascontiguousarray(col[n]) for n in names if n != 't' and n not in AXES}
-    t = np.ascontiguousarray(col['t'])
+    t, data, extra = columns.arrays()
     scale, note = _time_scale(path, t)
     if note:
-        t = t * scale
-    return Samples(t=t, data=np.ascontiguousarray(data), axes=axes, source=str(path),
-                   extra=extra, warnings=[note] if note else [])
+        t *= scale
+    return Samples(t=t, data=data, axes=columns.axes, source=str(path), extra=extra,
+                   warnings=[note] if note else [])
 
 
 def write_csv(path, samples):

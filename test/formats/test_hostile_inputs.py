@@ -130,3 +130,14 @@ def test_csv_read_in_blocks_with_a_line_limit(tmp_path, monkeypatch):
     endless.write_text('t,gyro_x\n' + '1' * (csv_samples.MAX_LINE + 10))
     with pytest.raises(InputError, match='line 2: longer than'):
         read_csv(endless)
+
+
+def test_thesis_log_stamp_beyond_int64_is_a_damaged_line(tmp_path):
+    """A stamp with too many digits (found by the fuzz test) is skipped and counted."""
+    from imu_allan.formats.thesis_log import read_thesis_log
+    good = [f'0.0; 0.0; 1.0; 0.001; 0.002; 0.003; {1445776339557671000 + i * 10_000_000}'
+            for i in range(5)]
+    path = tmp_path / 'log.txt'
+    path.write_text('\n'.join(good[:2] + [good[2] + '9' * 10] + good[3:]) + '\n')
+    s = read_thesis_log(path)
+    assert s.n == 4 and '1 malformed line(s) skipped (line 3)' in s.warnings[0]
