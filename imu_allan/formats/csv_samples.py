@@ -107,7 +107,7 @@ def _locate_bad(path, lines, first, names):
 
 
 #: Lines parsed per numpy call: the text held in memory is one block, not the whole file.
-_ROWS = 100_000
+_ROWS = 25_000
 #: Longest line accepted: a sample line is under 200 characters; this bounds what one read takes
 #: from a file with no line breaks.
 MAX_LINE = 1 << 16
