@@ -15,7 +15,15 @@ from ..core.units import ALL_TERMS, IEEE_TERMS
 from ..errors import InputError
 from ..formats import FORMATS
 from ..report.exporters import add_arguments as add_export_arguments
-from .common import ArgumentParser, EXIT_BAD_INPUT, guarded
+from .common import (
+    ArgumentParser,
+    bounded_float,
+    bounded_int,
+    check_out_dir,
+    emit,
+    EXIT_BAD_INPUT,
+    guarded,
+)
 from .progress import Progress
 
 
@@ -42,20 +50,21 @@ def build_parser():
                         'rosbag2 (MCAP) with imu/data_denoised')
     p.add_argument('--terms', help='comma-separated terms to fit (default: selected by BIC '
                    f'among {", ".join(IEEE_TERMS)}); gauss_markov and sinusoid allowed')
-    p.add_argument('--rate', type=float, metavar='HZ',
+    p.add_argument('--rate', type=bounded_float(0.0, 1e6, low_open=True), metavar='HZ',
                    help='sample rate (default: from the time stamps)')
-    p.add_argument('--points-per-decade', type=float, default=10.0,
+    p.add_argument('--points-per-decade', type=bounded_float(1.0, 100.0), default=10.0,
                    help='averaging times per decade (default 10)')
-    p.add_argument('--min-clusters', type=int, default=10,
+    p.add_argument('--min-clusters', type=bounded_int(2, 10**6), default=10,
                    help='fewest clusters at the longest averaging time (default 10: T/10)')
-    p.add_argument('--tau-max', type=float, metavar='S', help='longest averaging time, s')
+    p.add_argument('--tau-max', type=bounded_float(0.0, 1e9, low_open=True), metavar='S',
+                   help='longest averaging time, s')
     p.add_argument('--replace-outliers', action='store_true',
                    help='replace Tukey F=3 outliers by the axis mean (as the thesis did)')
     p.add_argument('--allow-jumps', action='store_true',
                    help='accept time-stamp jumps (treat the record as contiguous)')
     p.add_argument('--online', action='store_true',
                    help='use the bounded-memory online estimator of the allan node')
-    p.add_argument('--jobs', type=int, default=0,
+    p.add_argument('--jobs', type=bounded_int(0, 256), default=0,
                    help='parallel processes for several inputs (default: cores)')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     add_export_arguments(p)
@@ -70,14 +79,6 @@ def _options(args):
     terms = None
     if args.terms:
         terms = [t.strip() for t in args.terms.split(',') if t.strip()]
-    if args.rate is not None and not args.rate > 0:
-        raise InputError('--rate', 'must be > 0')
-    if args.points_per_decade <= 0:
-        raise InputError('--points-per-decade', 'must be > 0')
-    if args.min_clusters < 2:
-        raise InputError('--min-clusters', 'must be at least 2')
-    if args.tau_max is not None and not args.tau_max > 0:
-        raise InputError('--tau-max', 'must be > 0')
     if args.export and not args.out:
         raise InputError('--export', 'needs --out DIR (the files go into DIR/export/)')
     from ..core.analysis import AnalysisOptions
@@ -194,6 +195,8 @@ def main(argv=None):
     options = _options(args)
     if args.export_samples and len(args.inputs) > 1:
         raise InputError('--export-samples', 'takes exactly one INPUT')
+    if args.out:
+        check_out_dir(args.out)
     quiet = args.quiet or args.json or not sys.stderr.isatty()
     if len(args.inputs) == 1:
         steps = 2 + bool(args.denoise) + bool(args.out)  # read, estimate+fit, [denoise], [write]
@@ -202,7 +205,7 @@ def main(argv=None):
             report, text = run_one(args.inputs[0], args, options, progress)
         finally:
             progress.close()
-        print(json.dumps(report) if args.json else text)
+        emit(json.dumps(report) if args.json else text)
         return 0
     jobs = args.jobs or os.cpu_count() or 1
     work = [(path, args, options) for path in args.inputs]
@@ -218,8 +221,8 @@ def main(argv=None):
         sys.stderr.write(f'analyze: {message}\n')
     reports = [(p, r[0] if ok else r) for p, (ok, r) in results]
     if args.json:
-        print(json.dumps({'reports': [r for _, r in reports if not isinstance(r, str)],
-                          'errors': [m for _, m in failed]}))
+        emit(json.dumps({'reports': [r for _, r in reports if not isinstance(r, str)],
+                         'errors': [m for _, m in failed]}))
     else:
         for _path, (ok, rep) in results:
             if ok:

@@ -18,7 +18,7 @@ import sys
 
 from ..formats import FORMATS
 from ..report.discrepancy_report import report_dict, summary_text, write_plots
-from .common import ArgumentParser, guarded
+from .common import ArgumentParser, bounded_int, guarded
 
 
 def build_parser():
@@ -45,10 +45,11 @@ def build_parser():
     parser.add_argument('--topic', help='IMU topic in a bag (default: the only Imu topic)')
     parser.add_argument('--format', default='auto', choices=FORMATS,
                         help='input format (default: auto)')
-    parser.add_argument('--sims', type=int, default=4, metavar='K',
+    parser.add_argument('--sims', type=bounded_int(0, 1000), default=4, metavar='K',
                         help='simulated runs per model in the band (default 4)')
-    parser.add_argument('--seed', type=int, default=0, help='simulation seed (default 0)')
-    parser.add_argument('--max-steps', type=int, default=4, metavar='N',
+    parser.add_argument('--seed', type=bounded_int(0, 2**63 - 1), default=0,
+                        help='simulation seed (default 0)')
+    parser.add_argument('--max-steps', type=bounded_int(0, 20), default=4, metavar='N',
                         help='most effects added per axis (default 4)')
     return parser
 

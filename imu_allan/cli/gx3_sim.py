@@ -43,7 +43,7 @@ from ..core.units import STANDARD_GRAVITY
 from ..device import gx3_protocol as p
 from ..device.simulator import ID_STRINGS, SimConfig, Simulator
 from ..errors import InputError
-from .common import ArgumentParser, guarded
+from .common import ArgumentParser, bounded_float, bounded_int, guarded
 
 
 def build_parser():
@@ -52,39 +52,42 @@ def build_parser():
     ap.add_argument('--model', help='noise model YAML file (default: thesis 3DM-GX3-25 values)')
     ap.add_argument('--gravity-axis', default='-z',
                     help='axis that reads 1 g: x, y, z, -x, -y, -z or none (default -z)')
-    ap.add_argument('--gravity', type=float, default=STANDARD_GRAVITY,
+    ap.add_argument('--gravity', type=bounded_float(0.0, 100.0, low_open=True),
+                    default=STANDARD_GRAVITY,
                     help='m/s^2 per g used to express the noise in g (default 9.80665)')
-    ap.add_argument('--rate-hz', type=float, default=100.0,
+    ap.add_argument('--rate-hz', type=bounded_float(0.0, 1000.0, low_open=True), default=100.0,
                     help='power-up data rate, Hz (decimation = 1000/rate; default 100)')
-    ap.add_argument('--baud', type=int, default=p.DEFAULT_BAUD,
+    ap.add_argument('--baud', type=bounded_int(300, 10**7), default=p.DEFAULT_BAUD,
                     help='power-up baud rate used for pacing (default 115200)')
     ap.add_argument('--stream', default=None,
                     help='power up streaming this data command (hex, e.g. C2)')
-    ap.add_argument('--timer-start', type=int, default=0,
+    ap.add_argument('--timer-start', type=bounded_int(0, 2**32 - 1), default=0,
                     help='device timer at power-up, ticks (e.g. 4294900000 to test rollover)')
-    ap.add_argument('--seed', type=int, default=None, help='random seed')
+    ap.add_argument('--seed', type=bounded_int(0, 2**63 - 1), default=None, help='random seed')
     ap.add_argument('--link', help='also make this symlink to the terminal (stable path)')
     ap.add_argument('--record-truth', metavar='FILE', help='CSV of every record sent')
-    ap.add_argument('--duration', type=float, default=None, help='exit after this many s')
-    ap.add_argument('--firmware', type=int, default=1130, help='firmware number (1130)')
+    ap.add_argument('--duration', type=bounded_float(0.0, 1e7), default=None,
+                    help='exit after this many s')
+    ap.add_argument('--firmware', type=bounded_int(0, 2**31 - 1), default=1130,
+                    help='firmware number (1130)')
     ap.add_argument('--serial', default=ID_STRINGS[1], help='serial number string')
     ap.add_argument('--ignore-host-baud', action='store_true',
                     help='talk to the host whatever baud rate it opened the port at')
-    ap.add_argument('--max-bias-delay', type=float, default=0.2,
+    ap.add_argument('--max-bias-delay', type=bounded_float(0.0, 60.0), default=0.2,
                     help='cap on the 0xCD gyro-bias capture delay, s (default 0.2)')
-    ap.add_argument('--corrupt-rate', type=float, default=0.0,
+    ap.add_argument('--corrupt-rate', type=bounded_float(0.0, 1.0), default=0.0,
                     help='probability that a record gets one data byte flipped')
-    ap.add_argument('--drop-rate', type=float, default=0.0,
+    ap.add_argument('--drop-rate', type=bounded_float(0.0, 1.0), default=0.0,
                     help='probability that a record is not sent')
-    ap.add_argument('--garbage-rate', type=float, default=0.0,
+    ap.add_argument('--garbage-rate', type=bounded_float(0.0, 1.0), default=0.0,
                     help='probability of a burst of 1..32 junk bytes before a record')
-    ap.add_argument('--stall-after', type=float, default=None,
+    ap.add_argument('--stall-after', type=bounded_float(0.0, 1e7), default=None,
                     help='seconds of streaming before the device goes silent')
-    ap.add_argument('--stall-seconds', type=float, default=2.0,
+    ap.add_argument('--stall-seconds', type=bounded_float(0.0, 3600.0), default=2.0,
                     help='length of the stall, s (default 2)')
-    ap.add_argument('--disconnect-after', type=float, default=None,
+    ap.add_argument('--disconnect-after', type=bounded_float(0.0, 1e7), default=None,
                     help='seconds of streaming before the terminal is closed')
-    ap.add_argument('--disconnect-seconds', type=float, default=1.0,
+    ap.add_argument('--disconnect-seconds', type=bounded_float(0.0, 3600.0), default=1.0,
                     help='time before the device comes back, s (default 1)')
     return ap
 

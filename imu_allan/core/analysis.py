@@ -19,7 +19,7 @@ from .allan import (
 )
 from .fit import fit_noise_model, FitError, FittedModel
 from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
-from .units import is_gyro
+from .units import is_gyro, physical_limits, sample_unit
 
 #: Motion thresholds on 1-s block means, relative to the record's median: a still MEMS IMU's
 #: 1-s averages wander by ~1e-4 rad/s and ~1e-3 m/s^2; a moving robot by orders more.
@@ -62,19 +62,28 @@ class Analysis:
     data: np.ndarray = None
     t: np.ndarray = None
     upper_limits: dict = field(default_factory=dict)
+    integrity: str = ''
 
 
 def _validate(samples):
+    """Refuse records the estimator cannot use, naming the first offending sample."""
     where = samples.source or 'input'
     if samples.n == 0:
         raise InputError(where, 'no samples')
     if samples.n < 2:
         raise InputError(where, 'only one sample; need a record to compute an Allan deviation')
-    bad = ~np.isfinite(samples.data)
+    limits = np.asarray(physical_limits(samples.axes))
+    with np.errstate(invalid='ignore'):
+        bad = ~(np.abs(samples.data) <= limits)  # NaN compares False: caught too
     if bad.any():
         i, j = np.argwhere(bad)[0]
-        raise InputError(where, f'non-finite value {samples.data[i, j]} in {samples.axes[j]} '
-                                f'at sample {i} (t={samples.t[i]:.6f} s)')
+        value = samples.data[i, j]
+        unit = sample_unit(samples.axes[j])
+        what = (f'non-finite value {value}' if not np.isfinite(value) else
+                f'non-physical value {value:.6g} (beyond {limits[j]:g} {unit})')
+        raise InputError(where, f'{what} in {samples.axes[j]} at sample {i} '
+                                f'(t={samples.t[i]:.6f} s); {int(bad.any(axis=1).sum())} '
+                                'such sample(s): damaged input or wrong units')
     if not np.all(np.isfinite(samples.t)):
         raise InputError(where, f'non-finite time stamp at sample '
                                 f'{int(np.flatnonzero(~np.isfinite(samples.t))[0])}')
@@ -121,8 +130,9 @@ def analyze_samples(samples, options=None):
         jump = timing.longest_gap_s > max(1.0, JUMP_INTERVALS * timing.nominal_dt)
         if jump and not options.allow_jumps:
             i = int(timing.gap_indices[np.argmax(np.diff(samples.t)[timing.gap_indices])])
+            cause = f' (the reader: {samples.warnings[0]})' if samples.warnings else ''
             raise InputError(where, f'time stamps jump by {timing.longest_gap_s:.3f} s after '
-                                    f'sample {i} (t={samples.t[i]:.6f} s); the Allan '
+                                    f'sample {i} (t={samples.t[i]:.6f} s){cause}; the Allan '
                                     f'deviation needs an unbroken record')
         warnings.append(f'{timing.n_gaps} gap(s) in the time stamps, about '
                         f'{timing.missing_samples} sample(s) missing (longest '
@@ -134,6 +144,7 @@ def analyze_samples(samples, options=None):
     outliers_data, outliers = replace_outliers(data, samples.axes)
     if options.replace_outliers:
         data = outliers_data
+        outliers.replaced = bool(outliers.total)
         if outliers.total:
             warnings.append(f'{outliers.total} outlier(s) replaced (Tukey F=3): '
                             + ', '.join(f'{a} {c}' for a, c in outliers.counts.items() if c))
@@ -174,7 +185,8 @@ def analyze_samples(samples, options=None):
     return Analysis(source=where, axes=tuple(samples.axes), n_samples=n, rate_hz=rate,
                     duration_s=n / rate, timing=timing, outliers=outliers, result=result,
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
-                    t=samples.t, upper_limits=upper)
+                    t=samples.t, upper_limits=upper,
+                    integrity=getattr(samples, 'integrity', ''))
 
 
 def _kalibr_upper_limits(fit):

@@ -25,10 +25,9 @@ import math
 import os
 
 import numpy as np
-import yaml
 
-from ..errors import InputError
-from .units import AXES, conventional, IEEE_TERMS, sensor_of, si_unit
+from .model import as_number, ModelError, per_axis_entries, read_yaml_file
+from .units import AXES, conventional, IEEE_TERMS, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 
@@ -58,62 +57,33 @@ class NoiseBudget:
 
     @classmethod
     def from_dict(cls, data, where='budget'):
-        """Build from the file layout; raise :class:`InputError` naming ``where`` on problems."""
-        if not isinstance(data, dict):
-            raise InputError(where, 'expected a mapping with gyro/accel/axes entries')
-        unknown = set(data) - {'gyro', 'accel', 'axes', 'warn_ratio', 'error_ratio',
-                               'description'}
-        if unknown:
-            raise InputError(where, f'unknown key(s) {", ".join(sorted(unknown))}')
-        ratios = {}
-        for key, default in (('warn_ratio', 1.0), ('error_ratio', 2.0)):
-            try:
-                ratios[key] = float(data.get(key, default))
-            except (TypeError, ValueError):
-                raise InputError(where, f'{key} is not a number') from None
-            if not math.isfinite(ratios[key]) or ratios[key] <= 0:
-                raise InputError(where, f'{key} must be a positive number')
+        """Build from the file layout (the schema of :mod:`imu_allan.core.model`).
+
+        Raises :class:`~imu_allan.core.model.ModelError` (an InputError) naming ``where``.
+        """
+        where = str(where)
+        entries = per_axis_entries(data, where, ('warn_ratio', 'error_ratio'))
+        ratios = {key: as_number(data.get(key, default), where, key, low_open=True)
+                  for key, default in (('warn_ratio', 1.0), ('error_ratio', 2.0))}
         if ratios['error_ratio'] < ratios['warn_ratio']:
-            raise InputError(where, 'error_ratio must be >= warn_ratio')
-        axes_section = data.get('axes') or {}
-        if not isinstance(axes_section, dict):
-            raise InputError(where, 'axes must be a mapping of axis name to terms')
-        for axis in axes_section:
-            if axis not in AXES:
-                raise InputError(where, f'unknown axis {axis!r} (known: {", ".join(AXES)})')
+            raise ModelError(where, 'error_ratio must be >= warn_ratio')
         limits = {}
-        for axis in AXES:
-            merged = {**(data.get(sensor_of(axis)) or {}), **(axes_section.get(axis) or {})}
-            checked = {}
-            for term, value in merged.items():
+        for axis, merged in entries.items():
+            for term in merged:
                 if term not in IEEE_TERMS:
-                    raise InputError(where, f'{axis}: unknown or unbudgetable term {term!r} '
-                                     f'(known: {", ".join(IEEE_TERMS)})')
-                try:
-                    value = float(value)
-                except (TypeError, ValueError):
-                    raise InputError(where, f'{axis}.{term} is not a number') from None
-                if not math.isfinite(value) or value <= 0:
-                    raise InputError(where, f'{axis}.{term} must be a positive number')
-                checked[term] = value
-            if checked:
-                limits[axis] = checked
+                    raise ModelError(where, f'{axis}: unknown or unbudgetable term '
+                                            f'{str(term)[:40]!r} (known: {", ".join(IEEE_TERMS)})')
+            limits[axis] = {term: as_number(value, where, f'{axis}.{term}', low_open=True)
+                            for term, value in merged.items()}
         if not limits:
-            raise InputError(where, 'budget names no term for any axis')
-        return cls(limits, ratios['warn_ratio'], ratios['error_ratio'], str(where))
+            raise ModelError(where, 'budget names no term for any axis')
+        return cls(limits, ratios['warn_ratio'], ratios['error_ratio'], where)
 
     @classmethod
     def from_yaml(cls, path=None):
         """Load a budget file (default: the packaged 3DM-GX3-25 datasheet budget)."""
         path = path or DEFAULT_BUDGET_FILE
-        try:
-            with open(path, encoding='utf-8') as stream:
-                data = yaml.safe_load(stream)
-        except OSError as exc:
-            raise InputError(path, f'cannot read budget file ({exc.strerror})') from None
-        except yaml.YAMLError as exc:
-            raise InputError(path, f'not valid YAML ({str(exc).splitlines()[0]})') from None
-        return cls.from_dict(data, where=str(path))
+        return cls.from_dict(read_yaml_file(path, 'budget'), where=str(path))
 
     def limit(self, axis, term):
         """Budget of a term on an axis, or NaN when not budgeted."""
@@ -271,7 +241,8 @@ class StampMonitor:
 
 
 def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
-                  excluded_share=math.nan, max_excluded_share=0.5, name='IMU stream'):
+                  excluded_share=math.nan, max_excluded_share=0.5, name='IMU stream',
+                  rejected=None):
     """Health of the input stream: stamps, rate and motion-gate exclusions.
 
     Parameters
@@ -290,6 +261,9 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
         Share of decided samples the stationarity gate left out (0-1), NaN when gating is off.
     max_excluded_share : float
         WARN above this share: the estimate is starved (the IMU is moving most of the time).
+    rejected : dict, optional
+        ``{axis: n}`` samples rejected since the last report as NaN, inf or non-physical
+        (``OnlineAllan.take_rejected``): WARN with the counts.
 
     """
     rate = recent['rate_hz'] if math.isfinite(recent['rate_hz']) else monitor.measured_rate()
@@ -322,6 +296,12 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
     if math.isfinite(excluded_share) and excluded_share > max_excluded_share:
         level = WARN
         problems.append(f'{100 * excluded_share:.0f} % of samples excluded as motion')
+    for axis, n in (rejected or {}).items():
+        values[f'rejected_recent.{axis}'] = n
+    if rejected:
+        level = WARN
+        problems.append('samples rejected as NaN, inf or non-physical: ' +
+                        ', '.join(f'{a} {n}' for a, n in rejected.items()))
     return Health(name, level, '; '.join(problems) if problems else 'ok', values)
 
 

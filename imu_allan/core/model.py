@@ -22,40 +22,172 @@ import copy
 from dataclasses import dataclass, field
 import math
 import os
+import stat
 
 import yaml
 
+from ..errors import InputError
 from .units import ALL_TERMS, AXES, sensor_of, TERM_PARAMETERS
 
 
-class ModelError(ValueError):
-    """A model file or model dictionary is malformed."""
+class ModelError(InputError):
+    """A model or budget file (or model dictionary) is malformed.
+
+    ``ModelError('file: problem')`` (one text) and ``ModelError(where, problem)`` both work.
+    """
+
+    def __init__(self, where, problem=None):
+        """Split a single ``'where: problem'`` text, or take both parts."""
+        if problem is None:
+            where, _, problem = str(where).partition(': ')
+            if not problem:
+                where, problem = 'model', where
+        super().__init__(where, problem)
 
 
-def _check_params(axis, term, params, where):
+#: Bounds of the model/budget file schema (one place; used by NoiseModel and NoiseBudget).
+MAX_FILE_BYTES = 1 << 20  # a model file is a few hundred bytes; bounds /dev/zero and the like
+MAX_PARAMETER = 1.0e6  # no SI noise parameter, correlation time (s) or frequency (Hz) is larger
+MAX_RATE_HZ = 1.0e6
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """SafeLoader that refuses duplicate keys (YAML would silently keep the last one)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            try:
+                duplicate = key in seen
+            except TypeError:  # an unhashable key: the base class reports it
+                break
+            if duplicate:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f'duplicate key {key!r} (line {key_node.start_mark.line + 1})',
+                    key_node.start_mark)
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+def _kind(value):
+    return {bool: 'true/false', str: 'text', list: 'a list', dict: 'a mapping',
+            type(None): 'empty'}.get(type(value), type(value).__name__)
+
+
+def read_yaml_file(path, what='model'):
+    """Load a model or budget YAML file within the schema's bounds.
+
+    Raises :class:`ModelError` naming the file: unreadable, a directory or special file,
+    larger than :data:`MAX_FILE_BYTES`, binary, not valid YAML, duplicate keys, nested too
+    deeply.
+    """
+    where = str(path)
+    try:
+        mode = os.stat(path).st_mode
+        if not stat.S_ISREG(mode):  # a FIFO would block, /dev/zero would never end
+            kind = 'a directory' if stat.S_ISDIR(mode) else 'not a regular file'
+            raise ModelError(where, f'{kind} (a {what} file is expected)')
+        with open(path, 'rb') as stream:
+            raw = stream.read(MAX_FILE_BYTES + 1)
+    except OSError as exc:
+        raise ModelError(where, f'cannot read {what} file ({exc.strerror})') from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ModelError(where, f'larger than {MAX_FILE_BYTES // 1024} KiB: not a {what} file')
+    if b'\0' in raw:
+        raise ModelError(where, f'binary data, not a {what} file (YAML text expected)')
+    try:
+        text = raw.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        raise ModelError(where, f'not UTF-8 text at byte {exc.start}: not a {what} file') from None
+    try:
+        return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
+    except yaml.YAMLError as exc:
+        raise ModelError(where, f'not valid YAML ({" ".join(str(exc).split())[:160]})') from None
+    except RecursionError:
+        raise ModelError(where, 'YAML nested too deeply') from None
+
+
+def as_mapping(value, where, name):
+    """Return ``value`` as a dict (None -> {}); raise ModelError if it is not a mapping."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ModelError(where, f'{name} must be a mapping (key: value), not {_kind(value)}')
+    return value
+
+
+def as_number(value, where, name, low=0.0, high=MAX_PARAMETER, low_open=False):
+    """Return ``value`` as a finite float in [low, high] (or (low, high]); else ModelError.
+
+    Numbers and numeric text (YAML 1.1 reads ``1e-4`` as text) are accepted; true/false,
+    lists, mappings, NaN and infinities are not.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ModelError(where, f'{name} must be a number, not {_kind(value)}')
+    try:
+        number = float(value)
+    except OverflowError:
+        raise ModelError(where, f'{name} is too large') from None
+    except ValueError:
+        raise ModelError(where, f'{name} is not a number ({str(value)[:40]!r})') from None
+    if not math.isfinite(number):
+        raise ModelError(where, f'{name} must be finite')
+    if number < low or (low_open and number == low) or number > high:
+        need = 'a positive number' if low_open and low == 0 else f'a number >= {low:g}'
+        raise ModelError(where, f'{name} = {number:g}: must be {need} and at most {high:g}')
+    return number
+
+
+def per_axis_entries(data, where, more_keys=()):
+    """The layout model and budget files share, checked: ``{axis: {term: raw value}}``.
+
+    Top level: ``gyro`` and ``accel`` (defaults for their three axes), ``axes`` (per-axis
+    overrides), ``description`` and ``more_keys``; every section a mapping, axes known.
+    """
+    if not isinstance(data, dict):
+        raise ModelError(where, f'expected a mapping with gyro/accel/axes entries, not '
+                                f'{_kind(data)}')
+    unknown = set(map(str, data)) - {'gyro', 'accel', 'axes', 'description', *more_keys}
+    if unknown:
+        raise ModelError(where, f'unknown key(s) {", ".join(sorted(unknown))[:120]}')
+    sensors = {s: as_mapping(data.get(s), where, s) for s in ('gyro', 'accel')}
+    per_axis = as_mapping(data.get('axes'), where, 'axes')
+    for axis in per_axis:
+        if axis not in AXES:
+            raise ModelError(where, f'unknown axis {str(axis)[:40]!r} (known: '
+                                    f'{", ".join(AXES)})')
+    entries = {}
+    for axis in AXES:
+        merged = {**sensors[sensor_of(axis)],
+                  **as_mapping(per_axis.get(axis), where, f'axes.{axis}')}
+        if merged:
+            entries[axis] = merged
+    return entries
+
+
+def _check_params(axis, term, params, where, rate_hz=None):
+    """Validate one term's parameters against the schema; return ``{param: float}``."""
     if term not in TERM_PARAMETERS:
-        raise ModelError(f'{where}: unknown noise term {term!r} for {axis} '
-                         f'(known: {", ".join(ALL_TERMS)})')
+        raise ModelError(where, f'unknown noise term {str(term)[:40]!r} for {axis} '
+                                f'(known: {", ".join(ALL_TERMS)})')
     names = TERM_PARAMETERS[term]
-    if names == ('value',):
-        if isinstance(params, dict):
-            params = params.get('value')
+    if names == ('value',) and not isinstance(params, dict):
         params = {'value': params}
-    if not isinstance(params, dict) or set(params) != set(names):
-        raise ModelError(f'{where}: {axis}.{term} needs {", ".join(names)}')
-    out = {}
-    for name in names:
-        try:
-            value = float(params[name])
-        except (TypeError, ValueError):
-            raise ModelError(f'{where}: {axis}.{term}.{name} is not a number') from None
-        if not math.isfinite(value) or value < 0:
-            raise ModelError(f'{where}: {axis}.{term}.{name} must be finite and >= 0')
-        out[name] = value
+    params = as_mapping(params, where, f'{axis}.{term}')
+    if set(params) != set(names):
+        raise ModelError(where, f'{axis}.{term} needs {", ".join(names)}')
+    label = {n: f'{axis}.{term}' if names == ('value',) else f'{axis}.{term}.{n}' for n in names}
+    out = {name: as_number(params[name], where, label[name]) for name in names}
     if term == 'gauss_markov' and out['tau_c'] <= 0:
-        raise ModelError(f'{where}: {axis}.gauss_markov.tau_c must be > 0')
-    if term == 'sinusoid' and out['frequency_hz'] <= 0:
-        raise ModelError(f'{where}: {axis}.sinusoid.frequency_hz must be > 0')
+        raise ModelError(where, f'{axis}.gauss_markov.tau_c must be > 0')
+    if term == 'sinusoid':
+        if out['frequency_hz'] <= 0:
+            raise ModelError(where, f'{axis}.sinusoid.frequency_hz must be > 0')
+        if rate_hz and out['frequency_hz'] >= rate_hz / 2:
+            raise ModelError(where, f'{axis}.sinusoid.frequency_hz = {out["frequency_hz"]:g} '
+                                    f'is not below the Nyquist frequency {rate_hz / 2:g} Hz '
+                                    f'(rate_hz {rate_hz:g})')
     return out
 
 
@@ -69,11 +201,11 @@ class NoiseModel:
     def __post_init__(self):
         """Validate and normalise the parameters."""
         checked = {}
-        for axis, axis_terms in self.terms.items():
+        for axis, axis_terms in as_mapping(self.terms, 'model', 'terms').items():
             if axis not in AXES:
-                raise ModelError(f'model: unknown axis {axis!r} (known: {", ".join(AXES)})')
-            checked[axis] = {t: _check_params(axis, t, p, 'model')
-                             for t, p in (axis_terms or {}).items()}
+                raise ModelError('model', f'unknown axis {axis!r} (known: {", ".join(AXES)})')
+            checked[axis] = {t: _check_params(axis, t, p, 'model', self.rate_hz) for t, p in
+                             as_mapping(axis_terms, 'model', axis).items()}
         self.terms = checked
 
     @property
@@ -109,35 +241,19 @@ class NoiseModel:
     @classmethod
     def from_dict(cls, data, where='model'):
         """Build from the model-file layout (sensor defaults, then per-axis overrides)."""
-        if not isinstance(data, dict):
-            raise ModelError(f'{where}: expected a mapping with gyro/accel/axes entries')
-        unknown = set(data) - {'gyro', 'accel', 'axes', 'rate_hz', 'description', 'units'}
-        if unknown:
-            raise ModelError(f'{where}: unknown key(s) {", ".join(sorted(unknown))}')
-        terms = {}
-        for axis in AXES:
-            sensor_terms = data.get(sensor_of(axis)) or {}
-            axis_terms = (data.get('axes') or {}).get(axis) or {}
-            merged = {**sensor_terms, **axis_terms}
-            if merged:
-                terms[axis] = {t: _check_params(axis, t, p, where) for t, p in merged.items()}
-        for axis in (data.get('axes') or {}):
-            if axis not in AXES:
-                raise ModelError(f'{where}: unknown axis {axis!r}')
+        where = str(where)
+        entries = per_axis_entries(data, where, ('rate_hz', 'units'))
         rate = data.get('rate_hz')
-        return cls(terms, float(rate) if rate else None)
+        if rate is not None:
+            rate = as_number(rate, where, 'rate_hz', 0.0, MAX_RATE_HZ, low_open=True)
+        terms = {axis: {t: _check_params(axis, t, p, where, rate) for t, p in merged.items()}
+                 for axis, merged in entries.items()}
+        return cls(terms, rate)
 
     @classmethod
     def from_yaml(cls, path):
         """Load a model file; raise :class:`ModelError` naming the file on any problem."""
-        try:
-            with open(path, encoding='utf-8') as stream:
-                data = yaml.safe_load(stream)
-        except OSError as exc:
-            raise ModelError(f'{path}: cannot read model file ({exc.strerror})') from None
-        except yaml.YAMLError as exc:
-            raise ModelError(f'{path}: not valid YAML ({str(exc).splitlines()[0]})') from None
-        return cls.from_dict(data, where=str(path))
+        return cls.from_dict(read_yaml_file(path, 'model'), where=str(path))
 
     def to_yaml(self, path, header=None):
         """Write the model file (with a comment header stating units)."""

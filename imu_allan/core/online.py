@@ -16,7 +16,7 @@ from .fit import fit_noise_model, FitError, FittedModel
 from .health import StampMonitor
 from .stationarity import StationarityGate
 from .streaming import StreamingAllan
-from .units import AXES, is_gyro
+from .units import AXES, is_gyro, physical_limits
 
 
 class OnlineAllan:
@@ -57,6 +57,10 @@ class OnlineAllan:
                                          **(gate_options or {}))
             self._gate_breaks = _TagDelay(self.gate.w)
         self.terms = terms
+        self._limits = np.asarray(physical_limits(self.axes))
+        self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
+        self._rejected_recent = np.zeros(len(self.axes), np.int64)  # since take_rejected()
+        self._break_next = False  # the last sample of the previous batch was left out
 
     def memory_bytes(self):
         """Bytes held in numpy buffers by the estimator and the gate (fixed)."""
@@ -80,6 +84,9 @@ class OnlineAllan:
         data, brk = data[keep], brk[keep]
         if data.shape[0] == 0:
             return
+        data, brk = self._reject_nonphysical(data, brk)
+        if data.shape[0] == 0:
+            return
         if self.gate is None:
             self.estimator.update(data, None, brk)
             return
@@ -87,6 +94,35 @@ class OnlineAllan:
         brk_out = self._gate_breaks.push(brk, out.shape[0])
         if out.shape[0]:
             self.estimator.update(out, still, brk_out)
+
+    def _reject_nonphysical(self, data, brk):
+        """Leave out samples with a NaN, inf or non-physical value (``units.PHYSICAL_LIMIT``).
+
+        Counted per axis (:attr:`rejected_total`, :meth:`take_rejected`).  The estimator keeps
+        the axes in step, so such a sample is left out of every axis, as a stamp gap is: the
+        phase restarts after it and the samples around it still count.
+        """
+        with np.errstate(invalid='ignore'):
+            bad = ~(np.abs(data) <= self._limits)  # NaN compares False: caught too
+        follows = np.empty(data.shape[0], bool)
+        follows[0] = self._break_next
+        if not bad.any():
+            self._break_next = False
+            return data, brk | follows if follows[0] else brk
+        counts = bad.sum(axis=0)
+        self.rejected_total += counts
+        self._rejected_recent += counts
+        drop = bad.any(axis=1)
+        follows[1:] = drop[:-1]
+        self._break_next = bool(drop[-1])
+        keep = ~drop
+        return data[keep], (brk | follows)[keep]
+
+    def take_rejected(self):
+        """Per-axis counts of samples rejected since the last call ({axis: n}, non-zero only)."""
+        recent = {a: int(n) for a, n in zip(self.axes, self._rejected_recent) if n}
+        self._rejected_recent[:] = 0
+        return recent
 
     def result(self, window=False):
         """Current :class:`~imu_allan.core.allan.AllanResult` (None until enough data)."""

@@ -24,6 +24,7 @@ class OutlierReport:
     counts: dict = field(default_factory=dict)
     indices: dict = field(default_factory=dict)
     fences: dict = field(default_factory=dict)
+    replaced: bool = False  # True only when the caller asked for the replacement and it happened
 
     @property
     def total(self):
@@ -81,6 +82,21 @@ def count_gaps(steps, nominal, gap_factor=GAP_FACTOR):
     gaps = steps > gap_factor * nominal
     missing = int(np.sum(np.round(steps[gaps] / nominal) - 1)) if gaps.any() else 0
     return gaps, missing
+def nominal_interval(steps, share=0.15, tolerance=0.1, max_factor=8):
+    """The sample interval of a record from its positive time steps (any unit).
+
+    The median step, unless lost samples made most steps a multiple of the true interval (a
+    damaged capture losing half its packets steps by 2, 3 ... intervals): then the largest
+    divisor k <= ``max_factor`` of the median such that at least ``share`` of the steps lie
+    within ``tolerance`` of median / k gives the interval (the median of those steps).
+    """
+    steps = np.asarray(steps, dtype=float)
+    median = float(np.median(steps))
+    for k in range(max_factor, 1, -1):
+        near = np.abs(steps - median / k) <= tolerance * median / k
+        if near.sum() >= share * steps.size:
+            return float(np.median(steps[near]))
+    return median
 
 
 def check_timing(t, gap_factor=GAP_FACTOR):
@@ -96,7 +112,7 @@ def check_timing(t, gap_factor=GAP_FACTOR):
     positive = dt[dt > 0]
     if positive.size == 0:
         raise ValueError('time stamps never increase')
-    nominal = float(np.median(positive))
+    nominal = nominal_interval(positive)
     gaps, missing = count_gaps(dt, nominal, gap_factor)
     regular = dt[(dt > 0) & ~gaps]
     jitter = float(np.std(regular) / nominal) if regular.size else 0.0

@@ -25,6 +25,18 @@ assert ALL_TERMS[:len(IEEE_TERMS)] == IEEE_TERMS
 TERM_PARAMETERS = {name: spec.params for name, spec in TERMS.items()}
 
 
+#: Largest magnitude a sample of a real IMU can have, SI (rad/s, m/s^2): far beyond the full
+#: scale of any MEMS or tactical gyro (+-2000 deg/s = 35 rad/s is typical, a few reach 175
+#: rad/s) and accelerometer (+-200 g = 2000 m/s^2 for shock-rated parts).  A value beyond it is
+#: damage or a unit error, not a measurement; every intake (offline and live) checks it here.
+PHYSICAL_LIMIT = {'gyro': 1.0e3, 'accel': 1.0e4}
+
+
+def physical_limits(axes):
+    """Per-axis physical limits (SI) as a list, in the order of ``axes``."""
+    return [PHYSICAL_LIMIT[sensor_of(a)] for a in axes]
+
+
 def is_gyro(axis):
     """Return True for a gyroscope axis name."""
     return axis.startswith('gyro')

@@ -89,7 +89,28 @@ def _dir_storage(p):
     missing = [x.name for x in files if not x.exists()]
     if missing:
         raise InputError(p, f'storage file missing: {", ".join(missing)}')
-    return storage, files, compressed
+    note = None
+    signed = {_signature(x) for x in files} - {None}
+    if len(signed) == 1 and signed != {storage}:
+        # The files' own signature is the fact; metadata.yaml is a description of it.
+        note = (f'metadata.yaml names storage {str(storage)[:20]!r} but the files are '
+                f'{signed.pop()}: read as the files say')
+        storage = _signature(files[0])
+    return storage, files, compressed, note
+
+
+def _signature(path):
+    """Storage named by a file's first bytes ('mcap', 'sqlite3'), or None."""
+    try:
+        with open(path, 'rb') as f:
+            head = f.read(16)
+    except OSError:
+        return None
+    if head.startswith(MCAP_MAGIC):
+        return 'mcap'
+    if head.startswith(SQLITE_MAGIC):
+        return 'sqlite3'
+    return None
 
 
 def any_reader(paths, where):
@@ -166,16 +187,18 @@ def read_bag(path, topic=None, fast=True):
     where = str(path)
     kind, p = bag_kind(path)
     warnings = []
+    checks = {}
     if kind == 'dir':
-        storage, files, compressed = _dir_storage(p)
+        storage, files, compressed, note = _dir_storage(p)
         if storage == 'mcap' and not compressed and fast:
-            chosen, t, data, warnings = _read_mcap_files(where, files, topic)
+            chosen, t, data, warnings = _read_mcap_files(where, files, topic, checks=checks)
         elif storage == 'sqlite3' and not compressed and fast:
             chosen, t, data, warnings = _read_sqlite_files(where, files, topic)
         else:
             chosen, t, data, warnings = _read_generic(where, p, topic)
+        warnings = ([note] if note else []) + warnings
     elif kind == 'mcap' and fast:
-        chosen, t, data, warnings = _read_mcap_files(where, [p], topic)
+        chosen, t, data, warnings = _read_mcap_files(where, [p], topic, checks=checks)
     elif kind == 'sqlite3' and fast:
         chosen, t, data, warnings = _read_sqlite_files(where, [p], topic)
     elif kind == 'ros1' and fast:
@@ -188,7 +211,25 @@ def read_bag(path, topic=None, fast=True):
     if t.shape[0] == 0:
         extra = f' ({"; ".join(warnings)})' if warnings else ''
         raise InputError(path, f'topic {chosen} has no messages{extra}')
-    return Samples(t=t, data=data, axes=AXES, source=f'{where}:{chosen}', warnings=warnings)
+    storage = _dir_storage(p)[0] if kind == 'dir' else kind
+    integrity = INTEGRITY.get(storage, '')
+    if checks.get('chunks_without_crc'):
+        integrity = (f'{checks["chunks_without_crc"]} MCAP chunk(s) carry no CRC-32 (their writer '
+                     'stored none): their values could not be verified')
+    return Samples(t=t, data=data, axes=AXES, source=f'{where}:{chosen}', warnings=warnings,
+                   integrity=integrity)
+
+
+#: What a reader can verify in each storage (said in the report, so a reader of the report
+#: knows which damage could have gone unnoticed).
+INTEGRITY = {
+    'mcap': 'MCAP chunks checked against their CRC-32; message bytes outside chunks cannot be '
+            'verified',
+    'sqlite3': 'sqlite3 storage has no checksums: a damaged value or stamp inside a message '
+               'cannot be detected, only non-physical values and disordered stamps',
+    'ros1': 'ROS 1 bags have no checksums: decompression catches most damage in a compressed '
+            'chunk, but a damaged value inside a message cannot be detected',
+}
 
 
 def _read_generic(where, p, topic):
@@ -254,7 +295,7 @@ def _mcap_files(p, kind):
     if kind == 'mcap':
         return [p]
     if kind == 'dir':
-        storage, files, compressed = _dir_storage(p)
+        storage, files, compressed = _dir_storage(p)[:3]
         if storage == 'mcap' and not compressed:
             return files
     return []
@@ -265,7 +306,7 @@ def _sqlite_files(p, kind):
     if kind == 'sqlite3':
         return [p]
     if kind == 'dir':
-        storage, files, compressed = _dir_storage(p)
+        storage, files, compressed = _dir_storage(p)[:3]
         if storage == 'sqlite3' and not compressed:
             return files
     return []
@@ -286,8 +327,11 @@ def _join(ts, ds):
     return np.concatenate(ts), np.concatenate(ds)
 
 
-def _read_mcap_files(where, files, topic, force_generic=False):
-    """Fast path for MCAP storage: scan every file, bulk-decode the chosen topic."""
+def _read_mcap_files(where, files, topic, force_generic=False, checks=None):
+    """Fast path for MCAP storage: scan every file, bulk-decode the chosen topic.
+
+    ``checks`` (a dict) receives ``chunks_without_crc``, the chunks that could not be verified.
+    """
     scans = []
     for f in files:
         scan = McapScan(str(f), topic, force_generic=force_generic)
@@ -314,6 +358,9 @@ def _read_mcap_files(where, files, topic, force_generic=False):
             ds.append(d)
             warnings += scan.collectors[chosen].warnings()
         warnings += scan.warnings
+        if checks is not None:
+            checks['chunks_without_crc'] = (checks.get('chunks_without_crc', 0)
+                                            + scan.chunks_without_crc)
     if not ts:
         return chosen, np.zeros(0), np.zeros((0, 6)), warnings
     return chosen, *_join(ts, ds), warnings

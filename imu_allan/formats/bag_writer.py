@@ -8,7 +8,10 @@ orientation, as on ``imu/data_raw``), zero covariances otherwise. Axes missing f
 are written as 0.
 """
 
+from binascii import crc32
+import mmap
 from pathlib import Path
+import struct
 
 import numpy as np
 
@@ -97,7 +100,42 @@ def write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', frame_id
             st = np.array([int(x) for x, _ in msgs], dtype=np.int64)
             streams.append((c, st, [serialize(m, msgtype) for _, m in msgs]))
         _write_merged(writer, streams)
+    if storage == 'mcap':
+        fix_mcap_chunk_crcs(p)
     return p
+
+
+def fix_mcap_chunk_crcs(folder):
+    """Store each chunk's CRC-32 in the MCAP files of a rosbag2 folder written by rosbags.
+
+    rosbags 0.11 writes ``uncompressed_crc`` 0 ("not computed", MCAP specification, Chunk
+    record), so a flipped byte in a chunk would go unnoticed by every reader; this fills in the
+    CRC-32 of each chunk's uncompressed records, which readers (ours, rosbags, the mcap
+    libraries) then verify.
+    """
+    from .mcap_scan import decompress_chunk
+    for path in Path(folder).glob('*.mcap'):
+        with open(path, 'r+b') as stream:
+            mm = mmap.mmap(stream.fileno(), 0)
+            try:
+                pos = 8  # after the magic
+                while pos + 9 <= len(mm):
+                    op = mm[pos]
+                    (length,) = struct.unpack_from('<Q', mm, pos + 1)
+                    if op == 0x06:  # Chunk: start, end, size u64, crc u32, compression, records
+                        (usize,) = struct.unpack_from('<Q', mm, pos + 25)
+                        (n,) = struct.unpack_from('<I', mm, pos + 37)
+                        comp = mm[pos + 41:pos + 41 + n].decode()
+                        (csize,) = struct.unpack_from('<Q', mm, pos + 41 + n)
+                        start = pos + 49 + n
+                        records = decompress_chunk(comp, mm[start:start + csize], usize)
+                        struct.pack_into('<I', mm, pos + 33, crc32(records))
+                    elif op in (0x0F, 0x02):  # DataEnd or Footer: no chunk after this
+                        break
+                    pos += 9 + length
+                mm.flush()
+            finally:
+                mm.close()
 
 
 def _write_merged(writer, streams):
@@ -175,6 +213,7 @@ def copy_bag_with_topic(src, dst, topic, samples, frame_id='imu_link', compress=
                     writer.write(out[(c.topic, c.msgtype)], ts_ns, data)
                 for k in range(i, len(stamps)):
                     writer.write(new, stamps[k], rows[k].tobytes())
+            fix_mcap_chunk_crcs(p)
         except InputError:
             raise
         except Exception as err:

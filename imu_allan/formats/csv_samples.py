@@ -8,7 +8,10 @@ are ignored. Writing uses Python's shortest round-trip float repr, so write -> r
 same float64 values bit for bit.
 """
 
+import contextlib
+import os
 import re
+import tempfile
 
 import numpy as np
 
@@ -18,6 +21,43 @@ from .samples import Samples
 
 _NAME = re.compile(r'^[A-Za-z_][A-Za-z0-9_.]*$')
 _BLOCK = 100_000  # rows formatted per write call (bounds memory for long recordings)
+
+#: Sample rates an IMU recording can have, Hz.  A ``t`` column whose median step gives a rate
+#: below this range in seconds is in another unit: the one of ms, us, ns that lands in it.
+IMU_RATE_HZ = (0.5, 50_000.0)
+_TIME_UNITS = (('ms', 1e-3), ('us', 1e-6), ('ns', 1e-9))
+_EPOCH_S = (1.0e9, 4.1e9)  # Unix time in s from 2001 to 2099: tells the unit of absolute stamps
+
+
+def _time_scale(path, t):
+    """Seconds per unit of the ``t`` column, and a warning when it is not 1 (s).
+
+    The median step must give an IMU rate (:data:`IMU_RATE_HZ`).  If it does in seconds, t is
+    seconds.  Otherwise the units ms, us, ns that do are candidates; absolute Unix stamps
+    decide between several; one candidate is converted with a warning, none or several is an
+    error that says why.
+    """
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    if steps.size == 0:
+        return 1.0, None
+    step = float(np.median(steps))
+    low, high = IMU_RATE_HZ
+    if 1.0 / step >= low:
+        return 1.0, None
+    fits = [(n, k) for n, k in _TIME_UNITS if low <= 1.0 / (step * k) <= high]
+    epoch = [(n, k) for n, k in fits if _EPOCH_S[0] <= abs(t[0]) * k <= _EPOCH_S[1]]
+    fits = epoch if len(epoch) == 1 else fits
+    said = f'the t column steps by a median of {step:g}, which in seconds is {1.0 / step:.3g} Hz'
+    if len(fits) == 1:
+        name, scale = fits[0]
+        return scale, (f'{said}: t read as {name} ({1.0 / (step * scale):.6g} Hz) and '
+                       'converted to seconds')
+    if not fits:
+        raise InputError(path, f'{said}, and no unit (ms, us, ns) gives an IMU rate '
+                               f'({low:g} to {high:g} Hz): write t in seconds')
+    choices = ' or '.join(f'{n} ({1.0 / (step * k):.4g} Hz)' for n, k in fits)
+    raise InputError(path, f'{said}: not seconds; {choices}? write t in seconds')
 
 
 def _parse_header(path, line, lineno):
@@ -45,10 +85,10 @@ def _parse_header(path, line, lineno):
 
 
 def _locate_bad(path, lines, first, names):
-    """Find the first bad data line (slow path, only used to word an error)."""
+    """Find the first bad data line of a block whose first line is ``first`` (for the error)."""
     k = len(names)
-    for lineno in range(first, len(lines) + 1):
-        text = lines[lineno - 1].strip()
+    for lineno, text in enumerate(lines, start=first):
+        text = text.strip()
         if not text or text.startswith('#'):
             continue
         cells = text.split(',')
@@ -64,6 +104,107 @@ def _locate_bad(path, lines, first, names):
                 raise InputError(path, f'line {lineno}, column {name}: {cell.strip()} '
                                        '(NaN or infinite value)')
     raise InputError(path, 'unreadable numbers')  # pragma: no cover (loadtxt and float agree)
+
+
+#: Lines parsed per numpy call: the text held in memory is one block, not the whole file.
+_ROWS = 25_000
+#: Longest line accepted: a sample line is under 200 characters; this bounds what one read takes
+#: from a file with no line breaks.
+MAX_LINE = 1 << 16
+
+
+def _lines(path, f, lineno):
+    """Yield ``(lineno, line)`` with a length limit on each line."""
+    while True:
+        line = f.readline(MAX_LINE + 1)
+        if not line:
+            return
+        lineno += 1
+        if len(line) > MAX_LINE:
+            raise InputError(path, f'line {lineno}: longer than {MAX_LINE} characters: not a '
+                                   'sample CSV')
+        yield lineno, line
+
+
+class _Columns:
+    """The final arrays (t, data, extra columns) filled block by block: no concatenation.
+
+    The row count is estimated from the file size and the first block's bytes per line, so
+    the arrays are allocated once (grown by doubling if the estimate was short).
+    """
+
+    def __init__(self, names, file_bytes):
+        self.axes = tuple(a for a in AXES if a in names)
+        self.t_col = names.index('t')
+        self.axis_cols = [names.index(a) for a in self.axes]
+        self.extra_cols = {n: i for i, n in enumerate(names) if n != 't' and n not in AXES}
+        self.file_bytes = file_bytes
+        self.n = 0
+        self.t = np.empty(0)
+        self.data = np.empty((0, len(self.axes)))
+        self.extra = {n: np.empty(0) for n in self.extra_cols}
+
+    def add(self, table, block_bytes):
+        """Append a parsed block (rows, columns) that came from ``block_bytes`` of text."""
+        m = table.shape[0]
+        if self.n + m > self.t.shape[0]:
+            estimate = int(self.file_bytes * m / max(block_bytes, 1) * 1.02) + 1
+            self._grow(max(self.n + m, 2 * self.t.shape[0], estimate))
+        rows = slice(self.n, self.n + m)
+        self.t[rows] = table[:, self.t_col]
+        self.data[rows] = table[:, self.axis_cols]
+        for name, i in self.extra_cols.items():
+            self.extra[name][rows] = table[:, i]
+        self.n += m
+
+    def _grow(self, size):
+        def grown(old):
+            new = np.empty((size,) + old.shape[1:])
+            new[:self.n] = old[:self.n]
+            return new
+        self.t, self.data = grown(self.t), grown(self.data)
+        self.extra = {name: grown(col) for name, col in self.extra.items()}
+
+    def arrays(self):
+        """(t, data, extra) with exactly the rows read."""
+        n = self.n
+        return self.t[:n], self.data[:n], {name: col[:n] for name, col in self.extra.items()}
+
+
+def _read_table(path, f):
+    """Read header and rows in blocks of :data:`_ROWS` lines into :class:`_Columns`."""
+    lines = _lines(path, f, 0)
+    header_no, header = next(((n, ln) for n, ln in lines
+                              if ln.strip() and not ln.lstrip().startswith('#')), (None, None))
+    if header_no is None:
+        raise InputError(path, 'empty file (no CSV header)')
+    names = _parse_header(path, header.rstrip('\r\n'), header_no)
+    columns = _Columns(names, os.fstat(f.fileno()).st_size)
+    block, first = [], header_no + 1
+    for lineno, line in lines:
+        if not block:
+            first = lineno
+        block.append(line)
+        if len(block) == _ROWS:
+            columns.add(_parse_block(path, block, first, names), sum(map(len, block)))
+            block = []
+    if block:
+        columns.add(_parse_block(path, block, first, names), sum(map(len, block)))
+    return columns
+
+
+def _parse_block(path, block, first, names):
+    """One block of lines -> (rows, columns) float64; InputError naming the first bad line."""
+    body = [ln for ln in block if ln.strip() and not ln.lstrip().startswith('#')]
+    if not body:
+        return np.zeros((0, len(names)))
+    try:
+        table = np.loadtxt(body, delimiter=',', dtype=np.float64, ndmin=2)
+    except ValueError:
+        table = None
+    if table is None or table.shape[1] != len(names) or not np.isfinite(table).all():
+        _locate_bad(path, block, first, names)
+    return table
 
 
 def read_csv(path):
@@ -84,38 +225,19 @@ def read_csv(path):
     """
     try:
         with open(path, encoding='utf-8') as f:
-            text = f.read()
+            columns = _read_table(path, f)
     except FileNotFoundError:
         raise InputError(path, 'no such file') from None
     except UnicodeDecodeError:
         raise InputError(path, 'not a text file (CSV expected)') from None
     except OSError as err:
         raise InputError(path, f'cannot read: {err.strerror}') from None
-    lines = text.splitlines()
-    header_no = next((i + 1 for i, ln in enumerate(lines)
-                      if ln.strip() and not ln.lstrip().startswith('#')), None)
-    if header_no is None:
-        raise InputError(path, 'empty file (no CSV header)')
-    names = _parse_header(path, lines[header_no - 1], header_no)
-    body = [ln for ln in lines[header_no:] if ln.strip() and not ln.lstrip().startswith('#')]
-    k = len(names)
-    if body:
-        try:
-            table = np.loadtxt(body, delimiter=',', dtype=np.float64, ndmin=2)
-        except ValueError:
-            _locate_bad(path, lines, header_no + 1, names)
-        if table.shape[1] != k:
-            _locate_bad(path, lines, header_no + 1, names)
-        if not np.isfinite(table).all():
-            _locate_bad(path, lines, header_no + 1, names)
-    else:
-        table = np.zeros((0, k))
-    col = {name: table[:, i] for i, name in enumerate(names)}
-    axes = tuple(a for a in AXES if a in col)
-    data = np.column_stack([col[a] for a in axes]) if table.shape[0] else np.zeros((0, len(axes)))
-    extra = {n: np.ascontiguousarray(col[n]) for n in names if n != 't' and n not in AXES}
-    return Samples(t=np.ascontiguousarray(col['t']), data=np.ascontiguousarray(data), axes=axes,
-                   source=str(path), extra=extra)
+    t, data, extra = columns.arrays()
+    scale, note = _time_scale(path, t)
+    if note:
+        t *= scale
+    return Samples(t=t, data=data, axes=columns.axes, source=str(path), extra=extra,
+                   warnings=[note] if note else [])
 
 
 def write_csv(path, samples):
@@ -126,13 +248,27 @@ def write_csv(path, samples):
     names = ['t', *samples.axes, *extra]
     columns = [t, *(data[:, j] for j in range(data.shape[1])),
                *(np.asarray(v, dtype=np.float64) for v in extra.values())]
+    # Written beside the target and renamed into place: a full disk or an interruption never
+    # leaves a half-written CSV under the user's name.
+    folder = os.path.dirname(os.path.abspath(path))
+    tmp = None
     try:
-        with open(path, 'w', encoding='utf-8', newline='\n') as f:
+        fd, tmp = tempfile.mkstemp(prefix=f'.{os.path.basename(path)}.', dir=folder)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)  # the mode open() would give, not mkstemp's 0600
+        with open(fd, 'w', encoding='utf-8', newline='\n') as f:
             f.write(','.join(names) + '\n')
             for start in range(0, t.shape[0], _BLOCK):
                 # repr() is Python's shortest string that reads back to the same float64.
                 cols = [list(map(repr, c[start:start + _BLOCK].tolist())) for c in columns]
                 f.write('\n'.join(map(','.join, zip(*cols))))
                 f.write('\n')
+        os.replace(tmp, path)
+        tmp = None
     except OSError as err:
-        raise InputError(path, f'cannot write: {err.strerror}') from None
+        raise InputError(path, f'cannot write: {err.strerror or err}') from None
+    finally:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)

@@ -14,7 +14,7 @@ columns ``mag_x, mag_y, mag_z``.
 
 import numpy as np
 
-from ..core.preprocess import count_gaps
+from ..core.preprocess import count_gaps, nominal_interval
 from ..core.units import AXES, GYRO_AXES, STANDARD_GRAVITY
 from ..device.gx3_protocol import (
     decode_records,
@@ -78,8 +78,9 @@ def read_gx3raw(path, gravity=STANDARD_GRAVITY):
         warnings.append(f'device timer reset {resets} time(s): bridged with the previous '
                         'sample spacing')
     steps = np.diff(ticks)
-    nominal = float(np.median(steps)) if steps.size else 0.0
-    if nominal > 0:
+    if np.any(steps > 0):
+        # The device timer ticks evenly: lost packets show as steps of whole intervals.
+        nominal = nominal_interval(steps[steps > 0])
         gaps, lost = count_gaps(steps, nominal)
         if lost:
             warnings.append(f'{int(gaps.sum())} gap(s) in the device timer: about {lost} '

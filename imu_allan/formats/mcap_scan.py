@@ -34,6 +34,16 @@ def lz4_decompress(data):
 
 
 _DECOMPRESS = {'': bytes, 'zstd': _zstd_decompress, 'lz4': lz4_decompress}
+
+
+def decompress_chunk(compression, data, size):
+    """The records of a chunk (bytes); ValueError for an unknown compression or wrong size."""
+    if compression not in _DECOMPRESS:
+        raise ValueError(f'unknown chunk compression {compression!r}')
+    raw = _DECOMPRESS[compression](data)
+    if len(raw) != size:
+        raise ValueError('chunk size mismatch')
+    return raw
 _MCAP_OPS = frozenset(range(0x01, 0x11))  # record opcodes of MCAP v0 (0x80-0xFF: private)
 
 
@@ -55,6 +65,8 @@ class McapScan:
         self.warnings = []
         self.complete = False
         self.chunk_offsets = []
+        self.chunk_counts = {}  # chunk offset -> {channel id: messages}, from the summary
+        self.chunks_without_crc = 0  # chunks whose writer stored no CRC: content unverifiable
 
     def _wanted(self, cid):
         ch = self.channels.get(cid)
@@ -98,6 +110,7 @@ class McapScan:
         record header does not cost the rest of the file: the walk resumes at the next chunk.
         """
         self.chunk_offsets = []
+        self.chunk_counts = {}
         if size < 8 + 37 + 37:
             return
         foot = size - 37
@@ -118,11 +131,35 @@ class McapScan:
                     self.channels.setdefault(
                         cid, (topic, self.schemas.get(sid, ''), self._string(buf, p)[0]))
                 elif op == 0x08:
-                    self.chunk_offsets.append(struct.unpack_from('<Q', buf, pos + 9 + 16)[0])
+                    chunk = struct.unpack_from('<Q', buf, pos + 9 + 16)[0]
+                    self.chunk_offsets.append(chunk)
+                    self.chunk_counts[chunk] = self._index_counts(buf, pos + 41)
                 pos += 9 + length
         except (struct.error, IndexError, ValueError):
             pass  # a damaged summary only means no help for the walk
         self.chunk_offsets.sort()
+
+    @staticmethod
+    def _index_counts(buf, pos):
+        """{channel id: messages} of a chunk, from the Message Index records its index names."""
+        counts = {}
+        try:
+            (size,) = struct.unpack_from('<I', buf, pos)
+            for k in range(size // 10):
+                cid, offset = struct.unpack_from('<HQ', buf, pos + 4 + 10 * k)
+                if buf[offset] == 0x07:
+                    counts[cid] = struct.unpack_from('<I', buf, offset + 11)[0] // 16
+        except (struct.error, IndexError):
+            pass  # a damaged index: the loss is then not counted
+        return counts
+
+    def _lost(self, pos):
+        """Words on the Imu messages lost with the chunk at byte ``pos`` (from the index)."""
+        if pos not in self.chunk_counts:
+            return ''
+        n = sum(c for cid, c in self.chunk_counts[pos].items() if self._wanted(cid))
+        k = self.chunk_offsets.index(pos) + 1
+        return f' (chunk {k} of {len(self.chunk_offsets)}: {n} Imu message(s) lost)'
 
     def _resync(self, pos, end, problem):
         """Position of the next indexed chunk after a damaged record, or None (with a warning)."""
@@ -245,8 +282,9 @@ class McapScan:
                 base = p
             if crc and crc32(inner[base:base + usize]) != crc:
                 raise ValueError('chunk checksum mismatch')
+            self.chunks_without_crc += not crc
         except Exception as err:  # any decoding failure means this chunk is unreadable
-            self.warnings.append(f'corrupt chunk at byte {pos} skipped ({err})')
+            self.warnings.append(f'corrupt chunk at byte {pos} skipped ({err})' + self._lost(pos))
             return
         try:
             if base:

@@ -12,6 +12,7 @@ from ..errors import InputError
 from . import FORMATS
 from .bag_reader import bag_kind, MCAP_MAGIC, read_bag, ROS1_MAGIC, SQLITE_MAGIC
 from .csv_samples import read_csv
+from .input_file import regular_input
 from .thesis_log import looks_like_thesis_log, read_thesis_log
 
 _GX3_CODES = (0xCB, 0xC2, 0xCF)
@@ -87,6 +88,18 @@ def read_samples(path, fmt='auto', topic=None, fast=True):
     """
     if fmt not in FORMATS:
         raise InputError('--format', f'unknown format {fmt!r} (one of {", ".join(FORMATS)})')
+    real = regular_input(path)  # a FIFO is copied once a writer appears; devices are refused
+    if real == Path(path):
+        return _read(path, fmt, topic, fast)
+    try:
+        samples = _read(real, fmt, topic, fast)
+    except InputError as err:  # name the user's path, not the temporary copy
+        raise InputError(path, err.problem.replace(str(real), str(path))) from None
+    samples.source = samples.source.replace(str(real), str(path))
+    return samples
+
+
+def _read(path, fmt, topic, fast):
     if fmt == 'auto':
         fmt = detect_format(path)
     elif not Path(path).exists():

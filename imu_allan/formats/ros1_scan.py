@@ -51,6 +51,7 @@ class Ros1Scan:
         self.collectors = {}
         self.warnings = []
         self.unsupported = False
+        self.chunk_info = {}  # chunk position -> {conn id: message count}, from the index
 
     def run(self):
         """Scan the file up to its index section."""
@@ -62,6 +63,7 @@ class Ros1Scan:
             mm = map_file(f)
         buf = memoryview(mm)
         try:
+            self._read_index(buf, size)
             self._walk(buf, len(ROS1_MAGIC), size, top=True)
         except (struct.error, ValueError, IndexError, KeyError) as err:
             self.warnings.append(f'malformed ROS 1 record ({one_line(err)}): '
@@ -72,6 +74,47 @@ class Ros1Scan:
                 mm.close()
             except BufferError:
                 pass  # a numpy view still refers to the map; the GC frees it
+
+    def _read_index(self, buf, size):
+        """Pre-read the connections and chunk infos of the index section, if it is intact.
+
+        With them a damaged first chunk (which holds the connection records) does not cost the
+        intact chunks, and a skipped chunk's lost messages can be counted.
+        """
+        try:
+            pos = len(ROS1_MAGIC)
+            (hlen,) = struct.unpack_from('<I', buf, pos)
+            fields = _ros1_fields(buf, pos + 4, pos + 4 + hlen)
+            if fields['op'][0][:1] != b'\x03':
+                return
+            pos = struct.unpack('<Q', fields['index_pos'][0][:8])[0]
+            while len(ROS1_MAGIC) < pos and pos + 8 <= size:
+                (hlen,) = struct.unpack_from('<I', buf, pos)
+                hend = pos + 4 + hlen
+                (dlen,) = struct.unpack_from('<I', buf, hend)
+                rec_end = hend + 4 + dlen
+                if rec_end > size:
+                    return
+                fields = _ros1_fields(buf, pos + 4, hend)
+                op = fields['op'][0][:1]
+                if op == b'\x07':
+                    self._connection(buf, fields, hend + 4, rec_end)
+                elif op == b'\x06':
+                    (chunk_pos,) = struct.unpack('<Q', fields['chunk_pos'][0][:8])
+                    pairs = np.frombuffer(buf[hend + 4:rec_end], dtype='<u4').reshape(-1, 2)
+                    self.chunk_info[chunk_pos] = dict(pairs.tolist())
+                pos = rec_end
+        except (struct.error, ValueError, IndexError, KeyError):
+            pass  # a damaged index only means no help for the walk
+
+    def _lost(self, pos, read):
+        """Words on the Imu messages a damaged chunk at ``pos`` lost (``read`` were read)."""
+        if pos not in self.chunk_info:
+            return ''
+        order = sorted(self.chunk_info)
+        wanted = sum(n for c, n in self.chunk_info[pos].items() if self._wanted(c))
+        return (f' (chunk {order.index(pos) + 1} of {len(order)}: {wanted - read} of its '
+                f'{wanted} Imu message(s) lost)')
 
     def _walk(self, buf, pos, end, top):
         u8 = np.frombuffer(buf, dtype=np.uint8, count=end) if self.collect else None
@@ -194,8 +237,11 @@ class Ros1Scan:
             if raw is not None and len(raw) != usize:
                 raise ValueError('chunk size mismatch')
         except Exception as err:  # any decoding failure means this chunk is unreadable
-            self.warnings.append(f'corrupt chunk at byte {pos} skipped ({err})')
+            self.warnings.append(f'corrupt chunk at byte {pos} skipped ({one_line(err)})'
+                                 + self._lost(pos, 0))
             return
+        before = self._wanted_count()
+        n_warnings = len(self.warnings)
         try:
             if raw is None:
                 self._walk(buf[start:end], 0, usize, top=False)
@@ -204,6 +250,11 @@ class Ros1Scan:
         except (struct.error, ValueError, IndexError, KeyError) as err:
             self.warnings.append(f'malformed record in the chunk at byte {pos} '
                                  f'({one_line(err)}): rest of that chunk skipped')
+        if len(self.warnings) > n_warnings:  # the chunk walk stopped early: say what it cost
+            self.warnings[-1] += self._lost(pos, self._wanted_count() - before)
+
+    def _wanted_count(self):
+        return sum(n for c, n in self.counts.items() if self._wanted(c))
 
     def _partial_chunk(self, buf, pos, hend, end):
         """Read the complete records of an uncompressed chunk cut off by the end of the file."""

@@ -27,6 +27,8 @@ class Samples:
         Things the reader skipped or repaired, each one line.
     extra : dict
         Extra columns (for example ``mag_x``) by name, each shape (n,).
+    integrity : str
+        What the reader could and could not verify about the container (checksums), one line.
 
     """
 
@@ -37,6 +39,7 @@ class Samples:
     gravity: float = 9.80665
     warnings: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)
+    integrity: str = ''
 
     @property
     def n(self):

@@ -48,7 +48,7 @@ def _parse_block_fast(block):
         return np.zeros((0, 6)), np.zeros(0, dtype=np.int64)
     try:
         rows = np.loadtxt(body, delimiter=';', dtype=_ROW, ndmin=1)
-    except ValueError:
+    except (ValueError, OverflowError):  # OverflowError: a stamp beyond int64 (damage)
         return None
     if not np.isfinite(rows['v']).all():
         return None  # 'nan' or 'inf' text: the line-by-line parser counts such lines as damaged
@@ -64,7 +64,7 @@ def _parse_block_slow(block, first_lineno):
             mt = _DATA_COLON.match(ln)
             if mt is not None:
                 colon += 1
-        if mt is None:
+        if mt is None or not -2**63 <= int(mt.group(7)) < 2**63:  # a stamp beyond int64
             if ln.strip():
                 bad.append(lineno)
             continue

@@ -340,7 +340,8 @@ class AllanNode(Node):
         p = self.pipeline
         stream = hm.stream_health(
             p.monitor, p.monitor.take_recent(), silence, self.params['timeout_s'],
-            self.params['rate_tolerance'], p.excluded_share, name=prefix + 'IMU stream')
+            self.params['rate_tolerance'], p.excluded_share, name=prefix + 'IMU stream',
+            rejected=p.take_rejected())
         stream.values.update({
             'samples_used': p.estimator.n_used,
             'samples_offered': p.estimator.n_offered,

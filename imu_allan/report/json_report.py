@@ -50,10 +50,10 @@ def analysis_to_json(analysis):
         },
         'timing': {'gaps': timing.n_gaps, 'missing_samples': timing.missing_samples,
                    'longest_gap_s': timing.longest_gap_s, 'jitter': timing.jitter},
-        'outliers': {'rule': 'Tukey F=3', 'replaced': bool(analysis.outliers.total and
-                                                           analysis.data is not None),
+        'outliers': {'rule': 'Tukey F=3', 'replaced': analysis.outliers.replaced,
                      'counts': dict(analysis.outliers.counts)},
         'kalibr': kalibr,
+        'integrity': analysis.integrity,
     }
 
 
@@ -94,5 +94,7 @@ def console_summary(analysis):
         lines.append(f'outliers beyond Tukey fences (F=3): {analysis.outliers.total}')
     for warning in analysis.warnings:
         lines.append(f'warning: {warning}')
+    if analysis.integrity:
+        lines.append(f'integrity: {analysis.integrity}')
     return '\n'.join(lines)
 

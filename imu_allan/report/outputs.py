@@ -13,6 +13,7 @@ import shutil
 import tempfile
 
 from ..core.units import AXES, IEEE_TERMS, si_unit
+from ..errors import InputError
 from . import plots
 from .json_report import analysis_to_json
 from .kalibr import write_kalibr_yaml
@@ -51,6 +52,13 @@ def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/im
     ``exports = (names, inflate)`` writes those exporters' files into ``export/``.
     """
     out_dir = Path(out_dir)
+    try:
+        return _write_out_dir(out_dir, analysis, raw, denoised, report, topic, extra, exports)
+    except OSError as exc:  # name the user's folder, not the staging folder beside it
+        raise InputError(out_dir, f'cannot write the report ({exc.strerror or exc})') from None
+
+
+def _write_out_dir(out_dir, analysis, raw, denoised, report, topic, extra, exports):
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f'.{out_dir.name}.', dir=out_dir.parent))
     try:
