@@ -9,6 +9,8 @@ and publishes every ``publish_period`` seconds:
   detected;
 * ``imu/allan_deviation`` (std_msgs/Float64MultiArray): dims ``row`` (7: tau, gyro_x .. accel_z)
   x ``tau`` (T);
+* ``imu/allan_plot/compressed`` (sensor_msgs/CompressedImage, PNG): the Allan deviation figure,
+  rendered in a worker thread only while something subscribes (:mod:`.allan_plot`);
 * ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share) and each axis
   against the noise budget (OK / WARN / ERROR / STALE).
 
@@ -39,6 +41,7 @@ from ..report.coeffs_layout import (
     DEVIATION_LABELS,
     deviation_table,
 )
+from .allan_plot import PlotPublisher
 from .common import (
     apply_changes,
     declare_parameter_table,
@@ -182,6 +185,7 @@ class AllanNode(Node):
         self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
         self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._plot = PlotPublisher(self)
         self._last_arrival = None
         self._cycle = None
         self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
@@ -193,6 +197,10 @@ class AllanNode(Node):
             f'waiting for imu/data_raw at {self.params["rate_hz"]:g} Hz; publishing every '
             f'{self.params["publish_period"]:g} s; budget {self.budget.source}; estimator '
             f'memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
+
+    def close(self):
+        """Stop the figure's worker thread (run_node calls this before destroy_node)."""
+        self._plot.close()
 
     # -- parameters ------------------------------------------------------------------
 
@@ -252,6 +260,7 @@ class AllanNode(Node):
             table = coefficient_table(fitted, AXES) if fitted is not None else None
             if table is not None:
                 self._pub_coeffs.publish(multiarray(table, COEFF_LABELS))
+            self._plot.offer(result, fitted)  # rendered off this thread, only if subscribed
             self._cycle = None
             self._cycle_cpu += time.perf_counter() - start
             self.last_cycle = {'cycle_total_s': self._cycle_cpu,
@@ -284,6 +293,7 @@ class AllanNode(Node):
             'budget_file': self.budget.source,
             'model_file': self.model_file or '(none)',
             **self.last_cycle,
+            **self._plot.stats(),
         })
         records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
         if self.model is not None:  # issue 5's online hook: gap and effect per axis
