@@ -12,8 +12,9 @@ Sections (each prints its numbers):
 3. ``node``: CPU share of the built ``allan`` executable while this process publishes 6-axis
    Imu messages at 1 kHz, side by side with a plain rclpy subscriber that does nothing, and the
    node's publish-cycle time (from its diagnostics).  Needs the colcon-built package.
+4. ``plot``: render time per publish cycle of the live figure (``imu/allan_plot/compressed``).
 
-Usage: ``python bench/bench_online.py [estimator|accuracy|node ...]`` (default: all).
+Usage: ``python bench/bench_online.py [estimator|accuracy|node|plot ...]`` (default: all).
 """
 
 import os
@@ -205,11 +206,43 @@ def bench_node(seconds=35.0, rate=1000.0):
     rclpy.try_shutdown()
 
 
+def bench_plot(cycles=10):
+    """Render time of the live figure per publish cycle (the allan node's worker thread).
+
+    A 1 h, 100 Hz thesis-model estimate with the automatic fit; the figure object is kept
+    between cycles as in the node, so the first render (figure set-up) is shown apart.
+    Wall time and the rendering thread's CPU time (the machine is shared).
+    """
+    from imu_allan.report.plots import LiveFigure
+    rate, n = 100.0, 360_000
+    data = simulate(thesis_gx3_25_model(), n, rate, seed=2)
+    pipe = OnlineAllan(rate)
+    pipe.feed(np.arange(n) / rate, data)
+    result = pipe.result()
+    fitted = pipe.fit(result)
+    figure = LiveFigure()
+    start = time.perf_counter()
+    png = figure.render(result, fitted, 'bench')
+    first = time.perf_counter() - start
+    walls, cpus = [], []
+    for _ in range(cycles):
+        wall, cpu = time.perf_counter(), time.thread_time()
+        png = figure.render(result, fitted, 'bench')
+        cpus.append(time.thread_time() - cpu)
+        walls.append(time.perf_counter() - wall)
+    width, height = figure.size_px
+    print(f'plot: live figure {width}x{height} px, PNG {len(png) / 1024:.0f} KiB, '
+          f'{result.tau.size} taus x 6 axes: first render {first * 1e3:.0f} ms; then per cycle '
+          f'median {np.median(walls) * 1e3:.0f} ms wall (min {min(walls) * 1e3:.0f}), '
+          f'{np.median(cpus) * 1e3:.0f} ms CPU (min {min(cpus) * 1e3:.0f}); goal < 150 ms')
+
+
 def main():
     """Run the selected sections (all by default)."""
-    sections = sys.argv[1:] or ['estimator', 'accuracy', 'node']
+    sections = sys.argv[1:] or ['estimator', 'accuracy', 'node', 'plot']
     for section in sections:
-        {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node}[section]()
+        {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node,
+         'plot': bench_plot}[section]()
 
 
 if __name__ == '__main__':

@@ -280,7 +280,7 @@ def _loop(executor, state, topics, args, out):
     start = time.monotonic()
     if args.once:
         end = start + args.timeout
-        while state.coeffs is None and time.monotonic() < end:
+        while state.coeffs is None and time.monotonic() < end and executor.context.ok():
             executor.spin_once(timeout_sec=0.1)
         if state.coeffs is None:
             sys.stderr.write(f'monitor: no coefficients on {topics["coeffs"]} within '
@@ -294,7 +294,8 @@ def _loop(executor, state, topics, args, out):
         _emit(out, state, topics, args, False)
         return 0
     shown, shown_coeffs, last_draw = -1, 0, 0.0
-    while not args.duration or time.monotonic() - start < args.duration:
+    while executor.context.ok() and (not args.duration
+                                     or time.monotonic() - start < args.duration):
         executor.spin_once(timeout_sec=0.1)
         now = time.monotonic()
         if tty:  # redraw on news, and each second for the ages

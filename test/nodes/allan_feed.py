@@ -53,8 +53,9 @@ class AllanFeed:
     def __init__(self, context, domain, n=6000, seed=3, params=()):
         """``params``: extra ``name:=value`` node parameters."""
         self.context, self.domain, self.n = context, domain, n
+        # Two fixed terms: automatic selection would take seconds per cycle on a loaded machine.
         cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=0.5',
-               '-p', 'queue_depth:=20000',
+               '-p', 'queue_depth:=20000', '-p', 'terms:=white_noise,bias_instability',
                '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
         for param in params:
             cmd += ['-p', param]
