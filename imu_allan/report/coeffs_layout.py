@@ -4,7 +4,8 @@
 x ``stat`` (3: value, ci_low, ci_high; 68.3 %), row-major, ``data_offset`` 0, SI units,
 continuous-time coefficients, NaN where a term is not detected.  ``imu/allan_deviation``: dims
 ``row`` (7: tau, then the six axes) x ``tau``.  The node encodes with these functions; users
-and tools decode with :func:`decode_table`.
+and tools (``monitor``) decode with :func:`decode_coefficients` and :func:`decode_deviation`,
+which check the layout, or :func:`decode_table` for the bare reshape.
 """
 
 import math
@@ -122,7 +123,7 @@ def coefficient_terms(table, axes=AXES):
     """Detected terms of a decoded coefficient table, per axis, in ``analyze --json``'s shape.
 
     ``{axis: {term: {value, ci, unit, time, conventional: {value, unit, ci}}}}``; terms that
-    are NaN (not detected) are left out.
+    are NaN (not detected) are left out; an interval end that is NaN becomes None (JSON null).
     """
     out = {}
     for i, axis in enumerate(axes):
@@ -132,10 +133,12 @@ def coefficient_terms(table, axes=AXES):
             if not math.isfinite(value):
                 continue
             conv, unit = conventional(axis, term, value)
-            terms[term] = {'value': value, 'ci': [low, high], 'unit': si_unit(axis, term),
+            ci = [v if math.isfinite(v) else None for v in (low, high)]
+            terms[term] = {'value': value, 'ci': ci, 'unit': si_unit(axis, term),
                            'time': 'continuous',
                            'conventional': {'value': conv, 'unit': unit,
-                                            'ci': [conventional(axis, term, low)[0],
-                                                   conventional(axis, term, high)[0]]}}
+                                            'ci': [None if v is None else
+                                                   conventional(axis, term, v)[0]
+                                                   for v in ci]}}
         out[axis] = terms
     return out
