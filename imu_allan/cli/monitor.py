@@ -38,7 +38,7 @@ def build_parser():
     p = ArgumentParser(
         prog='monitor',
         description='Live view of a running allan node: per-axis noise coefficients with '
-                    '68.3 %% intervals in conventional units, the IMU stream health and the '
+                    '68.3 % intervals in conventional units, the IMU stream health and the '
                     'recording advice, from imu/allan_coeffs, imu/allan_deviation and '
                     '/diagnostics.  ROS arguments (remapping, domain) go after --ros-args.')
     p.add_argument('--namespace', default='', metavar='NS',
@@ -89,7 +89,7 @@ class MonitorState:
         self.version = 0
 
     def on_coeffs(self, msg):
-        """``imu/allan_coeffs`` callback; a bad layout is counted as a problem, not a crash."""
+        """``imu/allan_coeffs`` callback; a bad layout becomes an ERROR line, not a crash."""
         self._store('coeffs', decode_coefficients, msg)
 
     def on_deviation(self, msg):
@@ -109,7 +109,7 @@ class MonitorState:
         self.version += 1
 
     def on_diagnostics(self, msg):
-        """``/diagnostics`` callback: keep this node's statuses, newest first wins."""
+        """``/diagnostics`` callback: keep this node's statuses (the newest of each name)."""
         mine = [s for s in msg.status if s.name.startswith(self.prefix)]
         if not mine:
             return
@@ -160,10 +160,10 @@ def format_interval(axis, term, stats):
 
 
 def _status_line(label, status, width=99):
+    """``label  LEVEL  message`` of a kept status, cut at ``width`` columns."""
     if status is None:
         return [f'{label:9}(none yet)']
-    lines = [f'{label:9}{status["level"]:6}{status["message"]}'[:width]]
-    return lines
+    return [f'{label:9}{status["level"]:6}{status["message"]}'[:width]]
 
 
 def _key_values(values, width=99, indent=15):

@@ -4,6 +4,8 @@
   (dashed), the total model (solid), slope guides -1, -1/2, 0, +1/2, +1 (grey), and the
   denoised curve when given.
 * ``timeseries.png``: the raw samples per axis (1-s means on top) with Tukey outliers marked.
+* :class:`LiveFigure`: the allan node's ``imu/allan_plot/compressed`` image, both sensors' panels
+  drawn by the same :func:`draw_adev`.
 """
 
 import io
@@ -104,8 +106,8 @@ class LiveFigure:
 
     Each panel is :func:`draw_adev`, the drawing ``analyze``'s plots use.  Object API only (no
     pyplot state), so a worker thread can render while the node keeps taking messages.  The
-    figure and its axes are kept between renders and only the data artists are replaced: the
-    tick machinery of two log-log axes is most of a fresh figure's cost (docs/benchmarks.md).
+    figure and its axes are kept between renders and only the data artists are replaced (a
+    fresh figure per render cost 30 % more: its log-axis ticks are rebuilt; docs/benchmarks.md).
     """
 
     def __init__(self, size_px=(1100, 480), dpi=100):
