@@ -17,6 +17,7 @@ own lines.
 import json
 import math
 import os
+import shutil
 import sys
 import time
 
@@ -159,14 +160,14 @@ def format_interval(axis, term, stats):
     return f'{v:.{digits}g} [{lo:.{digits}g}, {hi:.{digits}g}] {unit}'
 
 
-def _status_line(label, status, width=99):
-    """``label  LEVEL  message`` of a kept status, cut at ``width`` columns."""
+def _status_line(label, status):
+    """``label  LEVEL  message`` of a kept status."""
     if status is None:
         return [f'{label:9}(none yet)']
-    return [f'{label:9}{status["level"]:6}{status["message"]}'[:width]]
+    return [f'{label:9}{status["level"]:6}{status["message"]}']
 
 
-def _key_values(values, width=99, indent=15):
+def _key_values(values, width, indent=15):
     """``key=value`` pairs wrapped to ``width`` columns."""
     lines, line = [], ''
     for key, value in values.items():
@@ -181,7 +182,7 @@ def _key_values(values, width=99, indent=15):
 
 
 def render(state, topics, width=99):
-    """The table as a list of text lines."""
+    """The table as a list of text lines; key-value lists wrapped at ``width`` columns."""
     now = time.monotonic()
     ago = {k: f'{now - t:.0f} s ago' for k, t in state.arrived.items()}
     lines = [f'imu_allan monitor: node {state.prefix[:-2]} on {topics["coeffs"]}  '
@@ -202,14 +203,14 @@ def render(state, topics, width=99):
         tau = state.deviation[0]
         lines.append(f'averaging times: {tau.size}, {tau[0]:.3g} s to {tau[-1]:.4g} s')
     stream = state.status('IMU stream')
-    lines += _status_line('stream', stream, width)
+    lines += _status_line('stream', stream)
     if stream is not None:
         v = stream['values']
         keep = ('rate_hz', 'expected_rate_hz', 'samples_total', 'samples_used', 'gaps_total',
                 'out_of_order_total', 'excluded_share', 'silence_s')
         lines += _key_values({k: v[k] for k in keep if k in v}, width)
     advice = state.status('recording advice')
-    lines += _status_line('advice', advice, width)
+    lines += _status_line('advice', advice)
     if advice is not None:
         lines += _key_values(advice['values'], width)
     others = {name[len(state.prefix):]: s for name, s in state.statuses.items()
@@ -219,7 +220,7 @@ def render(state, topics, width=99):
         for s in others.values():
             counts[s['level']] = counts.get(s['level'], 0) + 1
         lines.append(f'{"checks":9}' + ', '.join(f'{n} {lvl}' for lvl, n in counts.items()))
-        lines += [f'  {name}: {s["level"]} {s["message"]}'[:width]
+        lines += [f'  {name}: {s["level"]} {s["message"]}'
                   for name, s in others.items() if s['level'] != 'OK']
     return lines
 
@@ -233,8 +234,10 @@ def _topic_names(node):
 def _emit(out, state, topics, args, tty):
     if args.json:
         out.write(json.dumps(state.snapshot(topics), allow_nan=False) + '\n')
-    elif tty:
-        out.write(REDRAW + '\n'.join(render(state, topics)) + '\n')
+    elif tty:  # lines cut at the terminal's width, so a redraw never scrolls
+        width = shutil.get_terminal_size((99, 24)).columns
+        lines = [line[:width] for line in render(state, topics, min(width, 99))]
+        out.write(REDRAW + '\n'.join(lines) + '\n')
     else:
         out.write('\n'.join(render(state, topics)) + '\n\n')
     out.flush()
