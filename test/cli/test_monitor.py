@@ -18,7 +18,7 @@ import signal
 import subprocess
 import time
 
-from conftest import executable, ros_env, run_command
+from conftest import DOMAIN, executable, ros_env, run_command
 from nodes.allan_feed import AllanFeed
 import numpy as np
 import pytest
@@ -30,17 +30,6 @@ from imu_allan.report.coeffs_layout import COEFF_LABELS, decode_coefficients
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
-DOMAIN = os.getpid() % 100 + 100
-
-
-@pytest.fixture(scope='module')
-def ros_context():
-    """An rclpy context on this process's own domain id."""
-    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 def test_once_json_equals_a_direct_subscriber(ros_context):

@@ -11,6 +11,7 @@ import io
 import os
 import shutil
 
+from conftest import DOMAIN
 import numpy as np
 import pytest
 
@@ -18,17 +19,6 @@ from nodes.allan_feed import AllanFeed, status_values
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
-DOMAIN = os.getpid() % 100 + 100
-
-
-@pytest.fixture(scope='module')
-def ros_context():
-    """An rclpy context on this process's own domain id."""
-    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 def test_figure_published_only_while_subscribed(ros_context, tmp_path):
