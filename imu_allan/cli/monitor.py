@@ -248,8 +248,10 @@ def main(argv=None):
     """Entry point of ``monitor``."""
     own, ros_argv = split_ros_args(argv)
     args = build_parser().parse_args(own)
-    if args.timeout <= 0 or args.duration < 0:
-        raise InputError('--timeout/--duration', 'must be positive')
+    if args.timeout <= 0:
+        raise InputError('--timeout', f'must be positive, got {args.timeout:g}')
+    if args.duration < 0:
+        raise InputError('--duration', f'must be 0 (no limit) or positive, got {args.duration:g}')
     from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor

@@ -5,9 +5,10 @@
 * on a real pseudo-terminal the table is redrawn in place (cursor-home + clear-to-end) and shows
   two different estimates that this process publishes in turn; with stdout a pipe the same run
   prints plain lines (no escape sequences);
-* ``--once --timeout 1`` with nothing running exits 1 with one line on stderr.
+* ``--once --timeout 1`` with nothing running exits 1 with one line on stderr naming the topic
+  as resolved with ``--namespace`` or a ``--ros-args`` remapping; a bad argument exits 2.
 
-About 25 s in all on the 2-core test machine (node and monitor start-up dominate).
+About 60 s in all on the 2-core test machine (node and monitor start-up dominate).
 """
 
 import json
@@ -142,11 +143,22 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context):
     assert '\x1b' not in plain and texts[0] in plain and texts[1] in plain
 
 
-def test_once_times_out_with_one_line():
-    """Nothing running on this domain: exit 1, one line on stderr, nothing on stdout."""
-    proc = run_command('monitor', '--once', '--timeout', 1, env=ros_env((DOMAIN + 50) % 232),
-                       timeout=60)
+@pytest.mark.parametrize('args, topic', [
+    ((), '/imu/allan_coeffs'),
+    (('--namespace', 'robot1'), '/robot1/imu/allan_coeffs'),
+    (('--ros-args', '-r', 'imu/allan_coeffs:=/elsewhere/coeffs'), '/elsewhere/coeffs'),
+])
+def test_once_times_out_with_one_line(args, topic):
+    """Nothing running on this domain: exit 1, one line naming the (resolved) topic."""
+    proc = run_command('monitor', '--once', '--timeout', 1, *args,
+                       env=ros_env((DOMAIN + 50) % 232), timeout=60)
     assert proc.returncode == 1
     assert proc.stdout == ''
     lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and 'imu/allan_coeffs' in lines[0], proc.stderr
+    assert len(lines) == 1 and f' {topic} ' in lines[0], proc.stderr
+
+
+def test_bad_argument_one_line_exit_2():
+    proc = run_command('monitor', '--once', '--timeout', '0', timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.count('\n') == 1 and '--timeout' in proc.stderr
