@@ -21,12 +21,12 @@ import shutil
 import sys
 import time
 
+from ..core.health import LEVEL_NAMES
 from ..core.units import AXES, conventional, IEEE_TERMS
 from ..errors import InputError
 from ..report.coeffs_layout import coefficient_terms, decode_coefficients, decode_deviation
 from .common import ArgumentParser, guarded
 
-LEVELS = {0: 'OK', 1: 'WARN', 2: 'ERROR', 3: 'STALE'}
 #: Terminal control: cursor home, then clear to the end of the screen (redraw in place).
 REDRAW = '\x1b[H\x1b[J'
 #: Seconds to wait, after coefficients arrive with ``--once``, for the same cycle's diagnostics.
@@ -116,7 +116,7 @@ class MonitorState:
             return
         for status in mine:
             self.statuses[status.name] = {
-                'level': LEVELS.get(_level(status), str(_level(status))),
+                'level': LEVEL_NAMES.get(_level(status), str(_level(status))),
                 'message': status.message,
                 'values': {kv.key: kv.value for kv in status.values}}
         self.received['diagnostics'] += 1

@@ -71,19 +71,17 @@ class PlotPublisher:
                     self._cond.wait()
                 if self._stop:
                     return
-                (result, fitted, title, stamp), self._job = self._job, None
+                (result, fitted, text, stamp), self._job = self._job, None
             start = time.perf_counter()
             try:
                 if figure is None:  # matplotlib is imported here, off the node's start-up
                     from ..report.plots import LiveFigure
                     figure = LiveFigure()
-                png = figure.render(result, fitted, title)
+                msg = CompressedImage(format='png', data=figure.render(result, fitted, text))
+                self.render_s = time.perf_counter() - start
+                msg.header.stamp = stamp
+                self._pub.publish(msg)
+                self.published += 1
             except Exception as exc:  # noqa: BLE001 - a figure must never stop the node
-                self._node.get_logger().warning(f'live figure not rendered: {exc}',
+                self._node.get_logger().warning(f'live figure not published: {exc}',
                                                 throttle_duration_sec=60.0)
-                continue
-            self.render_s = time.perf_counter() - start
-            msg = CompressedImage(format='png', data=png)
-            msg.header.stamp = stamp
-            self._pub.publish(msg)
-            self.published += 1
