@@ -17,6 +17,7 @@ import os
 import select
 import signal
 import subprocess
+import threading
 import time
 
 from conftest import DOMAIN, executable, ros_env, run_command
@@ -91,8 +92,8 @@ def _read_until(fd, text, timeout, seen):
     return False
 
 
-def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context):
-    """Two estimates in turn: redrawn in place on a pty; plain lines on a pipe."""
+def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_path):
+    """Two estimates in turn: redrawn in place on a pty; plain lines on a pipe; Ctrl-C exits 0."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
     from std_msgs.msg import Float64MultiArray
 
@@ -100,11 +101,16 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context):
     pub = node.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
     diag = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
     master, slave = os.openpty()
-    cmd = [executable('monitor'), '--duration', '20']
-    on_tty = subprocess.Popen(cmd, stdout=slave, stderr=subprocess.PIPE, env=ros_env(DOMAIN))
-    on_pipe = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    cmd = [executable('monitor'), '--duration', '60']
+    errors = [open(tmp_path / f'stderr_{k}.txt', 'w+') for k in range(2)]
+    on_tty = subprocess.Popen(cmd, stdout=slave, stderr=errors[0], env=ros_env(DOMAIN))
+    on_pipe = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=errors[1], text=True,
                                env=ros_env(DOMAIN))
     os.close(slave)
+    plain_parts = []  # drained all along, so the monitor never blocks on a full pipe
+    reader = threading.Thread(target=lambda: plain_parts.extend(iter(on_pipe.stdout.readline,
+                                                                     '')), daemon=True)
+    reader.start()
     seen, texts = [], []
     try:
         for scale in (1.0, 3.0):
@@ -116,17 +122,21 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context):
                 name='allan: recording advice', level=b'\x01',
                 message=f'record about {scale:g} h more',
                 values=[KeyValue(key='gyro_x.bias_instability_more_s', value='5400')]))
-            deadline = time.monotonic() + 20
+            deadline = time.monotonic() + 30
             while time.monotonic() < deadline:
                 pub.publish(multiarray(table, COEFF_LABELS))
                 diag.publish(array)
-                if _read_until(master, text, 0.5, seen) and f'{scale:g} h more' in ''.join(seen):
+                if (_read_until(master, text, 0.5, seen)
+                        and f'{scale:g} h more' in ''.join(seen)
+                        and text in ''.join(plain_parts)):
                     break
             else:
-                pytest.fail(f'pty never showed {text!r}: {"".join(seen)[-2000:]}')
-        on_tty.send_signal(signal.SIGINT)
-        on_pipe.send_signal(signal.SIGINT)
-        plain, _ = on_pipe.communicate(timeout=20)
+                pytest.fail(f'never shown: {text!r}; pty: {"".join(seen)[-1500:]}; pipe: '
+                            f'{"".join(plain_parts)[-1500:]}')
+        for proc in (on_tty, on_pipe):
+            proc.send_signal(signal.SIGINT)
+        codes = [proc.wait(timeout=20) for proc in (on_tty, on_pipe)]
+        reader.join(timeout=5)
     finally:
         for proc in (on_tty, on_pipe):
             if proc.poll() is None:
@@ -134,6 +144,11 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context):
             proc.wait()
         os.close(master)
         node.destroy_node()
+    stderr = [e.seek(0) or e.read() for e in errors]
+    for e in errors:
+        e.close()
+    assert codes == [0, 0], stderr
+    plain = ''.join(plain_parts)
     screen = ''.join(seen)
     assert screen.count(REDRAW) >= 2
     assert texts[0] != texts[1] and texts[0] in screen and texts[1] in screen
