@@ -135,7 +135,12 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_pa
                             f'{"".join(plain_parts)[-1500:]}')
         for proc in (on_tty, on_pipe):
             proc.send_signal(signal.SIGINT)
-        codes = [proc.wait(timeout=20) for proc in (on_tty, on_pipe)]
+        # keep reading the terminal: a monitor blocked writing to a full pty cannot exit
+        end = time.monotonic() + 20
+        while time.monotonic() < end and None in (on_tty.poll(), on_pipe.poll()):
+            _read_until(master, '\x00', 0.2, seen)
+            time.sleep(0.05)
+        codes = [on_tty.poll(), on_pipe.poll()]
         reader.join(timeout=5)
     finally:
         for proc in (on_tty, on_pipe):
