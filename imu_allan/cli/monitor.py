@@ -298,7 +298,7 @@ def _loop(executor, state, topics, args, out):
             executor.spin_once(timeout_sec=0.05)
         _emit(out, state, topics, args, False)
         return 0
-    shown, shown_coeffs, last_draw = -1, 0, 0.0
+    shown, shown_coeffs, last_draw, pending = -1, 0, 0.0, None
     while executor.context.ok() and (not args.duration
                                      or time.monotonic() - start < args.duration):
         executor.spin_once(timeout_sec=0.1)
@@ -307,10 +307,12 @@ def _loop(executor, state, topics, args, out):
             if state.version != shown or now - last_draw >= 1.0:
                 _emit(out, state, topics, args, True)
                 shown, last_draw = state.version, now
-        elif state.received['coeffs'] != shown_coeffs and (
-                state.arrived.get('diagnostics', 0.0) >= state.arrived['coeffs']
-                or now - state.arrived['coeffs'] > DIAGNOSTICS_GRACE_S):
-            # plain lines: one block per estimate, with the same cycle's diagnostics
-            shown_coeffs = state.received['coeffs']
+            continue
+        # plain lines: one block per new estimate, with that cycle's diagnostics when they come
+        if state.received['coeffs'] != shown_coeffs and pending is None:
+            pending = now
+        if pending is not None and (state.arrived.get('diagnostics', 0.0) >= pending
+                                    or now - pending > DIAGNOSTICS_GRACE_S):
+            shown_coeffs, pending = state.received['coeffs'], None
             _emit(out, state, topics, args, False)
     return 0

@@ -92,6 +92,16 @@ def _read_until(fd, text, timeout, seen):
     return False
 
 
+def _threads(pid):
+    """What each thread of a process waits in (kernel wait channel), for a failure message."""
+    out = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        with open(f'/proc/{pid}/task/{tid}/comm') as comm, \
+                open(f'/proc/{pid}/task/{tid}/wchan') as wchan:
+            out[f'{tid} {comm.read().strip()}'] = wchan.read()
+    return out
+
+
 def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_path):
     """Two estimates in turn: redrawn in place on a pty; plain lines on a pipe; Ctrl-C exits 0."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -135,12 +145,15 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_pa
                             f'{"".join(plain_parts)[-1500:]}')
         for proc in (on_tty, on_pipe):
             proc.send_signal(signal.SIGINT)
-        # keep reading the terminal: a monitor blocked writing to a full pty cannot exit
-        end = time.monotonic() + 20
+        # keep reading the terminal: a monitor blocked writing to a full pty cannot exit.  The
+        # bound is generous: on the shared test machine a starved process needs seconds to
+        # close its DDS participant.
+        end = time.monotonic() + 60
         while time.monotonic() < end and None in (on_tty.poll(), on_pipe.poll()):
             _read_until(master, '\x00', 0.2, seen)
             time.sleep(0.05)
         codes = [on_tty.poll(), on_pipe.poll()]
+        hung = {p.pid: _threads(p.pid) for p in (on_tty, on_pipe) if p.poll() is None}
         reader.join(timeout=5)
     finally:
         for proc in (on_tty, on_pipe):
@@ -152,7 +165,7 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_pa
     stderr = [e.seek(0) or e.read() for e in errors]
     for e in errors:
         e.close()
-    assert codes == [0, 0], stderr
+    assert codes == [0, 0], (stderr, hung)
     plain = ''.join(plain_parts)
     screen = ''.join(seen)
     assert screen.count(REDRAW) >= 2
