@@ -255,10 +255,15 @@ def main(argv=None):
     from diagnostic_msgs.msg import DiagnosticArray
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
     from std_msgs.msg import Float64MultiArray
 
     context = rclpy.Context()
-    rclpy.init(args=['monitor', *ros_argv], context=context)
+    # Ctrl-C is Python's KeyboardInterrupt in this thread (spin_once wakes every 0.1 s), so
+    # the node and the context are torn down once, in order, by the finally below; rclpy's own
+    # handler would shut the context down from its signal thread at the same time.
+    rclpy.init(args=['monitor', *ros_argv], context=context,
+               signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:
         node = rclpy.create_node(f'allan_monitor_{os.getpid()}', namespace=args.namespace,
