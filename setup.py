@@ -36,6 +36,7 @@ setup(
             'analyze = imu_allan.cli.analyze:main',
             'discrepancy = imu_allan.cli.discrepancy:main',
             'gx3_sim = imu_allan.cli.gx3_sim:main',
+            'monitor = imu_allan.cli.monitor:main',
         ],
     },
 )

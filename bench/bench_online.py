@@ -15,9 +15,10 @@ Sections (each prints its numbers):
    message republished with live covariances, received here).  Needs the colcon-built package.
 4. ``covariance``: cost of patching the covariance diagonals in 50-message batches of CDR
    bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`).
+5. ``plot``: render time per publish cycle of the live figure (``imu/allan_plot/compressed``).
 
-Usage: ``python bench/bench_online.py [estimator|accuracy|node|covariance ...]`` (default:
-all).
+Usage: ``python bench/bench_online.py [estimator|accuracy|node|covariance|plot ...]``
+(default: all).
 """
 
 import os
@@ -237,13 +238,44 @@ def bench_covariance(n=200_000, batch=50):
           f'per message ({100 * dt / (n / 1000.0):.2f} % of one core at 1 kHz)')
 
 
+def bench_plot(cycles=10):
+    """Render time of the live figure per publish cycle (the allan node's worker thread).
+
+    A 1 h, 100 Hz thesis-model estimate with the automatic fit; the figure object is kept
+    between cycles as in the node, so the first render (figure set-up) is shown apart.
+    Wall time and the rendering thread's CPU time (the machine is shared).
+    """
+    from imu_allan.report.plots import LiveFigure
+    rate, n = 100.0, 360_000
+    data = simulate(thesis_gx3_25_model(), n, rate, seed=2)
+    pipe = OnlineAllan(rate)
+    pipe.feed(np.arange(n) / rate, data)
+    result = pipe.result()
+    fitted = pipe.fit(result)
+    figure = LiveFigure()
+    start = time.perf_counter()
+    png = figure.render(result, fitted, 'bench')
+    first = time.perf_counter() - start
+    walls, cpus = [], []
+    for _ in range(cycles):
+        wall, cpu = time.perf_counter(), time.thread_time()
+        png = figure.render(result, fitted, 'bench')
+        cpus.append(time.thread_time() - cpu)
+        walls.append(time.perf_counter() - wall)
+    width, height = figure.size_px
+    print(f'plot: live figure {width}x{height} px, PNG {len(png) / 1024:.0f} KiB, '
+          f'{result.tau.size} taus x 6 axes: first render {first * 1e3:.0f} ms; then per cycle '
+          f'median {np.median(walls) * 1e3:.0f} ms wall (min {min(walls) * 1e3:.0f}), '
+          f'{np.median(cpus) * 1e3:.0f} ms CPU (min {min(cpus) * 1e3:.0f}); goal < 150 ms')
+
+
 def main():
     """Run the selected sections (all by default)."""
     header('bench_online')
-    sections = sys.argv[1:] or ['estimator', 'accuracy', 'node', 'covariance']
+    sections = sys.argv[1:] or ['estimator', 'accuracy', 'node', 'covariance', 'plot']
     for section in sections:
         {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node,
-         'covariance': bench_covariance}[section]()
+         'covariance': bench_covariance, 'plot': bench_plot}[section]()
 
 
 if __name__ == '__main__':

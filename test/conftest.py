@@ -14,7 +14,9 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / 'shared' / 'data'
-EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim')
+#: This test process's own ROS_DOMAIN_ID: DDS tests in parallel processes see each other.
+DOMAIN = os.getpid() % 100 + 100
+EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim', 'monitor')
 
 
 @pytest.fixture(scope='session')
@@ -44,9 +46,20 @@ def run_command(name, *args, timeout=120, env=None, **kwargs):
 def ros_env(domain=None):
     """Environment for a DDS subprocess with its own ROS_DOMAIN_ID."""
     env = dict(os.environ)
-    env['ROS_DOMAIN_ID'] = str(domain if domain is not None else os.getpid() % 100 + 100)
+    env['ROS_DOMAIN_ID'] = str(domain if domain is not None else DOMAIN)
     env.setdefault('PYTHONUNBUFFERED', '1')
     return env
+
+
+@pytest.fixture(scope='module')
+def ros_context():
+    """An rclpy context on this process's own domain id (:data:`DOMAIN`)."""
+    rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
+    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    yield context
+    rclpy.try_shutdown(context=context)
 
 
 def python():

@@ -9,6 +9,8 @@ and publishes every ``publish_period`` seconds:
   detected;
 * ``imu/allan_deviation`` (std_msgs/Float64MultiArray): dims ``row`` (7: tau, gyro_x .. accel_z)
   x ``tau`` (T);
+* ``imu/allan_plot/compressed`` (sensor_msgs/CompressedImage, PNG): the Allan deviation figure,
+  rendered in a worker thread only while something subscribes (:mod:`.allan_plot`);
 * ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share), each axis
   against the noise budget (OK / WARN / ERROR / STALE) and the recording advice (OK when every
   precision target is met, WARN with the longest additional recording time otherwise;
@@ -50,6 +52,7 @@ from ..report.coeffs_layout import (
     DEVIATION_LABELS,
     deviation_table,
 )
+from .allan_plot import PlotPublisher
 from .common import (
     apply_changes,
     declare_parameter_table,
@@ -210,6 +213,7 @@ class AllanNode(Node):
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
             if self.params['covariance_topic'] else None
         self._cov_variance = None  # per-sample N^2 f per axis, once estimated
+        self._plot = PlotPublisher(self)
         self._last_arrival = None
         self._cycle = None
         self._advice, self._advice_due = None, 0.0
@@ -223,6 +227,10 @@ class AllanNode(Node):
             f'waiting for imu/data_raw at {self.params["rate_hz"]:g} Hz; publishing every '
             f'{self.params["publish_period"]:g} s; budget {self.budget.source}; estimator '
             f'memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
+
+    def close(self):
+        """Stop the figure's worker thread (run_node calls this before destroy_node)."""
+        self._plot.close()
 
     # -- parameters ------------------------------------------------------------------
 
@@ -289,6 +297,7 @@ class AllanNode(Node):
                 # robot_localization reads per-message variances: N^2 f (NaN: keep the driver's)
                 self._cov_variance = discrete_white_std(
                     table[:, IEEE_TERMS.index('white_noise'), 0], self.params['rate_hz']) ** 2
+            self._plot.offer(result, fitted)  # rendered off this thread, only if subscribed
             self._cycle = None
             self._cycle_cpu += time.perf_counter() - start
             self.last_cycle = {'cycle_total_s': self._cycle_cpu,
@@ -352,6 +361,7 @@ class AllanNode(Node):
             'budget_file': self.budget.source,
             'model_file': self.model_file or '(none)',
             **self.last_cycle,
+            **self._plot.stats(),
         })
         records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
         records.append(self._advice_status)

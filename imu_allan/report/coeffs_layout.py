@@ -4,14 +4,16 @@
 x ``stat`` (3: value, ci_low, ci_high; 68.3 %), row-major, ``data_offset`` 0, SI units,
 continuous-time coefficients, NaN where a term is not detected.  ``imu/allan_deviation``: dims
 ``row`` (7: tau, then the six axes) x ``tau``.  The node encodes with these functions; users
-and tools decode with :func:`decode_table`.
+and tools (``monitor``) decode with :func:`decode_coefficients` and :func:`decode_deviation`,
+which check the layout, or :func:`decode_table` for the bare reshape.
 """
 
 import math
 
 import numpy as np
 
-from ..core.units import AXES, IEEE_TERMS
+from ..core.units import AXES, conventional, IEEE_TERMS, si_unit
+from ..errors import InputError
 
 COEFF_LABELS = ('axis', 'term', 'stat')
 DEVIATION_LABELS = ('row', 'tau')
@@ -64,3 +66,79 @@ def decode_table(data, dims):
     if int(np.prod(sizes)) != values.size:
         raise ValueError(f'layout {sizes} does not match {values.size} values')
     return values.reshape(sizes)
+
+
+def _layout(source, dims, topic):
+    """``(flat data, ((label, size), ...))`` of a message or of data + dims."""
+    if dims is None:
+        layout = getattr(source, 'layout', None)
+        if layout is None:
+            raise InputError(topic, 'neither a Float64MultiArray nor data with dims')
+        if layout.data_offset:
+            raise InputError(topic, f'data_offset {layout.data_offset}, expected 0')
+        dims = [(d.label, d.size) for d in layout.dim]
+        source = source.data
+    return source, tuple((str(label), int(size)) for label, size in dims)
+
+
+def _check_labels(dims, labels, topic):
+    if tuple(label for label, _ in dims) != labels:
+        raise InputError(topic, f'dimension labels {[label for label, _ in dims]}, expected '
+                                f'{list(labels)}')
+
+
+def decode_coefficients(source, dims=None):
+    """The ``imu/allan_coeffs`` array (axis, term, stat) = (6, 5, 3), SI, NaN if not detected.
+
+    ``source`` is a ``std_msgs/Float64MultiArray`` (rclpy or rosbags: the same field names), or
+    the flat data with ``dims`` as ``((label, size), ...)``.  Labels and sizes are checked
+    against the contract; a mismatch raises InputError naming the topic.
+    """
+    data, dims = _layout(source, dims, 'imu/allan_coeffs')
+    _check_labels(dims, COEFF_LABELS, 'imu/allan_coeffs')
+    expected = (len(AXES), len(IEEE_TERMS), len(STATS))
+    if tuple(size for _, size in dims) != expected:
+        raise InputError('imu/allan_coeffs', f'sizes {[size for _, size in dims]}, expected '
+                                             f'{list(expected)}')
+    try:
+        return decode_table(data, dims)
+    except ValueError as exc:
+        raise InputError('imu/allan_coeffs', str(exc)) from None
+
+
+def decode_deviation(source, dims=None):
+    """``(tau (T,), adev (T, 6))`` of ``imu/allan_deviation`` (s, and rad/s or m/s^2)."""
+    data, dims = _layout(source, dims, 'imu/allan_deviation')
+    _check_labels(dims, DEVIATION_LABELS, 'imu/allan_deviation')
+    if dims[0][1] != 1 + len(AXES):
+        raise InputError('imu/allan_deviation', f'{dims[0][1]} rows, expected {1 + len(AXES)}')
+    try:
+        table = decode_table(data, dims)
+    except ValueError as exc:
+        raise InputError('imu/allan_deviation', str(exc)) from None
+    return table[0], table[1:].T
+
+
+def coefficient_terms(table, axes=AXES):
+    """Detected terms of a decoded coefficient table, per axis, in ``analyze --json``'s shape.
+
+    ``{axis: {term: {value, ci, unit, time, conventional: {value, unit, ci}}}}``; terms that
+    are NaN (not detected) are left out; an interval end that is NaN becomes None (JSON null).
+    """
+    out = {}
+    for i, axis in enumerate(axes):
+        terms = {}
+        for j, term in enumerate(IEEE_TERMS):
+            value, low, high = (float(v) for v in table[i, j])
+            if not math.isfinite(value):
+                continue
+            conv, unit = conventional(axis, term, value)
+            ci = [v if math.isfinite(v) else None for v in (low, high)]
+            terms[term] = {'value': value, 'ci': ci, 'unit': si_unit(axis, term),
+                           'time': 'continuous',
+                           'conventional': {'value': conv, 'unit': unit,
+                                            'ci': [None if v is None else
+                                                   conventional(axis, term, v)[0]
+                                                   for v in ci]}}
+        out[axis] = terms
+    return out

@@ -7,11 +7,10 @@ the node's numbers can be compared with the offline path on exactly the same sam
 """
 
 import math
-import os
 import subprocess
 import time
 
-from conftest import executable, ros_env, spin_until
+from conftest import DOMAIN, executable, ros_env, spin_until
 import numpy as np
 import pytest
 
@@ -21,10 +20,10 @@ from imu_allan.core.simulate import simulate
 from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
 from imu_allan.report.coeffs_layout import coefficient_table
+from nodes.allan_feed import imu_messages
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
-DOMAIN = os.getpid() % 100 + 100
 RATE = 100.0
 N = 30000
 # Bias instability large enough that its flat Allan region (from about 1 s) is inside the
@@ -48,32 +47,6 @@ def _decode_coeffs(msg):
     return np.asarray(msg.data, dtype=float).reshape(6, 5, 3)
 
 
-@pytest.fixture(scope='module')
-def ros_context():
-    """An rclpy context on this process's own domain id."""
-    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
-
-
-def _imu_messages(data, t):
-    from sensor_msgs.msg import Imu
-    msgs = []
-    for ti, row in zip(t, data):
-        msg = Imu()
-        sec = int(math.floor(ti))
-        msg.header.stamp.sec = sec
-        msg.header.stamp.nanosec = int(round((ti - sec) * 1e9))
-        msg.header.frame_id = 'imu_link'
-        msg.orientation_covariance[0] = -1.0
-        w, a = msg.angular_velocity, msg.linear_acceleration
-        w.x, w.y, w.z, a.x, a.y, a.z = (float(v) for v in row)
-        msgs.append(msg)
-    return msgs
-
-
 def test_allan_node_end_to_end(ros_context, tmp_path):
     """True coefficients inside the published intervals; node == offline; budget levels."""
     from diagnostic_msgs.msg import DiagnosticArray
@@ -91,7 +64,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
     data[:, 5] += 9.80665  # gravity on z: the estimator must not care about a constant
     t0 = 1_700_000_000.0
     t = t0 + np.arange(N) / RATE
-    msgs = _imu_messages(data, t)
+    msgs = imu_messages(data, t)
     # The msg stamps are what the node sees: decode them back exactly as it does.
     from imu_allan.formats.imu_adapter import imus_to_arrays
     t_seen, data_seen = imus_to_arrays(msgs)
