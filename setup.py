@@ -32,6 +32,7 @@ setup(
             'analyze = imu_allan.cli.analyze:main',
             'discrepancy = imu_allan.cli.discrepancy:main',
             'gx3_sim = imu_allan.cli.gx3_sim:main',
+            'fleet = imu_allan.cli.fleet:main',
         ],
     },
 )

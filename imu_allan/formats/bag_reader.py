@@ -188,7 +188,28 @@ def read_bag(path, topic=None, fast=True):
     if t.shape[0] == 0:
         extra = f' ({"; ".join(warnings)})' if warnings else ''
         raise InputError(path, f'topic {chosen} has no messages{extra}')
-    return Samples(t=t, data=data, axes=AXES, source=f'{where}:{chosen}', warnings=warnings)
+    return Samples(t=t, data=data, axes=AXES, source=f'{where}:{chosen}', warnings=warnings,
+                   topic=chosen, frame_id=first_frame_id(p, chosen))
+
+
+def first_frame_id(path, topic):
+    """The ``header.frame_id`` of the first message on ``topic``; '' if rosbags cannot tell.
+
+    One message through the generic deserializer: the bulk readers skip the frame id.
+    """
+    try:
+        reader = any_reader([path], str(path))
+    except InputError:
+        return ''  # a damaged bag rosbags cannot open: its samples are still good
+    try:
+        conns = [c for c in reader.connections if c.topic == topic]
+        for conn, _, raw in reader.messages(connections=conns):
+            return str(reader.deserialize(raw, conn.msgtype).header.frame_id)
+    except Exception:  # a garbled first message costs the id, not the record
+        pass
+    finally:
+        reader.close()
+    return ''
 
 
 def _read_generic(where, p, topic):

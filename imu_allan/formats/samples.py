@@ -27,6 +27,10 @@ class Samples:
         Things the reader skipped or repaired, each one line.
     extra : dict
         Extra columns (for example ``mag_x``) by name, each shape (n,).
+    topic : str
+        Bags: the Imu topic read ('' for other inputs).
+    frame_id : str
+        Bags: the ``header.frame_id`` of the first message ('' for other inputs).
 
     """
 
@@ -37,6 +41,8 @@ class Samples:
     gravity: float = 9.80665
     warnings: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)
+    topic: str = ''
+    frame_id: str = ''
 
     @property
     def n(self):

@@ -45,8 +45,13 @@ def kalibr_values(analysis):
     return out, per_axis
 
 
-def analysis_to_json(analysis):
-    """The report dictionary of one analysis (JSON-ready)."""
+def analysis_to_json(analysis, samples=None):
+    """The report dictionary of one analysis (JSON-ready).
+
+    ``upper_limits``: ``{axis: {term: 95 % upper limit}}`` of undetected N and K (SI).  With
+    the :class:`~imu_allan.formats.samples.Samples` analysed, also ``recording``: the Imu
+    ``topic`` and ``frame_id`` (bags; '' otherwise) and ``start_s``, the first stamp (s).
+    """
     res = analysis.result
     axes = {}
     for j, axis in enumerate(analysis.axes):
@@ -60,7 +65,7 @@ def analysis_to_json(analysis):
         }
     timing = analysis.timing
     kalibr, _ = kalibr_values(analysis)
-    return {
+    report = {
         'source': analysis.source,
         'n_samples': int(analysis.n_samples),
         'sample_rate_hz': float(analysis.rate_hz),
@@ -80,7 +85,12 @@ def analysis_to_json(analysis):
                                                            analysis.data is not None),
                      'counts': dict(analysis.outliers.counts)},
         'kalibr': kalibr,
+        'upper_limits': analysis.upper_limits,
     }
+    if samples is not None:
+        report['recording'] = {'topic': samples.topic, 'frame_id': samples.frame_id,
+                               'start_s': float(samples.t[0])}
+    return report
 
 
 def _fmt(value):
