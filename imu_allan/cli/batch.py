@@ -15,6 +15,7 @@ exactly once (one future per input, read once).
 """
 
 from collections import Counter
+import contextlib
 import json
 import logging
 import os
@@ -119,10 +120,21 @@ class History:
     """The ``--db`` side of a run: what to skip, and one transaction per finished input."""
 
     def __init__(self, path, imu_id=None):
-        """Open nothing yet; the database is opened per write (see :mod:`..history.db`)."""
+        """Read what is known; the file is then opened only while writing (:meth:`session`)."""
         from ..history import db
         self.db, self.path, self.imu_id = db, path, imu_id
         self.known = db.known_inputs(path)
+        self.con = None
+
+    @contextlib.contextmanager
+    def session(self):
+        """Keep the database open for the :meth:`record` calls inside (one per input)."""
+        with self.db.connect(self.path) as con:
+            self.con = con
+            try:
+                yield self
+            finally:
+                self.con = None
 
     def fingerprint(self, path):
         """``(size, mtime)`` of an input, None if it cannot be read (the analysis will say)."""
@@ -148,7 +160,11 @@ class History:
                  'error': outcome.get('error'), 'analyzed_at': now, 'version': __version__}
         rows = measurement_rows(outcome['report'], key, now, self.imu_id) if outcome['ok'] \
             else []
-        self.db.record(self.path, entry, rows)
+        if self.con is None:
+            with self.session():
+                self.db.record(self.con, entry, rows)
+        else:
+            self.db.record(self.con, entry, rows)
 
 
 def _dask_client(args, n_inputs):
@@ -176,7 +192,7 @@ def _dask_client(args, n_inputs):
 
 
 def _run_dask(work, args, options, out_dirs, done):
-    """Submit one task per input; call ``done(outcome)`` as each finishes."""
+    """Submit one task per input; call ``done(outcomes)`` with each batch that finished."""
     from argparse import Namespace
 
     from dask.distributed import as_completed
@@ -187,18 +203,21 @@ def _run_dask(work, args, options, out_dirs, done):
     try:
         futures = {client.submit(analyze_task, path, task_args, options, out_dirs[path],
                                  pure=False): path for path in work}
-        for future in as_completed(futures, loop=client.loop):
-            path = futures[future]
-            try:
-                outcome = future.result()
-            except KilledWorker:
-                outcome = {'input': path, 'ok': False,
-                           'error': f'{path}: the worker analysing it died '
-                                    f'{ALLOWED_FAILURES + 1} times'}
-            except Exception as exc:  # the task could not even run (pickling, lost scheduler)
-                outcome = {'input': path, 'ok': False, 'error': f'{path}: {_one_line(exc)}'}
-            future.release()
-            done(outcome)
+        for batch in as_completed(futures, loop=client.loop).batches():
+            outcomes = []
+            for future in batch:
+                path = futures[future]
+                try:
+                    outcomes.append(future.result())
+                except KilledWorker:
+                    outcomes.append({'input': path, 'ok': False,
+                                     'error': f'{path}: the worker analysing it died '
+                                              f'{ALLOWED_FAILURES + 1} times'})
+                except Exception as exc:  # the task could not run (pickling, lost scheduler)
+                    outcomes.append({'input': path, 'ok': False,
+                                     'error': f'{path}: {_one_line(exc)}'})
+                future.release()
+            done(outcomes)
     finally:
         client.close()
         if cluster is not None:
@@ -250,11 +269,13 @@ def run_batch(args, options):
     progress = RunProgress(len(work), tty=sys.stderr.isatty(), enabled=not quiet)
     outcomes = {}
 
-    def done(outcome):
-        if history:
-            history.record(outcome, prints[outcome['input']])
-        outcomes[outcome['input']] = outcome
-        progress.finished(outcome['input'], outcome.get('error'))
+    def done(batch):
+        with history.session() if history else contextlib.nullcontext():
+            for outcome in batch:
+                if history:
+                    history.record(outcome, prints[outcome['input']])
+                outcomes[outcome['input']] = outcome
+                progress.finished(outcome['input'], outcome.get('error'))
 
     try:
         if args.scheduler or len(work) > 1 and _have_dask():
@@ -264,7 +285,7 @@ def run_batch(args, options):
                 say(f'analyze: dask is not installed, analysing {len(work)} inputs one after '
                     f"another (pip install 'dask[distributed]' to use every core)")
             for path in work:
-                done(analyze_task(path, args, options, out_dirs[path]))
+                done([analyze_task(path, args, options, out_dirs[path])])
     finally:
         progress.close()
     results = [outcomes[p] for p in work]

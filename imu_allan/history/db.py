@@ -6,8 +6,9 @@ error, when and by which version), and the noise coefficients of the ``ok`` ones
 (docs/interfaces.md).
 
 DuckDB lets one process at a time open a database file for writing.  So that several runs can
-share a file, every write opens the file, writes one input in one transaction and closes it;
-a process that finds the file locked retries for up to :data:`LOCK_WAIT_S`.  An input's old rows
+share a file, a run opens it only to write what has just finished (one transaction per input)
+and closes it again; a process that finds the file locked retries for up to
+:data:`LOCK_WAIT_S`.  An input's old rows
 are deleted in the same transaction that inserts its new ones, so a crash leaves either the old
 or the new rows of an input, never half of them and never both.
 """
@@ -129,13 +130,13 @@ def known_inputs(path):
     return {inp: (size, mtime) for inp, size, mtime in rows}
 
 
-def record(path, entry, rows):
+def record(con, entry, rows):
     """Write one input: its ``inputs`` row and its ``measurements`` rows, in one transaction.
 
     Parameters
     ----------
-    path : str or pathlib.Path
-        The database file.
+    con : duckdb.DuckDBPyConnection
+        An open connection (:func:`connect`).
     entry : dict
         Values of :data:`INPUT_COLUMNS`.
     rows : list of dict
@@ -143,24 +144,23 @@ def record(path, entry, rows):
 
     """
     inp = entry['input']
-    with connect(path) as con:
-        con.execute('BEGIN TRANSACTION')
-        try:
-            con.execute('DELETE FROM measurements WHERE input = ?', [inp])
-            con.execute('DELETE FROM inputs WHERE input = ?', [inp])
-            con.execute(f'INSERT INTO inputs ({", ".join(INPUT_COLUMNS)}) VALUES '
-                        f'({", ".join("?" * len(INPUT_COLUMNS))})',
-                        [entry[c] for c in INPUT_COLUMNS])
-            if rows:
-                # one statement with many VALUES: executemany costs a round trip per row
-                one = '(' + ', '.join('?' * len(MEASUREMENT_COLUMNS)) + ')'
-                con.execute(f'INSERT INTO measurements ({", ".join(MEASUREMENT_COLUMNS)}) '
-                            f'VALUES {", ".join([one] * len(rows))}',
-                            [r[c] for r in rows for c in MEASUREMENT_COLUMNS])
-            con.execute('COMMIT')
-        except BaseException:
-            con.execute('ROLLBACK')
-            raise
+    con.execute('BEGIN TRANSACTION')
+    try:
+        con.execute('DELETE FROM measurements WHERE input = ?', [inp])
+        con.execute('DELETE FROM inputs WHERE input = ?', [inp])
+        con.execute(f'INSERT INTO inputs ({", ".join(INPUT_COLUMNS)}) VALUES '
+                    f'({", ".join("?" * len(INPUT_COLUMNS))})',
+                    [entry[c] for c in INPUT_COLUMNS])
+        if rows:
+            # one statement with many VALUES: executemany costs a round trip per row
+            one = '(' + ', '.join('?' * len(MEASUREMENT_COLUMNS)) + ')'
+            con.execute(f'INSERT INTO measurements ({", ".join(MEASUREMENT_COLUMNS)}) '
+                        f'VALUES {", ".join([one] * len(rows))}',
+                        [r[c] for r in rows for c in MEASUREMENT_COLUMNS])
+        con.execute('COMMIT')
+    except BaseException:
+        con.execute('ROLLBACK')
+        raise
 
 
 def abspath(path):

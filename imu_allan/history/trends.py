@@ -11,8 +11,11 @@ Two flags, each on an IMU's latest record:
   their robust standard deviation (1.4826 MAD) and their typical interval half-width.  Median
   and MAD, not mean and range, so that a rise sustained over the last few records (already in
   the history) does not hide itself.  Needs :data:`MIN_HISTORY` earlier values.
-* **fleet** (worst axis of each sensor): the latest value's interval lies wholly above the 95th
-  percentile of every other record of the fleet (all IMUs, the same sensor and term).  Needs
+* **fleet** (worst axis of each sensor): the latest value lies above the 95th percentile of
+  every other record of the fleet (all IMUs, the same sensor and term) by more than its own
+  uncertainty: the larger of its interval's lower half and ``K_SPREAD`` times the spread of the
+  IMU's earlier values, the same test as the history flag (a short record's interval
+  under-states how much B scatters from record to record; the history shows it).  Needs
   :data:`MIN_FLEET` other records.
 """
 
@@ -213,10 +216,16 @@ def fleet_flags(imus):
                 if len(others) < MIN_FLEET:
                     continue
                 p95 = float(np.percentile(others, FLEET_PERCENTILE))
-                if s.low[i] > p95:
-                    flags.append(_flag(imu, s, i, 'fleet', {'p95': p95, 'records': len(others)},
+                margin = s.value[i] - s.low[i]
+                if i >= MIN_HISTORY:
+                    spread = history_band(s.value[:i], s.low[:i], s.high[:i])[1]
+                    margin = max(margin, K_SPREAD * spread)
+                if s.value[i] - margin > p95:
+                    flags.append(_flag(imu, s, i, 'fleet', {'p95': p95, 'records': len(others),
+                                                            'margin': margin},
                                        f"is above the fleet's 95th percentile {p95:.3e} of "
-                                       f'{len(others)} other records (whole interval above)'))
+                                       f'{len(others)} other records by more than its '
+                                       f'uncertainty {margin:.2e}'))
     return flags
 
 
