@@ -194,10 +194,9 @@ def _dask_client(args, n_inputs):
 def _run_dask(work, args, options, out_dirs, done):
     """Submit one task per input; call ``done(outcomes)`` with each batch that finished."""
     from argparse import Namespace
-
+    client, cluster = _dask_client(args, len(work))  # first: says what to install
     from dask.distributed import as_completed
     from distributed import KilledWorker
-    client, cluster = _dask_client(args, len(work))
     # each task gets the options, not the list of every input
     task_args = Namespace(**dict(vars(args), inputs=[]))
     try:
@@ -251,13 +250,15 @@ def _scan_line(inputs, counts):
 
 def run_batch(args, options):
     """Analyse every input of ``args`` (folders scanned); return the exit status."""
+    if args.scheduler and not _have_dask():
+        raise InputError('--scheduler', DASK_HINT)
+    history = History(args.db, args.imu_id) if args.db else None  # or: what to install
     inputs, counts = scan_inputs(args.inputs)
     if args.export_samples and len(inputs) > 1:
         raise InputError('--export-samples', 'takes exactly one INPUT')
     quiet = args.quiet
     say = (lambda line: None) if quiet else (lambda line: print(line, file=sys.stderr))
     say(_scan_line(inputs, counts))
-    history = History(args.db, args.imu_id) if args.db else None
     prints = {p: history.fingerprint(p) for p in inputs} if history else {}
     work = [p for p in inputs if args.force or not history or
             not history.is_known(p, prints[p])]

@@ -23,7 +23,7 @@ from ..errors import InputError
 
 #: How long a run waits for another process to release the database file, s.
 LOCK_WAIT_S = 120.0
-INSTALL_HINT = "--db needs duckdb: pip install 'duckdb>=1.5'"
+INSTALL_HINT = "the history needs duckdb: pip install 'duckdb>=1.5'"
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS inputs (

@@ -193,3 +193,26 @@ def test_cluster_run_equals_serial_then_skips_then_survives_a_dead_worker(
         np.testing.assert_allclose([x if x is not None else np.nan for x in a[9:12]],
                                    [x if x is not None else np.nan for x in b[9:12]],
                                    rtol=1e-12)
+
+
+def test_without_dask_and_duckdb_one_input_works_and_the_options_say_what_to_install(
+        bag_folder, tmp_path):
+    """dask, distributed and duckdb shadowed by packages that fail to import (as if absent)."""
+    for name in ('dask', 'distributed', 'duckdb'):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / '__init__.py').write_text(f'raise ImportError("no {name}")\n')
+    env = dict(os.environ, PYTHONPATH=f'{tmp_path}:{os.environ.get("PYTHONPATH", "")}')
+    bag = bag_folder / 'robot1' / 'rec04'
+    proc = run_command('analyze', bag, '--json', *OPTIONS, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)['n_samples'] == N
+    for args, needs in ((('--scheduler', 'tcp://127.0.0.1:9'), "pip install 'dask"),
+                        (('--db', tmp_path / 'h.duckdb'), 'pip install')):
+        proc = run_command('analyze', bag, *args, *OPTIONS, env=env)
+        assert proc.returncode == 2
+        assert len(proc.stderr.splitlines()) == 1 and needs in proc.stderr, proc.stderr
+    # several inputs still work, one after another in this process
+    proc = run_command('analyze', bag, bag_folder / 'robot2' / 'rec05.bag', '--json', *OPTIONS,
+                       env=env)
+    assert proc.returncode == 0 and len(json.loads(proc.stdout)['reports']) == 2
+    assert 'dask is not installed' in proc.stderr
