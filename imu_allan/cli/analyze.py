@@ -56,7 +56,7 @@ def build_parser():
     p.add_argument('--scheduler', metavar='tcp://HOST:PORT',
                    help='run on this dask.distributed scheduler (its workers must see the '
                         'input paths) instead of a local cluster')
-    p.add_argument('--workers', '--jobs', type=int, default=0, metavar='N',
+    p.add_argument('--workers', type=int, default=0, metavar='N',
                    help='worker processes of the local cluster (default: cores)')
     p.add_argument('--db', metavar='FILE',
                    help='append the results to this DuckDB history (created if absent)')

@@ -224,6 +224,7 @@ def _run_dask(work, args, options, out_dirs, done):
 
 
 def _summary_table(rows):
+    from ..core.units import conventional
     head = (f'{"input":40} {"samples":>9} {"rate Hz":>8} {"hours":>6} {"static":>6} '
             f'{"gyro N worst (deg/sqrt(h))":>27} {"accel N worst (m/s/sqrt(h))":>28}')
     lines = ['summary:', head]
@@ -234,8 +235,8 @@ def _summary_table(rows):
         kal = rep['kalibr']
         g = kal.get('gyroscope_noise_density')
         a = kal.get('accelerometer_noise_density')
-        g_txt = f'{g * 60 * 57.29577951308232:.4g}' if g else '-'
-        a_txt = f'{a * 60:.4g}' if a else '-'
+        g_txt = f'{conventional("gyro_x", "white_noise", g)[0]:.4g}' if g else '-'
+        a_txt = f'{conventional("accel_x", "white_noise", a)[0]:.4g}' if a else '-'
         lines.append(f'{name[-40:]:40} {rep["n_samples"]:>9} {rep["sample_rate_hz"]:>8.4g} '
                      f'{rep["duration_s"] / 3600:>6.2f} {str(rep["verdict"]["static"]):>6} '
                      f'{g_txt:>27} {a_txt:>28}')
