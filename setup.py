@@ -37,6 +37,7 @@ setup(
             'discrepancy = imu_allan.cli.discrepancy:main',
             'gx3_sim = imu_allan.cli.gx3_sim:main',
             'monitor = imu_allan.cli.monitor:main',
+            'fleet = imu_allan.cli.fleet:main',
         ],
     },
 )

@@ -16,7 +16,8 @@ REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / 'shared' / 'data'
 #: This test process's own ROS_DOMAIN_ID: DDS tests in parallel processes see each other.
 DOMAIN = os.getpid() % 100 + 100
-EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim', 'monitor')
+EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim', 'monitor',
+               'fleet')
 
 
 @pytest.fixture(scope='session')

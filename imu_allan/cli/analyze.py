@@ -2,12 +2,11 @@
 
 Usage: ``analyze INPUT... [--topic T] [--format auto|rosbag2|ros1|csv|thesis|gx3raw]
 [--out DIR] [--json] [--export-samples FILE.csv] [--denoise]`` (docs/interfaces.md).
-Several inputs are analysed in parallel, one process per core, and summarised in one table.
+Several inputs (and folders, scanned for bags) are analysed as Dask tasks and summarised in
+one table, optionally recorded in a DuckDB history (:mod:`imu_allan.cli.batch`).
 """
 
-from concurrent.futures import ProcessPoolExecutor
 import json
-import os
 from pathlib import Path
 import sys
 
@@ -21,7 +20,6 @@ from .common import (
     bounded_int,
     check_out_dir,
     emit,
-    EXIT_BAD_INPUT,
     guarded,
 )
 from .progress import Progress
@@ -64,8 +62,19 @@ def build_parser():
                    help='accept time-stamp jumps (treat the record as contiguous)')
     p.add_argument('--online', action='store_true',
                    help='use the bounded-memory online estimator of the allan node')
-    p.add_argument('--jobs', type=bounded_int(0, 256), default=0,
-                   help='parallel processes for several inputs (default: cores)')
+    p.add_argument('--scheduler', metavar='tcp://HOST:PORT',
+                   help='run on this dask.distributed scheduler (its workers must see the '
+                        'input paths) instead of a local cluster')
+    p.add_argument('--workers', type=bounded_int(0, 256), default=0, metavar='N',
+                   help='worker processes of the local cluster (default: cores)')
+    p.add_argument('--db', metavar='FILE',
+                   help='append the results to this DuckDB history (created if absent)')
+    p.add_argument('--force', action='store_true',
+                   help='with --db: analyse inputs already recorded with the same size and '
+                        'mtime again')
+    p.add_argument('--imu-id', metavar='ID',
+                   help='with --db: the imu_id of every input (default: the topic namespace '
+                        'and the Imu frame_id)')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     add_export_arguments(p)
     p.add_argument('--target', metavar='TERM=REL,...', default='',
@@ -115,8 +124,11 @@ def _write_denoised_bag(path, fmt, samples, denoised_samples, folder):
     return dst
 
 
-def run_one(path, args, options, progress=None):
-    """Analyse one input; return ``(report dict, console text)``; raise InputError."""
+def run_one(path, args, options, progress=None, out_dir=None):
+    """Analyse one input; return ``(report dict, console text)``; raise InputError.
+
+    ``out_dir`` is where ``--out`` files go (default ``args.out``).
+    """
     from ..core.analysis import analyze_samples
     from ..formats.readers import read_samples
     from ..report.json_report import analysis_to_json, console_summary
@@ -130,7 +142,7 @@ def run_one(path, args, options, progress=None):
     step('Allan deviation and fit')
     analysis = analyze_samples(samples, options)
     denoised = None
-    report = analysis_to_json(analysis)
+    report = analysis_to_json(analysis, samples)
     from ..report.advice import advice_sentence, advice_to_json, compute_advice
     advice = compute_advice(analysis, options, args.targets)
     report['advice'] = advice_to_json(advice)
@@ -145,9 +157,7 @@ def run_one(path, args, options, progress=None):
     if args.out:
         step('writing report')
         from ..report.outputs import write_out_dir
-        out_dir = Path(args.out)
-        if len(args.inputs) > 1:
-            out_dir = out_dir / Path(str(path).rstrip('/')).name.replace('.', '_')
+        out_dir = Path(out_dir or args.out)
         extra = None
         if args.denoise:
             from ..formats.readers import detect_format
@@ -161,33 +171,6 @@ def run_one(path, args, options, progress=None):
     return report, console_summary(analysis) + '\n' + advice_sentence(advice)
 
 
-def _worker(job):
-    path, args, options = job
-    try:
-        return True, run_one(path, args, options)
-    except InputError as exc:
-        return False, str(exc)
-
-
-def _summary_table(rows):
-    head = (f'{"input":40} {"samples":>9} {"rate Hz":>8} {"hours":>6} {"static":>6} '
-            f'{"gyro N worst (deg/sqrt(h))":>27} {"accel N worst (m/s/sqrt(h))":>28}')
-    lines = ['summary:', head]
-    for name, rep in rows:
-        if isinstance(rep, str):
-            lines.append(f'{name[-40:]:40} error: {rep}')
-            continue
-        kal = rep['kalibr']
-        g = kal.get('gyroscope_noise_density')
-        a = kal.get('accelerometer_noise_density')
-        g_txt = f'{g * 60 * 57.29577951308232:.4g}' if g else '-'
-        a_txt = f'{a * 60:.4g}' if a else '-'
-        lines.append(f'{name[-40:]:40} {rep["n_samples"]:>9} {rep["sample_rate_hz"]:>8.4g} '
-                     f'{rep["duration_s"] / 3600:>6.2f} {str(rep["verdict"]["static"]):>6} '
-                     f'{g_txt:>27} {a_txt:>28}')
-    return '\n'.join(lines)
-
-
 @guarded
 def main(argv=None):
     """Entry point of ``analyze``."""
@@ -198,7 +181,9 @@ def main(argv=None):
     if args.out:
         check_out_dir(args.out)
     quiet = args.quiet or args.json or not sys.stderr.isatty()
-    if len(args.inputs) == 1:
+    from .batch import is_scan_folder, run_batch
+    if len(args.inputs) == 1 and not (args.scheduler or args.db or
+                                      is_scan_folder(args.inputs[0])):
         steps = 2 + bool(args.denoise) + bool(args.out)  # read, estimate+fit, [denoise], [write]
         progress = Progress(args.inputs[0], steps, enabled=not quiet)
         try:
@@ -207,25 +192,4 @@ def main(argv=None):
             progress.close()
         emit(json.dumps(report) if args.json else text)
         return 0
-    jobs = args.jobs or os.cpu_count() or 1
-    work = [(path, args, options) for path in args.inputs]
-    progress = Progress('inputs', len(work), enabled=not quiet)
-    with ProcessPoolExecutor(max_workers=min(jobs, len(work))) as pool:
-        results = []
-        for path, outcome in zip(args.inputs, pool.map(_worker, work)):
-            progress.step(path)
-            results.append((path, outcome))
-    progress.close()
-    failed = [(p, r) for p, (ok, r) in results if not ok]
-    for _path, message in failed:
-        sys.stderr.write(f'analyze: {message}\n')
-    reports = [(p, r[0] if ok else r) for p, (ok, r) in results]
-    if args.json:
-        emit(json.dumps({'reports': [r for _, r in reports if not isinstance(r, str)],
-                         'errors': [m for _, m in failed]}))
-    else:
-        for _path, (ok, rep) in results:
-            if ok:
-                print(rep[1] + '\n')
-        print(_summary_table(reports))
-    return EXIT_BAD_INPUT if failed else 0
+    return run_batch(args, options)

@@ -1,5 +1,6 @@
 """A small progress bar on stderr (only on a terminal, never with --quiet or --json)."""
 
+from pathlib import Path
 import sys
 import time
 
@@ -30,3 +31,27 @@ class Progress:
         if self.enabled and self.done:
             sys.stderr.write('\n')
             sys.stderr.flush()
+
+
+class RunProgress(Progress):
+    """One bar for a run of several inputs: done / total and failures so far.
+
+    On a terminal it is the bar; elsewhere (a log, a pipe) one plain line per finished input.
+    """
+
+    def __init__(self, total, tty, enabled=True):
+        """Start a run of ``total`` inputs; ``tty``: stderr is a terminal."""
+        super().__init__('inputs', total, enabled=enabled and tty)
+        self.plain = enabled and not tty
+        self.failed = 0
+
+    def finished(self, name, error=None):
+        """Count one finished input (``error``: its reason if it failed, said at the end)."""
+        self.failed += error is not None
+        if self.plain:
+            self.done = min(self.done + 1, self.total)
+            sys.stderr.write(f'[{self.done}/{self.total}, {self.failed} failed] {name}: '
+                             f'{"failed" if error else "ok"}\n')
+            sys.stderr.flush()
+        else:
+            self.step(f'{self.failed} failed, last {Path(str(name).rstrip("/")).name}')

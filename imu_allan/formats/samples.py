@@ -29,6 +29,10 @@ class Samples:
         Extra columns (for example ``mag_x``) by name, each shape (n,).
     integrity : str
         What the reader could and could not verify about the container (checksums), one line.
+    topic : str
+        Bags: the Imu topic read ('' for other inputs).
+    frame_id : str
+        Bags: the ``header.frame_id`` of the first message ('' for other inputs).
 
     """
 
@@ -40,6 +44,8 @@ class Samples:
     warnings: list = field(default_factory=list)
     extra: dict = field(default_factory=dict)
     integrity: str = ''
+    topic: str = ''
+    frame_id: str = ''
 
     @property
     def n(self):

@@ -19,8 +19,13 @@ def _floats(values):
     return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=float)]
 
 
-def analysis_to_json(analysis):
-    """The report dictionary of one analysis (JSON-ready)."""
+def analysis_to_json(analysis, samples=None):
+    """The report dictionary of one analysis (JSON-ready).
+
+    ``upper_limits``: ``{axis: {term: 95 % upper limit}}`` of undetected N and K (SI).  With
+    the :class:`~imu_allan.formats.samples.Samples` analysed, also ``recording``: the Imu
+    ``topic`` and ``frame_id`` (bags; '' otherwise) and ``start_s``, the first stamp (s).
+    """
     res = analysis.result
     axes = {}
     for j, axis in enumerate(analysis.axes):
@@ -34,7 +39,7 @@ def analysis_to_json(analysis):
         }
     timing = analysis.timing
     kalibr, _ = kalibr_values(analysis)
-    return {
+    report = {
         'source': analysis.source,
         'n_samples': int(analysis.n_samples),
         'sample_rate_hz': float(analysis.rate_hz),
@@ -54,7 +59,12 @@ def analysis_to_json(analysis):
                      'counts': dict(analysis.outliers.counts)},
         'kalibr': kalibr,
         'integrity': analysis.integrity,
+        'upper_limits': analysis.upper_limits,
     }
+    if samples is not None:
+        report['recording'] = {'topic': samples.topic, 'frame_id': samples.frame_id,
+                               'start_s': float(samples.t[0])}
+    return report
 
 
 def _fmt(value):

@@ -1,0 +1,1 @@
+"""The analysis history: the DuckDB tables ``analyze --db`` fills and ``fleet`` reads."""
