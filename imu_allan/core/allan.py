@@ -200,7 +200,12 @@ def identify_noise(tau, avar):
         if ok.sum() < 2:
             continue
         w = 1.0 / y[ok]
-        coef, _ = nnls(basis[ok] * w[:, None], np.ones(ok.sum()))
+        # columns scaled to unit norm: the shapes span many decades, and unscaled NNLS can
+        # run out of iterations on smooth model curves (seen on forecast grids)
+        a = basis[ok] * w[:, None]
+        scale = np.linalg.norm(a, axis=0)
+        scale[scale == 0] = 1.0
+        coef = nnls(a / scale, np.ones(ok.sum()), maxiter=50 * a.shape[1])[0] / scale
         contrib = basis * coef
         out[:, j] = alphas[np.argmax(contrib, axis=1)]
     return out
