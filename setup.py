@@ -24,7 +24,7 @@ setup(
     install_requires=['setuptools'],
     zip_safe=True,
     maintainer='imu_allan maintainers',
-    maintainer_email='maintainers@imu-allan.dev',
+    maintainer_email='maintainers@users.noreply.h-seed-36e6b70a.example',
     description='Online and offline IMU noise monitoring with the Allan variance.',
     license='BSD-3-Clause',
     extras_require={'test': ['pytest']},

@@ -13,7 +13,10 @@ import pytest
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / 'shared' / 'data'
+#: The shared folder beside the repository (CI: a fresh clone with shared/ next to it); a
+#: checkout elsewhere names it with IMU_ALLAN_SHARED.
+SHARED = Path(os.environ.get('IMU_ALLAN_SHARED', REPO.parent / 'shared'))
+SHARED_DATA = SHARED / 'data'
 #: This test process's own ROS_DOMAIN_ID: DDS tests in parallel processes see each other.
 DOMAIN = os.getpid() % 100 + 100
 EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim', 'monitor',

@@ -17,7 +17,7 @@ def test_package_xml_is_a_valid_ros_manifest():
     assert pkg.get_build_type() == 'ament_python'
     names = {d.name for d in pkg.exec_depends}
     for dep in ('rclpy', 'sensor_msgs', 'std_msgs', 'diagnostic_msgs', 'python3-numpy',
-                'python3-scipy', 'python3-serial', 'python3-pywt', 'rosbags'):
+                'python3-scipy', 'python3-serial', 'python3-pywt', 'python3-rosbags-pip'):
         assert dep in names
     pkg.validate()
 
