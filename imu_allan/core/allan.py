@@ -14,6 +14,7 @@ averaging time, chi-square quantiles at the 68.27 % level.
 """
 
 from dataclasses import dataclass
+import logging
 import math
 
 import numpy as np
@@ -168,17 +169,29 @@ def avar_function(work):
     Both take ``(data, ms)`` and return the same numbers (the tests compare them); the
     compiled one lives in :mod:`.allan_kernel`, imported here on first use so that commands
     that never compute a long deviation (``--help``, short records) never import numba.
+    numba is optional (not every platform packages it): without it the reference runs, with
+    one log line saying so (docs/benchmarks.md: how much slower).
     """
     if work < SMALL_WORK:
         return avar_reference
-    from . import allan_kernel
+    try:
+        from . import allan_kernel
+    except ImportError:
+        if not _NO_NUMBA:
+            _NO_NUMBA.append(True)
+            logging.getLogger('imu_allan').warning(
+                'numba is not installed: the numpy reference Allan estimator runs instead '
+                '(slower; pip install numba, or apt install python3-numba, for the fast one)')
+        return avar_reference
     return allan_kernel.avar
+
+
+_NO_NUMBA = []
 
 
 def avar_fast(data, ms):
     """Overlapping AVAR like :func:`avar_reference`, compiled and multi-threaded."""
-    from . import allan_kernel
-    return allan_kernel.avar(data, ms)
+    return avar_function(math.inf)(data, ms)
 
 
 def identify_noise(tau, avar):

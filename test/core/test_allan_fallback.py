@@ -1,0 +1,41 @@
+"""numba is optional: without it the numpy reference estimator gives the same numbers.
+
+The child process blocks the import (``sys.modules['numba'] = None`` makes ``import numba``
+raise ImportError, as on a platform with no numba package) and asks twice for the compiled
+path (``avar_fast``; long records choose it by themselves), printing the results; this process
+computes the same with numba.
+"""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+from imu_allan.core.allan import avar_fast, tau_grid
+
+CHILD = """
+import json, sys
+sys.modules['numba'] = None
+import numpy as np
+from imu_allan.core.allan import avar_fast, tau_grid
+data = np.random.default_rng(3).normal(size=(20000, 3))
+first = avar_fast(data, tau_grid(20000))
+second = avar_fast(data[:5000], tau_grid(5000))   # the log line comes once, not per call
+print(json.dumps([first.tolist(), second.tolist()]))
+"""
+
+
+def test_without_numba_same_numbers_and_one_log_line():
+    """Same AVAR within float rounding (the compiled kernel sums in another order, fastmath);
+    exactly one stderr line, naming numba and what to install."""
+    out = subprocess.run([sys.executable, '-c', CHILD], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    first, second = (np.array(a) for a in json.loads(out.stdout))
+    data = np.random.default_rng(3).normal(size=(20000, 3))
+    np.testing.assert_allclose(first, avar_fast(data, tau_grid(20000)), rtol=1e-9)
+    np.testing.assert_allclose(second, avar_fast(data[:5000], tau_grid(5000)), rtol=1e-9)
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1, out.stderr
+    assert 'numba is not installed' in lines[0] and 'pip install numba' in lines[0]
