@@ -240,6 +240,62 @@ class StampMonitor:
         return out
 
 
+#: Seconds of header stamps whose median spacing fixes a measured rate (tau0).
+RATE_SETTLE_S = 2.0
+
+
+class RateFinder:
+    """Measures a stream's sample rate from its header stamps, holding the samples meanwhile.
+
+    The rate is 1 / the median spacing of the increasing stamps (the rule ``analyze`` uses,
+    :func:`imu_allan.core.preprocess.check_timing`), fixed once the stamps span ``settle_s``
+    seconds (or ``max_samples`` have arrived).  The samples that arrive until then are held,
+    not lost: :meth:`take` hands them back to be fed with the rate found.
+    """
+
+    def __init__(self, settle_s=RATE_SETTLE_S, max_samples=200_000):
+        """``settle_s``: stamp span that fixes the rate, s; ``max_samples`` bounds the memory."""
+        self.settle_s = float(settle_s)
+        self.max_samples = int(max_samples)
+        self.rate_hz = None
+        self.n_held = 0
+        self.n_dropped = 0  # only stamps that never increase, over max_samples of them
+        self._t, self._data = [], []
+        self._first = self._last = None
+
+    def add(self, t, data):
+        """Hold samples (stamps ``t`` in s, ``data`` (n, A)); return the rate (Hz) once fixed."""
+        from .preprocess import check_timing
+        t = np.asarray(t, dtype=float)
+        if self.rate_hz is not None or t.size == 0:
+            return self.rate_hz
+        self._t.append(t)
+        self._data.append(np.asarray(data, dtype=float))
+        self.n_held += t.size
+        self._first = float(t[0]) if self._first is None else self._first
+        self._last = float(t.max()) if self._last is None else max(self._last, float(t.max()))
+        if self._last - self._first >= self.settle_s or self.n_held >= self.max_samples:
+            try:
+                # exactly the first settle_s seconds (or max_samples): the rate does not
+                # depend on how the stream was cut into batches
+                t = np.concatenate(self._t)
+                if self._last - self._first >= self.settle_s:
+                    t = t[t <= self._first + self.settle_s]
+                self.rate_hz = check_timing(t[:self.max_samples]).rate_hz
+            except ValueError:  # stamps that never increase: keep waiting, bounded
+                if self.n_held >= self.max_samples:
+                    self._t, self._data = self._t[-1:], self._data[-1:]
+                    self.n_dropped += self.n_held - self._t[0].size
+                    self.n_held = self._t[0].size
+        return self.rate_hz
+
+    def take(self):
+        """The held samples ``(t, data)`` in arrival order; the finder holds none afterwards."""
+        t, data = np.concatenate(self._t), np.concatenate(self._data)
+        self._t, self._data, self.n_held = [], [], 0
+        return t, data
+
+
 def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
                   excluded_share=math.nan, max_excluded_share=0.5, name='IMU stream',
                   rejected=None):

@@ -13,7 +13,8 @@ import numpy as np
 
 from .allan import AllanResult
 from .fit import fit_noise_model, FitError, FittedModel
-from .health import StampMonitor
+from ..errors import InputError
+from .health import Health, RATE_SETTLE_S, RateFinder, STALE, stream_health, StampMonitor
 from .stationarity import StationarityGate
 from .streaming import StreamingAllan
 from .units import AXES, is_gyro, physical_limits
@@ -28,7 +29,9 @@ class OnlineAllan:
     Parameters
     ----------
     rate_hz : float
-        Configured sample rate, Hz.
+        Configured sample rate, Hz; 0 or None: measured from the stamps
+        (:class:`~imu_allan.core.health.RateFinder`, median spacing over the first
+        ``settle_s`` seconds), the samples of those seconds held and fed once it is known.
     axes : sequence of str
         Columns of the data (default the six package axes).
     gate : bool
@@ -39,31 +42,49 @@ class OnlineAllan:
         A stamp spacing above this many sample intervals is a gap (phase restarts there).
     terms : sequence of str, optional
         Terms to fit (default: automatic selection among the five IEEE terms).
+    settle_s : float
+        Stamp span that fixes a measured rate, s.
     **estimator_options
         :class:`StreamingAllan` parameters (max_tau, window_s, stride_base, ...).
 
     """
 
     def __init__(self, rate_hz, axes=AXES, gate=True, gate_options=None, gap_factor=1.5,
-                 terms=None, **estimator_options):
+                 terms=None, settle_s=RATE_SETTLE_S, **estimator_options):
         self.axes = tuple(axes)
-        self.rate_hz = float(rate_hz)
-        self.estimator = StreamingAllan(rate_hz, self.axes, **estimator_options)
-        self.monitor = StampMonitor(rate_hz, gap_factor)
-        self.gate = None
-        if gate:
-            gyro_columns = [i for i, a in enumerate(self.axes) if is_gyro(a)]
-            self.gate = StationarityGate(rate_hz, len(self.axes), gyro_columns,
-                                         **(gate_options or {}))
-            self._gate_breaks = _TagDelay(self.gate.w)
         self.terms = terms
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
         self._rejected_recent = np.zeros(len(self.axes), np.int64)  # since take_rejected()
         self._break_next = False  # the last sample of the previous batch was left out
+        self._setup = (gate, gate_options, gap_factor, estimator_options)
+        self.rate_source = 'configured' if rate_hz else 'measured'
+        self.rate_hz = self.estimator = self.monitor = self.gate = None
+        self.finder = None if rate_hz else RateFinder(settle_s)
+        if rate_hz:
+            self._start(rate_hz)
+
+    def _start(self, rate_hz):
+        """Build the stages for a known rate (Hz)."""
+        gate, gate_options, gap_factor, estimator_options = self._setup
+        if self.rate_source == 'measured':
+            check_rate_options(rate_hz, estimator_options.get('max_tau', math.inf),
+                               estimator_options.get('window_s', 0.0),
+                               estimator_options.get('min_clusters', 2),
+                               (gate_options or {}).get('window_s') if gate else None)
+        self.rate_hz = float(rate_hz)
+        self.estimator = StreamingAllan(rate_hz, self.axes, **estimator_options)
+        self.monitor = StampMonitor(rate_hz, gap_factor)
+        if gate:
+            gyro_columns = [i for i, a in enumerate(self.axes) if is_gyro(a)]
+            self.gate = StationarityGate(rate_hz, len(self.axes), gyro_columns,
+                                         **(gate_options or {}))
+            self._gate_breaks = _TagDelay(self.gate.w)
 
     def memory_bytes(self):
         """Bytes held in numpy buffers by the estimator and the gate (fixed)."""
+        if self.estimator is None:
+            return 0
         extra = self.gate.memory_bytes() + self._gate_breaks.memory_bytes() if self.gate else 0
         return self.estimator.memory_bytes() + extra
 
@@ -77,6 +98,13 @@ class OnlineAllan:
         data = np.asarray(data, dtype=float)
         if data.ndim == 1:
             data = data[:, None]
+        if self.estimator is None:
+            if t is None:
+                raise ValueError('a measured rate (rate_hz 0) needs the time stamps')
+            if self.finder.add(t, data) is None:
+                return
+            self._start(self.finder.rate_hz)
+            t, data = self.finder.take()
         if t is None:
             keep, brk = np.ones(data.shape[0], bool), np.zeros(data.shape[0], bool)
         else:
@@ -126,7 +154,23 @@ class OnlineAllan:
 
     def result(self, window=False):
         """Current :class:`~imu_allan.core.allan.AllanResult` (None until enough data)."""
-        return self.estimator.result(window=window)
+        return None if self.estimator is None else self.estimator.result(window=window)
+
+    def stream_health(self, silence_s, timeout_s=2.0, rate_tolerance=0.1, name='IMU stream'):
+        """:func:`~imu_allan.core.health.stream_health` of the input, STALE while the rate is
+        being measured; the values say whether tau0 was configured or measured."""
+        if self.monitor is None:
+            values = {'rate_source': self.rate_source, 'samples_held': self.finder.n_held,
+                      'settle_s': self.finder.settle_s, 'silence_s': silence_s}
+            return Health(name, STALE, f'measuring the sample rate from the stamps '
+                                       f'({self.finder.n_held} samples so far)', values)
+        health = stream_health(self.monitor, self.monitor.take_recent(), silence_s, timeout_s,
+                               rate_tolerance, self.excluded_share, name=name,
+                               rejected=self.take_rejected())
+        health.values.update({'rate_source': self.rate_source, 'tau0_s': 1.0 / self.rate_hz})
+        if self.finder is not None:
+            health.values['samples_dropped_before_rate'] = self.finder.n_dropped
+        return health
 
     def fit(self, result):
         """Fit the noise terms to a result; None when it has too few averaging times."""
@@ -136,6 +180,22 @@ class OnlineAllan:
             return fit_noise_model(result, terms=self.terms)
         except FitError:
             return None
+
+
+def check_rate_options(rate_hz, max_tau, window_s, min_clusters, gate_window_s):
+    """Raise InputError naming the first option that does not fit the sample rate (Hz).
+
+    ``gate_window_s`` None: no gate.  The allan node checks a configured rate when it starts;
+    :class:`OnlineAllan` checks a measured one when it is found.
+    """
+    at = f' at {rate_hz:.6g} Hz'
+    if max_tau * rate_hz < 1.0:
+        raise InputError('max_tau', 'shorter than one sample interval' + at)
+    if window_s and window_s * rate_hz < 2 * min_clusters:
+        raise InputError('window_s', f'too short: needs at least {2 * min_clusters} samples'
+                                     + at)
+    if gate_window_s is not None and gate_window_s * rate_hz < 4:
+        raise InputError('gate_window_s', 'must span at least 4 samples' + at)
 
 
 class StagedEstimate:
@@ -150,7 +210,8 @@ class StagedEstimate:
 
     def __init__(self, pipeline, window=False):
         self.pipeline = pipeline
-        self.snapshot = pipeline.estimator.snapshot(window)
+        est = pipeline.estimator
+        self.snapshot = est.snapshot(window) if est is not None else None
         self.result = None
         self.fitted = None
         self._parts = {}

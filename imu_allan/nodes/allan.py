@@ -41,7 +41,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from ..core import health as hm
 from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
 from ..core.model import NoiseModel
-from ..core.online import OnlineAllan, StagedEstimate
+from ..core.online import check_rate_options, OnlineAllan, StagedEstimate
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 from ..formats.imu_adapter import cdr_to_arrays
@@ -70,8 +70,9 @@ DESCRIPTION = ('Live Allan deviation and noise coefficients (with 68.3 % interva
 
 #: The parameter table (nodes.common.Param: name, default, description, range, read-only).
 PARAMETERS = [
-    Param('rate_hz', 100.0, 'configured sample rate of imu/data_raw, Hz (tau0 = 1/rate_hz)',
-          (0.1, 10000.0)),
+    Param('rate_hz', 0.0, 'sample rate of imu/data_raw, Hz (tau0 = 1/rate_hz); 0 = measured '
+                          'from the header stamps (median spacing over the first 2 s)',
+          (0.0, 10000.0)),
     Param('publish_period', 10.0, 'seconds between publications (each cycle computes intervals '
                                   'and fits one axis at a time between message drains)',
           (0.1, 3600.0)),
@@ -154,13 +155,9 @@ def pipeline_options(p):
 
 def check_parameters(p):
     """Cross-field checks on a full parameter dictionary; raise InputError with the reason."""
-    if p['max_tau'] * p['rate_hz'] < 1.0:
-        raise InputError('max_tau', 'shorter than one sample interval')
-    if p['window_s'] and p['window_s'] * p['rate_hz'] < 2 * p['min_clusters']:
-        raise InputError('window_s', f'too short: needs at least {2 * p["min_clusters"]} '
-                                     f'samples')
-    if p['gate_window_s'] * p['rate_hz'] < 4:
-        raise InputError('gate_window_s', 'must span at least 4 samples')
+    if p['rate_hz']:  # a measured rate is checked by OnlineAllan once it is known
+        check_rate_options(p['rate_hz'], p['max_tau'], p['window_s'], p['min_clusters'],
+                           p['gate_window_s'] if p['gate'] else None)
     from ..core.health import NoiseBudget
     from ..core.model import ModelError, NoiseModel
     parse_terms(p['terms'])
@@ -223,10 +220,11 @@ class AllanNode(Node):
         self._drain_timer = self.create_timer(self.params['drain_period'], self.drain)
         self._publish_timer = self.create_timer(self.params['publish_period'],
                                                 self.publish)
+        rate = self.params['rate_hz']
         self.get_logger().info(
-            f'waiting for imu/data_raw at {self.params["rate_hz"]:g} Hz; publishing every '
-            f'{self.params["publish_period"]:g} s; budget {self.budget.source}; estimator '
-            f'memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
+            f'waiting for imu/data_raw at {f"{rate:g} Hz" if rate else "a measured rate"}; '
+            f'publishing every {self.params["publish_period"]:g} s; budget '
+            f'{self.budget.source}')
 
     def close(self):
         """Stop the figure's worker thread (run_node calls this before destroy_node)."""
@@ -260,7 +258,12 @@ class AllanNode(Node):
         if msgs:
             self._last_arrival = time.monotonic()
             t, data = cdr_to_arrays(msgs)
-            self.pipeline.feed(t, data)
+            started = self.pipeline.estimator is not None
+            self.pipeline.feed(t, data)  # InputError (measured rate misfits): exit 2
+            if not started and self.pipeline.estimator is not None:
+                self.get_logger().info(
+                    f'sample rate {self.pipeline.rate_hz:.6g} Hz ({self.pipeline.rate_source});'
+                    f' estimator memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
             if self._pub_cov is not None:
                 self._republish(msgs)
         if self._cycle is not None:
@@ -296,7 +299,7 @@ class AllanNode(Node):
                 self._pub_coeffs.publish(multiarray(table, COEFF_LABELS))
                 # robot_localization reads per-message variances: N^2 f (NaN: keep the driver's)
                 self._cov_variance = discrete_white_std(
-                    table[:, IEEE_TERMS.index('white_noise'), 0], self.params['rate_hz']) ** 2
+                    table[:, IEEE_TERMS.index('white_noise'), 0], self.pipeline.rate_hz) ** 2
             self._plot.offer(result, fitted)  # rendered off this thread, only if subscribed
             self._cycle = None
             self._cycle_cpu += time.perf_counter() - start
@@ -347,13 +350,11 @@ class AllanNode(Node):
         silence = (time.monotonic() - self._last_arrival
                    if self._last_arrival is not None else math.inf)
         p = self.pipeline
-        stream = hm.stream_health(
-            p.monitor, p.monitor.take_recent(), silence, self.params['timeout_s'],
-            self.params['rate_tolerance'], p.excluded_share, name=prefix + 'IMU stream',
-            rejected=p.take_rejected())
+        stream = p.stream_health(silence, self.params['timeout_s'],
+                                 self.params['rate_tolerance'], name=prefix + 'IMU stream')
         stream.values.update({
-            'samples_used': p.estimator.n_used,
-            'samples_offered': p.estimator.n_offered,
+            'samples_used': p.estimator.n_used if p.estimator else 0,
+            'samples_offered': p.estimator.n_offered if p.estimator else 0,
             'averaging_times': 0 if result is None else int(result.tau.size),
             'longest_tau_s': math.nan if result is None else float(result.tau[-1]),
             'estimator_memory_bytes': p.memory_bytes(),

@@ -21,6 +21,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
+from ..core.health import RateFinder
 from ..core.units import AXES, IEEE_TERMS
 from ..errors import InputError
 from ..formats.imu_adapter import imus_to_arrays
@@ -40,8 +41,9 @@ DESCRIPTION = ('Wavelet (PyWavelets) or median denoising of imu/data_raw on over
 
 #: The parameter table (nodes.common.Param).
 PARAMETERS = [
-    Param('rate_hz', 100.0, 'sample rate of imu/data_raw, Hz (block sizes, noise conversion)',
-          (0.1, 10000.0)),
+    Param('rate_hz', 0.0, 'sample rate of imu/data_raw, Hz (block sizes, noise conversion); '
+                          '0 = measured from the header stamps (median spacing, first 2 s)',
+          (0.0, 10000.0)),
     Param('method', 'wavelet', 'wavelet or median'),
     Param('wavelet', 'sym8', 'PyWavelets discrete wavelet (sym8 as in the thesis; haar, db4, '
                              '...)'),
@@ -108,7 +110,7 @@ class DenoiseNode(Node):
         super().__init__('denoise')
         self.params = declare_parameter_table(self, PARAMETERS)
         check_parameters(self.params)
-        self.denoiser = make_denoiser(self.params)
+        self._new_denoiser()
         self._pending = deque()  # messages waiting for their denoised values
         self._noise = None
         self.add_on_set_parameters_callback(validate_on_set(self.params, PARAMETERS,
@@ -125,20 +127,36 @@ class DenoiseNode(Node):
         self._log_latency()
         self._timer = self.create_timer(self.params['drain_period'], self.drain)
 
+    def _new_denoiser(self):
+        """A denoiser for the configured rate, or a RateFinder until the rate is measured."""
+        rate = self.params['rate_hz']
+        self.finder = None if rate else RateFinder()
+        self.denoiser = make_denoiser(self.params) if rate else None
+        self._rate = rate
+
     def _log_latency(self):
         d = self.denoiser
+        if d is None:
+            self.get_logger().info(f'{self.params["method"]} denoising once the sample rate '
+                                   f'is measured from the stamps')
+            return
         self.get_logger().info(
             f'{self.params["method"]} denoising, latency up to {d.latency_samples} samples '
-            f'({d.latency_s:.3g} s at {self.params["rate_hz"]:g} Hz)')
+            f'({d.latency_s:.3g} s at {self._rate:.6g} Hz'
+            f'{"" if self.finder is None else ", measured"})')
 
     def _post_set(self, params):
         changed = apply_changes(self.params, PARAMETERS, params)
         if changed & _DENOISER:
             # Finish the samples in flight with the old settings, then switch.
-            self._publish_rows(self.denoiser.flush())
-            self.denoiser = make_denoiser(self.params)
+            if self.denoiser is not None:
+                self._publish_rows(self.denoiser.flush())
+            held = self.finder.take() if self.finder is not None and self.finder.n_held else None
+            self._new_denoiser()
             self._apply_noise()
             self._log_latency()
+            if held is not None:  # samples held for a rate measurement are not lost
+                self._feed(*held)
 
     def _on_coeffs(self, msg):
         dims = [(d.label, d.size) for d in msg.layout.dim]
@@ -146,6 +164,8 @@ class DenoiseNode(Node):
         self._apply_noise()
 
     def _apply_noise(self):
+        if self.denoiser is None:
+            return
         if self.params['noise_source'] == 'allan' and self._noise is not None:
             self.denoiser.set_noise(noise_density=self._noise)
         else:
@@ -156,8 +176,19 @@ class DenoiseNode(Node):
         msgs = take_batch(self._sub, self._max_batch)
         if not msgs:
             return
-        _, data = imus_to_arrays(msgs)
+        t, data = imus_to_arrays(msgs)
         self._pending.extend(msgs)
+        self._feed(t, data)
+
+    def _feed(self, t, data):
+        if self.denoiser is None:  # measuring the rate: hold the samples until it is known
+            if self.finder.add(t, data) is None:
+                return
+            self._rate = self.finder.rate_hz
+            self.denoiser = make_denoiser(dict(self.params, rate_hz=self._rate))
+            self._apply_noise()
+            self._log_latency()
+            t, data = self.finder.take()
         self._publish_rows(self.denoiser.push(data))
 
     def _publish_rows(self, rows):

@@ -27,7 +27,7 @@ def test_analyze_online_equals_the_node_pipeline(tmp_path):
     path = tmp_path / 'still.csv'
     write_csv(path, Samples(t=t, data=data))
 
-    node = OnlineAllan(axes=AXES, **pipeline_options(dict(_DEFAULTS)))
+    node = OnlineAllan(axes=AXES, **pipeline_options(dict(_DEFAULTS, rate_hz=100.0)))
     node.feed(t, data)
     result = node.result()
     expected = coefficient_table(node.fit(result), AXES)

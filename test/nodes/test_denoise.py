@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from imu_allan.core.allan import allan_deviation
+from imu_allan.core.health import RateFinder
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulate import simulate
 from imu_allan.formats.imu_adapter import imus_to_arrays
@@ -72,7 +73,9 @@ def test_denoise_node_stream():
             for msg in msgs[i:i + 500]:
                 pub.publish(msg)
             executor.spin_once(timeout_sec=0.01)
-        reference = make_denoiser(dict(_DEFAULTS))
+        # rate_hz defaults to 0: the node measures it from the stamps, as RateFinder does
+        rate = RateFinder().add(t_in, data_in)
+        reference = make_denoiser(dict(_DEFAULTS, rate_hz=rate))
         expected = reference.push(data_in)
         assert spin_until(executor, lambda: len(received) >= expected.shape[0], 60), \
             f'{len(received)} of {expected.shape[0]} denoised messages'
