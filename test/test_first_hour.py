@@ -1,4 +1,5 @@
-"""The README's first hour on a real ROS 2 install, command by command (apt installs aside).
+"""
+The README's first hour on a real ROS 2 install, command by command (apt installs aside).
 
 A fresh ``git clone`` of this repository into ``ws/src/imu_allan``, ``colcon build
 --packages-select imu_allan`` in ``ws``, then in a shell that ran ``source install/setup.bash``:
@@ -12,13 +13,12 @@ import subprocess
 import sys
 
 from conftest import REPO
-import numpy as np
-import pytest
-
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulate import simulate
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
 
 
 def run(cmd, cwd, timeout=300):

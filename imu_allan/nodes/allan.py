@@ -224,7 +224,9 @@ class AllanNode(Node):
         self.get_logger().info(
             f'waiting for imu/data_raw at {f"{rate:g} Hz" if rate else "a measured rate"}; '
             f'publishing every {self.params["publish_period"]:g} s; budget '
-            f'{self.budget.source}')
+            f'{self.budget.source}'
+            + (f'; estimator memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)'
+               if rate else ''))
 
     def close(self):
         """Stop the figure's worker thread (run_node calls this before destroy_node)."""
