@@ -36,8 +36,9 @@ lint: $(STAMP)
 # launch and launch_ros are not on PyPI: an importable one (a ROS install) is used, else the
 # vendored Jazzy sources in the shared folder are built into the venv, once per venv (about a
 # minute; build_launch.sh stamps it). Without either, the launch tests skip and say why.
-SHARED ?= ../shared
-LAUNCH_VENDOR := $(SHARED)/vendor/ros2_jazzy
+# (the shared folder beside the checkout; the tests read IMU_ALLAN_SHARED too)
+IMU_ALLAN_SHARED ?= ../shared
+LAUNCH_VENDOR := $(IMU_ALLAN_SHARED)/vendor/ros2_jazzy
 launch-stack: $(STAMP)
 	@$(RUN_ENV) $(VPY) -c 'import launch_ros' 2>/dev/null \
 		|| { test -f $(LAUNCH_VENDOR)/build_launch.sh \
