@@ -8,7 +8,7 @@ Arguments:
 * ``rate_hz``: its sample rate, Hz; empty (the default) keeps the parameter files' value, which
   is 0 in the packaged ones: measured from the header stamps;
 * ``params_file``: a parameter file for both nodes, applied after the packaged
-  ``config/allan.yaml`` and ``config/denoise.yaml`` (sections ``allan:``, ``denoise:`` or
+  ``config/allan.yaml`` and ``config/denoise.yaml`` (sections ``/**/allan:``, ``/**/denoise:`` or
   ``/**:``);
 * ``namespace``: the namespace of both nodes and of their output topics.
 """

@@ -44,8 +44,9 @@ def test_clone_build_source_run(tmp_path):
     data = simulate(thesis_gx3_25_model(), 60000, 100.0, seed=4)  # 10 min at 100 Hz
     write_imu_bag(bag, Samples(t=1.7e9 + np.arange(data.shape[0]) / 100.0, data=data))
     # `ros2 run PKG EXE` = the ament index prefix of PKG + lib/PKG/EXE (ros2run's lookup)
-    lookup = ("$(python -c \"from ament_index_python.packages import get_package_prefix; "
-              "print(get_package_prefix('imu_allan'))\")/lib/imu_allan/analyze")
+    code = ('import sys; from ament_index_python.packages import get_package_prefix; '
+            'print(get_package_prefix(sys.argv[1]))')
+    lookup = f'$(python -c "{code}" imu_allan)/lib/imu_allan/analyze'
     out = run(f'source install/setup.bash && echo "$AMENT_PREFIX_PATH" && '
               f'{lookup} {bag} --out {tmp_path / "report"}', ws)
     assert out.splitlines()[0].startswith(str(ws / 'install' / 'imu_allan')), out
