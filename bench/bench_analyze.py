@@ -1,4 +1,5 @@
-"""Benchmark: ``analyze`` end to end, on a one-minute CSV and on a 10-hour bag.
+"""
+Benchmark: ``analyze`` end to end, on a one-minute CSV and on a 10-hour bag.
 
 1. A one-minute, 100 Hz, 6-axis CSV: the built ``analyze --json`` as a user runs it, best of
    5 (wall, and CPU of the child process, steadier on a shared machine), after one warm-up
@@ -20,12 +21,11 @@ import tempfile
 import time
 
 from benchlib import goal, header
-import numpy as np
-
 from imu_allan import simulate, thesis_gx3_25_model
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
+import numpy as np
 
 # Runs in a fresh interpreter: the steps of ``analyze INPUT --json``, each timed.  The two
 # functions analyze_samples calls for the estimate and the fit are wrapped to time them.
@@ -83,7 +83,7 @@ def _run(cmd):
 
 
 def bench_csv(tmp):
-    """The one-minute CSV: end to end, then the breakdown."""
+    """Return the one-minute CSV: end to end, then the breakdown."""
     n = 6000
     data = simulate(thesis_gx3_25_model(), n, 100.0, seed=2)
     data[:, 5] += 9.80665
@@ -112,7 +112,7 @@ def bench_csv(tmp):
 
 
 def bench_bags(tmp, hours):
-    """The long bags: MCAP and sqlite3, --json and --out."""
+    """Return the long bags: MCAP and sqlite3, --json and --out."""
     n = int(hours * 3600 * 100)
     data = simulate(thesis_gx3_25_model(), n, 100.0, seed=5)
     data[:, 5] += 9.80665

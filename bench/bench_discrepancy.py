@@ -1,4 +1,5 @@
-"""Benchmark: the discrepancy workflow on 2 h at 100 Hz, 6 axes (goal: under 60 s).
+"""
+Benchmark: the discrepancy workflow on 2 h at 100 Hz, 6 axes (goal: under 60 s).
 
 The data are the thesis 3DM-GX3-25 model plus hidden effects on four axes (a rate random walk on
 two gyros, a Gauss-Markov hump on one accelerometer, a sinusoid on another), so the timed run
@@ -14,7 +15,6 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from benchlib import header  # noqa: E402
-
 from imu_allan.core.allan import allan_deviation  # noqa: E402
 from imu_allan.core.discrepancy import run_discrepancy  # noqa: E402
 from imu_allan.core.model import thesis_gx3_25_model  # noqa: E402

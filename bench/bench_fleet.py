@@ -1,4 +1,5 @@
-"""Benchmark: ``analyze`` on many bags, a local Dask cluster against one process.
+"""
+Benchmark: ``analyze`` on many bags, a local Dask cluster against one process.
 
 Writes DISTINCT one-hour 100 Hz 6-axis MCAP bags (different seeds) and makes BAGS inputs of
 them as hard links (bare ``.mcap`` files: every input is a separate path, read and analysed
@@ -20,13 +21,12 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-
 from imu_allan import simulate, thesis_gx3_25_model
 from imu_allan.cli.analyze import _options, build_parser
 from imu_allan.cli.batch import analyze_task
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.samples import Samples
+import numpy as np
 
 
 def _exe():

@@ -1,4 +1,5 @@
-"""Benchmark of the 3DM-GX3-25 path: parser throughput and the live driver at 1000 Hz.
+"""
+Benchmark of the 3DM-GX3-25 path: parser throughput and the live driver at 1000 Hz.
 
 1. ``StreamParser`` + ``decode_records`` on a synthetic stream (with junk), packets/s.
 2. ``gx3_sim`` (921600 baud, 1000 Hz) -> built ``driver`` for ``--seconds`` (default 60):
@@ -19,10 +20,9 @@ import tempfile
 import time
 
 from benchlib import goal, header
-import numpy as np
-
 from imu_allan.device import gx3_protocol as p
 from imu_allan.device.gx3_stream import StreamParser
+import numpy as np
 
 #: Extra driver arguments (e.g. "-p read_period:=0.01") for experiments.
 EXTRA = os.environ.get('BENCH_DRIVER_ARGS', '').split()

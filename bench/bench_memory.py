@@ -1,4 +1,5 @@
-"""Benchmark: peak memory of reading a long recording (CSV and MCAP) against its decoded size.
+"""
+Benchmark: peak memory of reading a long recording (CSV and MCAP) against its decoded size.
 
 Writes HOURS of 100 Hz six-axis samples as a contract CSV and as an MCAP rosbag2 into a
 temporary folder, then reads each in a fresh process (``read_samples``, what ``analyze`` does
@@ -13,11 +14,10 @@ import subprocess
 import sys
 import tempfile
 
-import numpy as np
-
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
+import numpy as np
 
 _CHILD = """
 import sys

@@ -1,4 +1,5 @@
-"""Allan deviation with and without numba (the optional dependency): how much slower.
+"""
+Allan deviation with and without numba (the optional dependency): how much slower.
 
 The thesis's largest data set size (1.7 M samples x 6 axes, 4.7 h at 100 Hz), default grid;
 the no-numba run is a child process with ``import numba`` blocked, as on a platform that does
@@ -9,8 +10,6 @@ import os
 import subprocess
 import sys
 import time
-
-
 
 CODE = """
 import sys, time

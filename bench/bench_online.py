@@ -1,4 +1,5 @@
-"""Benchmark: the online Allan estimator and the allan node at 1 kHz x 6 axes.
+"""
+Benchmark: the online Allan estimator and the allan node at 1 kHz x 6 axes.
 
 Sections (each prints its numbers):
 
@@ -25,19 +26,18 @@ import os
 
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')  # as the nodes do (see nodes/allan.py)
 
-import math  # noqa: E402
+import math  # noqa: E402, I100 - after the environment setting above
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
 from benchlib import header  # noqa: E402
-import numpy as np  # noqa: E402
-
 from imu_allan.core.allan import allan_deviation  # noqa: E402
 from imu_allan.core.model import NoiseModel, thesis_gx3_25_model  # noqa: E402
 from imu_allan.core.online import OnlineAllan  # noqa: E402
 from imu_allan.core.simulate import simulate  # noqa: E402
 from imu_allan.core.streaming import StreamingAllan  # noqa: E402
+import numpy as np  # noqa: E402
 
 
 def bench_estimator():
@@ -239,7 +239,8 @@ def bench_covariance(n=200_000, batch=50):
 
 
 def bench_plot(cycles=10):
-    """Render time of the live figure per publish cycle (the allan node's worker thread).
+    """
+    Render time of the live figure per publish cycle (the allan node's worker thread).
 
     A 1 h, 100 Hz thesis-model estimate with the automatic fit; the figure object is kept
     between cycles as in the node, so the first render (figure set-up) is shown apart.

@@ -1,4 +1,5 @@
-"""Benchmark: reading sensor_msgs/Imu from bags, generic deserializer vs bulk fast path.
+"""
+Benchmark: reading sensor_msgs/Imu from bags, generic deserializer vs bulk fast path.
 
 Writes a synthetic Imu recording (1,000,000 messages as MCAP and sqlite3 rosbag2, 200,000 as
 a ROS 1 bag; 324-byte CDR, frame_id ``imu_link``, 400 Hz stamps) into a temporary folder once,
@@ -16,11 +17,10 @@ import tempfile
 import time
 
 from benchlib import goal, header
-import numpy as np
-
 from imu_allan.formats.bag_reader import read_bag
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.samples import Samples
+import numpy as np
 
 #: Goals of the fast path, messages per wall-clock second.
 GOALS = {'mcap': 1e6, 'sqlite3': 2.5e6}

@@ -1,4 +1,5 @@
-"""Shared by the benchmarks: the machine line, best-of timing and goal lines.
+"""
+Shared by the benchmarks: the machine line, best-of timing and goal lines.
 
 Every figure is printed with the machine it was measured on (CPU model, cores, SIMD flags)
 and the load average at the time, so that figures from different machines or conditions are
@@ -33,7 +34,7 @@ def machine():
 
 
 def load():
-    """The 1-minute load average (other processes sharing the cores), as text."""
+    """Return the 1-minute load average (other processes sharing the cores), as text."""
     try:
         return f'load {os.getloadavg()[0]:.1f}'
     except OSError:

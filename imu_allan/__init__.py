@@ -1,4 +1,5 @@
-"""imu_allan: IMU noise monitoring with the Allan variance (ROS 2 Jazzy package).
+"""
+imu_allan: IMU noise monitoring with the Allan variance (ROS 2 Jazzy package).
 
 The ROS-free Python API (SI units, continuous-time coefficients)::
 

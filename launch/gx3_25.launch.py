@@ -1,4 +1,5 @@
-"""A LORD MicroStrain 3DM-GX3-25 on a serial port: the driver plus the monitor.
+"""
+A LORD MicroStrain 3DM-GX3-25 on a serial port: the driver plus the monitor.
 
     ros2 launch imu_allan gx3_25.launch.py port:=/dev/ttyACM0
 
@@ -16,12 +17,11 @@ Starts ``driver`` (publishing ``imu/data_raw``) with the packaged ``config/drive
 import os
 
 from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-
-from launch import LaunchDescription
 
 ARGUMENTS = (
     ('port', '/dev/ttyACM0', 'serial port of the 3DM-GX3-25'),
@@ -32,7 +32,7 @@ ARGUMENTS = (
 
 
 def driver_node(context):
-    """The driver with the packaged parameters, ``params_file`` and the arguments."""
+    """Return the driver with the packaged parameters, ``params_file`` and the arguments."""
     arg = context.launch_configurations
     params = [os.path.join(get_package_share_directory('imu_allan'), 'config', 'driver.yaml')]
     if arg['params_file'].strip():

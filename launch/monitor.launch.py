@@ -1,8 +1,9 @@
-"""Monitor an existing IMU: the allan and denoise nodes on any ``sensor_msgs/Imu`` topic.
+"""
+Monitor an existing IMU: the allan and denoise nodes on any ``sensor_msgs/Imu`` topic.
 
     ros2 launch imu_allan monitor.launch.py imu_topic:=/my_imu/data
 
-Arguments:
+Launch arguments:
 
 * ``imu_topic``: the Imu topic to monitor (remapped onto the nodes' ``imu/data_raw``);
 * ``rate_hz``: its sample rate, Hz; empty (the default) keeps the parameter files' value, which
@@ -11,15 +12,15 @@ Arguments:
   ``config/allan.yaml`` and ``config/denoise.yaml`` (sections ``/**/allan:``, ``/**/denoise:`` or
   ``/**:``);
 * ``namespace``: the namespace of both nodes and of their output topics.
+
 """
 
 import os
 
 from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
-
-from launch import LaunchDescription
 
 ARGUMENTS = (
     ('imu_topic', 'imu/data_raw', 'sensor_msgs/Imu topic to monitor'),
@@ -31,7 +32,7 @@ ARGUMENTS = (
 
 
 def monitor_nodes(context):
-    """The allan and denoise nodes for the current launch arguments."""
+    """Return the allan and denoise nodes for the current launch arguments."""
     arg = context.launch_configurations
     share = get_package_share_directory('imu_allan')
     overrides = {}

@@ -1,4 +1,5 @@
-"""Run every benchmark in bench/ (``make bench``) and print the results with the machine.
+"""
+Run every benchmark in bench/ (``make bench``) and print the results with the machine.
 
 Each script prints its figures and ``GOAL ...: met / NOT met [CPU, cores, load]`` lines
 (``bench/benchlib.py``); they are repeated at the end under the machine line (CPU model, cores,

@@ -1,4 +1,5 @@
-"""``make demo``: the main job on the embedded default, with no hardware.
+"""
+``make demo``: the main job on the embedded default, with no hardware.
 
 1. ``gx3_sim`` (a simulated 3DM-GX3-25 with the thesis's noise model) on a pseudo-terminal ->
    the ``driver`` node -> the ``allan`` and ``denoise`` nodes, over real DDS, for about a minute
@@ -16,7 +17,6 @@ import random
 import shutil
 import signal
 import subprocess
-import time
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / 'demo_out'
@@ -24,16 +24,19 @@ SECONDS = float(os.environ.get('DEMO_SECONDS', '60'))
 
 
 def executable(name):
-    """The built executable, looked up like ``ros2 run imu_allan NAME``."""
+    """Return the built executable, looked up like ``ros2 run imu_allan NAME``."""
     from ament_index_python.packages import get_package_prefix
     path = Path(get_package_prefix('imu_allan')) / 'lib' / 'imu_allan' / name
     return str(path) if path.is_file() and os.access(path, os.X_OK) else None
 
 
 def stop(procs):
-    """Stop the processes in reverse start order, each before the next: the nodes go before
-    the simulator they read from (the driver otherwise logs a failed read of a vanished
-    pseudo-terminal while its node shuts down).  SIGINT first, kill after 5 s."""
+    """
+    Stop the processes in reverse start order, each before the next.
+
+    The nodes go before the simulator they read from (the driver otherwise logs a failed read
+    of a vanished pseudo-terminal while its node shuts down).  SIGINT first, kill after 5 s.
+    """
     for proc in reversed(procs):
         if proc.poll() is None:
             proc.send_signal(signal.SIGINT)
@@ -45,7 +48,7 @@ def stop(procs):
 
 
 def live_part(env):
-    """Simulator -> driver -> allan + denoise, watched with ``monitor``."""
+    """Return simulator -> driver -> allan + denoise, watched with ``monitor``."""
     names = ('gx3_sim', 'driver', 'allan', 'denoise', 'monitor')
     exes = {n: executable(n) for n in names}
     missing = [n for n, path in exes.items() if path is None]
@@ -74,11 +77,10 @@ def live_part(env):
 
 def offline_part(env):
     """Simulate 2 h of the thesis model, write an MCAP bag, run analyze on it."""
-    import numpy as np
-
     from imu_allan import simulate, thesis_gx3_25_model
     from imu_allan.formats.bag_writer import write_imu_bag
     from imu_allan.formats.samples import Samples
+    import numpy as np
 
     analyze = executable('analyze')
     if analyze is None:

@@ -25,7 +25,7 @@ EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim'
 
 @pytest.fixture(scope='session')
 def shared_data():
-    """The third-party test data folder (tests skip when it is absent)."""
+    """Return the third-party test data folder (tests skip when it is absent)."""
     if not SHARED_DATA.is_dir():
         pytest.skip(f'{SHARED_DATA} not present (shared test data)')
     return SHARED_DATA
@@ -57,7 +57,7 @@ def ros_env(domain=None):
 
 @pytest.fixture(scope='module')
 def ros_context():
-    """An rclpy context on this process's own domain id (:data:`DOMAIN`)."""
+    """Return an rclpy context on this process's own domain id (:data:`DOMAIN`)."""
     rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
     os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
     context = rclpy.Context()
@@ -67,7 +67,7 @@ def ros_context():
 
 
 def python():
-    """The interpreter running the tests (the venv's)."""
+    """Return the interpreter running the tests (the venv's)."""
     return sys.executable
 
 

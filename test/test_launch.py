@@ -1,4 +1,5 @@
-"""The launch files, started with the real ``launch`` / ``launch_ros`` (Jazzy) libraries.
+"""
+The launch files, started with the real ``launch`` / ``launch_ros`` (Jazzy) libraries.
 
 There is no ``ros2 launch`` without ros2cli, so a child process does what it does: a
 ``launch.LaunchService`` (it refuses to run outside a main thread) including the installed
@@ -88,7 +89,7 @@ def check_clean_shutdown(status, out, expected):
 
 @pytest.fixture
 def ros_node(request):
-    """An rclpy node and executor in their own context on the test's own domain id."""
+    """Return an rclpy node and executor in their own context on the test's own domain id."""
     from rclpy.executors import SingleThreadedExecutor
     domain = request.param
     context = rclpy.Context()
@@ -141,8 +142,12 @@ def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
 
 @pytest.mark.parametrize('ros_node', [(os.getpid() + 71) % 100 + 100], indirect=True)
 def test_monitor_launch_on_any_imu_topic(launch_stack, ros_node, tmp_path):
-    """monitor.launch.py imu_topic:=/test_imu/data namespace:=mon: both nodes on that topic,
-    outputs under /mon, the rate measured from the stamps (no rate_hz given)."""
+    """
+    Run monitor.launch.py imu_topic:=/test_imu/data namespace:=mon.
+
+    Both nodes on that topic, outputs under /mon, the rate measured from the stamps (no
+    rate_hz given).
+    """
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray

@@ -30,8 +30,8 @@ def test_ament_index_marker_found_like_ros2_run():
     share = Path(get_package_share_directory('imu_allan'))
     assert (share / 'package.xml').is_file()
     assert sorted(p.name for p in (share / 'config').glob('*.yaml')) >= ['allan.yaml',
-                                                                        'denoise.yaml',
-                                                                        'driver.yaml']
+                                                                         'denoise.yaml',
+                                                                         'driver.yaml']
 
 
 def test_executables_are_in_lib_and_only_once():

@@ -1,4 +1,5 @@
-"""Every dependency is declared in package.xml, with a rosdep key that resolves.
+"""
+Every dependency is declared in package.xml, with a rosdep key that resolves.
 
 The real ``rosdep`` tool (PyPI package, pinned below, in a throwaway venv under ``build/``
 made once per machine) runs offline against the rosdistro snapshot in the shared data folder
@@ -7,7 +8,6 @@ plus this repository's ``rosdep.yaml``, as a user's ``rosdep install --from-path
 
 import ast
 import os
-from pathlib import Path
 import subprocess
 import sys
 
@@ -33,8 +33,11 @@ MODULE_KEYS = {
 
 
 def required_imports(path):
-    """Top-level modules a file imports, except optional ones (inside ``try: ... except
-    ImportError``) and relative imports."""
+    """
+    Return the top-level modules a file imports.
+
+    Except optional ones (inside ``try: ... except ImportError``) and relative imports.
+    """
     tree = ast.parse(path.read_text(encoding='utf-8'), str(path))
     optional = set()
     for node in ast.walk(tree):
@@ -83,7 +86,7 @@ def test_optional_imports_are_recognised(tmp_path):
 
 @pytest.fixture(scope='session')
 def rosdep(shared_data):
-    """Run the pinned rosdep offline against the snapshot + rosdep.yaml: ``rosdep(*args)``."""
+    """Run the pinned rosdep offline against the snapshot + rosdep.yaml (a function of args)."""
     if not (ROSDEP_DB / 'index-v4.yaml').is_file():
         pytest.skip(f'{ROSDEP_DB} not present')
     venv = REPO / 'build' / 'rosdep-venv'
@@ -121,7 +124,8 @@ def rosdep(shared_data):
 
 
 def test_rosdep_resolves_every_key(rosdep):
-    """``rosdep install --simulate`` finds a rule for every key (exit 0, no unknown key).
+    """
+    ``rosdep install --simulate`` finds a rule for every key (exit 0, no unknown key).
 
     ``rosdep check`` says the same key by key, but also exits 1 because the apt packages are
     not installed on this machine, so its output is checked instead of its status.

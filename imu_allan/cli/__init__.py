@@ -1,4 +1,5 @@
-"""Command-line entry points (analyze, discrepancy, gx3_sim).
+"""
+Command-line entry points (analyze, discrepancy, gx3_sim).
 
 Importing this package is what starting a command does, so it sets the process-wide BLAS
 default here (before numpy loads): the fits solve many small (< 100 x 100) systems, where BLAS

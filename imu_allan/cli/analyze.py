@@ -1,4 +1,5 @@
-"""``analyze``: IMU noise report from bags, logs, CSV and raw captures.
+"""
+``analyze``: IMU noise report from bags, logs, CSV and raw captures.
 
 Usage: ``analyze INPUT... [--topic T] [--format auto|rosbag2|ros1|csv|thesis|gx3raw]
 [--out DIR] [--json] [--export-samples FILE.csv] [--denoise]`` (docs/interfaces.md).
@@ -10,10 +11,6 @@ import json
 from pathlib import Path
 import sys
 
-from ..core.units import ALL_TERMS, IEEE_TERMS
-from ..errors import InputError
-from ..formats import FORMATS
-from ..report.exporters import add_arguments as add_export_arguments
 from .common import (
     ArgumentParser,
     bounded_float,
@@ -23,10 +20,14 @@ from .common import (
     guarded,
 )
 from .progress import Progress
+from ..core.units import ALL_TERMS, IEEE_TERMS
+from ..errors import InputError
+from ..formats import FORMATS
+from ..report.exporters import add_arguments as add_export_arguments
 
 
 def build_parser():
-    """The command-line interface (contract options first)."""
+    """Return the command-line interface (contract options first)."""
     p = ArgumentParser(
         prog='analyze',
         description='Allan-deviation noise analysis of a static IMU recording: overlapping '
@@ -125,7 +126,8 @@ def _write_denoised_bag(path, fmt, samples, denoised_samples, folder):
 
 
 def run_one(path, args, options, progress=None, out_dir=None):
-    """Analyse one input; return ``(report dict, console text)``; raise InputError.
+    """
+    Analyse one input; return ``(report dict, console text)``; raise InputError.
 
     ``out_dir`` is where ``--out`` files go (default ``args.out``).
     """
@@ -164,8 +166,9 @@ def run_one(path, args, options, progress=None, out_dir=None):
             real_fmt = detect_format(path) if fmt == 'auto' else fmt
             report['denoised_bag'] = str(out_dir / 'denoised_bag')
 
-            def extra(staging):
+            def write_bag(staging):
                 _write_denoised_bag(path, real_fmt, samples, den_samples, staging)
+            extra = write_bag
         report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
                                             extra=extra, exports=(args.export, args.inflate))
     return report, console_summary(analysis) + '\n' + advice_sentence(advice)

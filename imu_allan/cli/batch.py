@@ -1,4 +1,5 @@
-"""``analyze`` on many inputs: scan folders, run one Dask task per input, record in DuckDB.
+"""
+``analyze`` on many inputs: scan folders, run one Dask task per input, record in DuckDB.
 
 Each input's whole analysis (read, estimate, fit, report files) is one task,
 :func:`analyze_task`, the same function the single-input path runs, so the numbers do not
@@ -22,9 +23,9 @@ import os
 from pathlib import Path
 import sys
 
-from ..errors import InputError
 from .common import emit, EXIT_BAD_INPUT
 from .progress import RunProgress
+from ..errors import InputError
 
 #: Worker deaths a task may be part of before it is given up (Dask's scheduler setting
 #: ``distributed.scheduler.allowed-failures``; its default is 3).  A bag that crashes the
@@ -36,7 +37,7 @@ BAG_SUFFIXES = {'.mcap': '.mcap', '.db3': '.db3', '.bag': 'ROS 1 .bag'}
 
 
 def is_scan_folder(path):
-    """True for a folder to scan (a folder that is not itself a rosbag2 bag)."""
+    """Return True for a folder to scan (a folder that is not itself a rosbag2 bag)."""
     p = Path(path)
     return p.is_dir() and not (p / 'metadata.yaml').exists()
 
@@ -56,7 +57,8 @@ def _walk(root):
 
 
 def scan_inputs(paths):
-    """Expand folders into the bags they hold; return ``(inputs, counts by kind)``.
+    """
+    Expand folders into the bags they hold; return ``(inputs, counts by kind)``.
 
     Folders are scanned recursively for rosbag2 folders (with a ``metadata.yaml``), ``.mcap`` and
     ``.db3`` files outside them and ROS 1 ``.bag`` files; CSV files and logs count only when
@@ -83,7 +85,8 @@ def scan_inputs(paths):
 
 
 def analyze_task(path, args, options, out_dir=None):
-    """Analyse one input, wherever it runs; never raises for a bad input.
+    """
+    Analyse one input, wherever it runs; never raises for a bad input.
 
     Returns a dict: ``input``, ``ok`` and either ``report`` (the JSON report) and ``text`` (the
     console summary) or ``error`` (one line naming the input).
@@ -144,7 +147,7 @@ class History:
             return None
 
     def is_known(self, path, fingerprint):
-        """True if the input was recorded with this same size and mtime."""
+        """Return True if the input was recorded with this same size and mtime."""
         return fingerprint is not None and \
             self.known.get(self.db.abspath(path)) == fingerprint
 
@@ -168,7 +171,7 @@ class History:
 
 
 def _dask_client(args, n_inputs):
-    """A client of the given scheduler, or of a new local cluster; ``(client, cluster)``."""
+    """Return a client of the given scheduler, or of a new local cluster; ``(client, cluster)``."""
     where = '--scheduler' if args.scheduler else 'analyze'
     try:
         import dask

@@ -13,7 +13,8 @@ EXIT_BAD_INPUT = 2
 
 
 class ArgumentParser(argparse.ArgumentParser):
-    """argparse with a one-line error (``prog: error: ...``), exit status 2, no abbreviations.
+    """
+    argparse with a one-line error (``prog: error: ...``), exit status 2, no abbreviations.
 
     Prefix matching is off: with it, ``--export all`` was silently taken as
     ``--export-samples all`` (a 200 MB CSV named ``all``).
@@ -31,7 +32,8 @@ class ArgumentParser(argparse.ArgumentParser):
 
 
 def bounded_float(low, high, low_open=False):
-    """Argparse ``type=``: a finite float in [low, high] (or (low, high]), else a usage error.
+    """
+    Argparse ``type=``: a finite float in [low, high] (or (low, high]), else a usage error.
 
     Every numeric option of every command goes through this or :func:`bounded_int`, so
     ``--rate inf`` or ``--points-per-decade 100000`` is one line and exit 2, not a traceback
@@ -43,7 +45,7 @@ def bounded_float(low, high, low_open=False):
         except ValueError:
             raise argparse.ArgumentTypeError(f'not a number: {text!r}') from None
         if not math.isfinite(value) or value < low or value > high or (low_open and
-                                                                        value == low):
+                                                                       value == low):
             bound = f'> {low:g}' if low_open else f'>= {low:g}'
             raise argparse.ArgumentTypeError(f'{text} is out of range (must be {bound} and '
                                              f'<= {high:g})')

@@ -1,4 +1,5 @@
-"""``discrepancy``: where do a noise model and a recording disagree, and which effect is missing.
+"""
+``discrepancy``: where do a noise model and a recording disagree, and which effect is missing.
 
 Usage::
 
@@ -16,9 +17,9 @@ import json
 import os
 import sys
 
+from .common import ArgumentParser, bounded_int, guarded
 from ..formats import FORMATS
 from ..report.discrepancy_report import report_dict, summary_text, write_plots
-from .common import ArgumentParser, bounded_int, guarded
 
 
 def build_parser():

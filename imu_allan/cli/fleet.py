@@ -1,4 +1,5 @@
-"""``fleet``: which IMU is getting worse?  Trends and flags from the ``analyze --db`` history.
+"""
+``fleet``: which IMU is getting worse?  Trends and flags from the ``analyze --db`` history.
 
 Usage: ``fleet DB --out DIR [--json] [--since DATE]``.  Writes one trend plot per ``imu_id``
 (``DIR/<imu_id>.png``) and ``DIR/fleet.json``; prints a table of the IMUs and one line per flag
@@ -10,12 +11,12 @@ import json
 from pathlib import Path
 import re
 
-from ..errors import InputError
 from .common import ArgumentParser, guarded
+from ..errors import InputError
 
 
 def build_parser():
-    """The command-line interface."""
+    """Return the command-line interface."""
     p = ArgumentParser(
         prog='fleet',
         description='Per-IMU trends of white noise N and bias instability B (gyro and accel, '
@@ -98,7 +99,7 @@ def _cell(latest, sensor, term):
 
 
 def console_text(report):
-    """The table of IMUs and one line per flag."""
+    """Return the table of IMUs and one line per flag."""
     head = (f'{"imu_id":28} {"records":>7} {"latest (UTC)":16} {"gyro N":>8} {"gyro B":>8} '
             f'{"accel N":>8} {"accel B":>8}  flags')
     lines = [f'fleet: {len(report["imus"])} IMUs from {report["db"]}'

@@ -1,4 +1,5 @@
-"""gx3_sim: a simulated LORD MicroStrain 3DM-GX3-25 on a pseudo-terminal.
+"""
+gx3_sim: a simulated LORD MicroStrain 3DM-GX3-25 on a pseudo-terminal.
 
 The simulator opens a pseudo-terminal in raw mode, prints the path a driver should open as the
 first line on stdout, and then behaves like a 3DM-GX3-25 with single-byte firmware
@@ -38,12 +39,12 @@ import dataclasses
 import signal
 import sys
 
+from .common import ArgumentParser, bounded_float, bounded_int, guarded
 from ..core.model import NoiseModel, thesis_gx3_25_model
 from ..core.units import STANDARD_GRAVITY
 from ..device import gx3_protocol as p
 from ..device.simulator import ID_STRINGS, SimConfig, Simulator
 from ..errors import InputError
-from .common import ArgumentParser, bounded_float, bounded_int, guarded
 
 
 def build_parser():

@@ -1,4 +1,5 @@
-"""monitor: the live view of a running allan node, for an operator standing next to the robot.
+"""
+monitor: the live view of a running allan node, for an operator standing next to the robot.
 
 Subscribes ``imu/allan_coeffs``, ``imu/allan_deviation`` (relative names: ``--namespace`` or
 ROS remapping after ``--ros-args`` move them) and ``/diagnostics``, and shows per axis the
@@ -21,11 +22,11 @@ import shutil
 import sys
 import time
 
+from .common import ArgumentParser, guarded
 from ..core.health import LEVEL_NAMES
 from ..core.units import AXES, conventional, IEEE_TERMS
 from ..errors import InputError
 from ..report.coeffs_layout import coefficient_terms, decode_coefficients, decode_deviation
-from .common import ArgumentParser, guarded
 
 #: Terminal control: cursor home, then clear to the end of the screen (redraw in place).
 REDRAW = '\x1b[H\x1b[J'
@@ -35,7 +36,7 @@ TOPICS = ('imu/allan_coeffs', 'imu/allan_deviation', '/diagnostics')
 
 
 def build_parser():
-    """The command line (ROS arguments after ``--ros-args`` are passed to rclpy)."""
+    """Return the command line (ROS arguments after ``--ros-args`` are passed to rclpy)."""
     p = ArgumentParser(
         prog='monitor',
         description='Live view of a running allan node: per-axis noise coefficients with '
@@ -124,7 +125,7 @@ class MonitorState:
         self.version += 1
 
     def status(self, suffix):
-        """The kept status ``<node>: <suffix>`` or None."""
+        """Return the kept status ``<node>: <suffix>`` or None."""
         return self.statuses.get(self.prefix + suffix)
 
     def snapshot(self, topics=None):
@@ -146,7 +147,8 @@ class MonitorState:
 
 
 def format_interval(axis, term, stats):
-    """``value [low, high] unit`` in conventional units, or ``-`` when not detected.
+    """
+    ``value [low, high] unit`` in conventional units, or ``-`` when not detected.
 
     Enough significant digits that the interval's ends differ from the value (3 to 6).
     """
@@ -182,7 +184,7 @@ def _key_values(values, width, indent=15):
 
 
 def render(state, topics, width=99):
-    """The table as a list of text lines; key-value lists wrapped at ``width`` columns."""
+    """Return the table as a list of text lines; key-value lists wrapped at ``width`` columns."""
     now = time.monotonic()
     ago = {k: f'{now - t:.0f} s ago' for k, t in state.arrived.items()}
     lines = [f'imu_allan monitor: node {state.prefix[:-2]} on {topics["coeffs"]}  '

@@ -34,7 +34,8 @@ class Progress:
 
 
 class RunProgress(Progress):
-    """One bar for a run of several inputs: done / total and failures so far.
+    """
+    One bar for a run of several inputs: done / total and failures so far.
 
     On a terminal it is the bar; elsewhere (a log, a pipe) one plain line per finished input.
     """

@@ -1,4 +1,5 @@
-"""The recording advisor: how much longer to record until each noise term is known well enough.
+"""
+The recording advisor: how much longer to record until each noise term is known well enough.
 
 ROS-free.  For every axis and fitted term it gives the relative precision now (68.3 %
 half-width / value) and the predicted additional recording time, under the same conditions,
@@ -37,7 +38,6 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.optimize import minimize_scalar
 
-from ..errors import InputError
 from . import terms as _terms
 from .allan import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
 from .edf import edf_oadev
@@ -45,6 +45,7 @@ from .edf import edf_oadev
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
 from .fit import _fit_terms, _Problem, _shape_columns, SELECTION_PENALTY, upper_limit
 from .units import IEEE_TERMS, TERM_PARAMETERS
+from ..errors import InputError
 
 #: Default targets: relative 68.3 % half-width per term (main parameter; sigma for
 #: Gauss-Markov).  The one place these numbers live.
@@ -66,7 +67,8 @@ _BISECTIONS = 10
 
 
 def parse_targets(text, where='--target'):
-    """Targets from ``'bias_instability=0.05,white_noise=0.01'`` merged over the defaults.
+    """
+    Targets from ``'bias_instability=0.05,white_noise=0.01'`` merged over the defaults.
 
     Raises :class:`InputError` naming ``where`` for an unknown term, a non-number or a value
     outside :data:`TARGET_RANGE`.
@@ -96,7 +98,8 @@ def parse_targets(text, where='--target'):
 
 @dataclass
 class TermAdvice:
-    """One term of one axis: precision now and the additional time to the target, s.
+    """
+    One term of one axis: precision now and the additional time to the target, s.
 
     ``more_s`` is 0 when the target is met and None when no prediction is possible
     (``reason`` says why).  For an undetected term, ``rel_halfwidth`` is None, ``upper_limit``
@@ -141,7 +144,8 @@ class Advice:
 
 def analysis_grid(points_per_decade=DEFAULT_POINTS_PER_DECADE,
                   min_clusters=DEFAULT_MIN_CLUSTERS, m_max=None):
-    """``grid(n)``: averaging factors of a record of n samples, as dense as ``analyze``'s.
+    """
+    ``grid(n)``: averaging factors of a record of n samples, as dense as ``analyze``'s.
 
     The points are 10^(k / points_per_decade) up to n / min_clusters: the same density and
     span as :func:`~.allan.tau_grid`, but anchored at m = 1 so that records of different
@@ -195,7 +199,7 @@ class _Forecast:
         self._cache = {}
 
     def problem(self, n, axis_terms, key):
-        """The fit's problem for a record of ``n`` samples whose AVAR is the model's."""
+        """Return the fit's problem for a record of ``n`` samples whose AVAR is the model's."""
         cached = self._cache.get((n, key))
         if cached is not None:
             return cached
@@ -231,7 +235,8 @@ class _Forecast:
         return out
 
     def criterion_gap(self, n, truth, key, other_names, start=None):
-        """Noise-free criterion of ``other_names`` fitted to the ``truth`` curve minus truth's.
+        """
+        Noise-free criterion of ``other_names`` fitted to the ``truth`` curve minus truth's.
 
         ``start`` holds starting values of nonlinear parameters (tau_c) of ``other_names``.
         """
@@ -259,7 +264,8 @@ def _best_chi2(problem, names, start):
 
 
 def _crossing(ok, n0, n_max):
-    """Smallest n in [n0, n_max] with ``ok(n)`` (assumed monotone), by bisection in log n.
+    """
+    Smallest n in [n0, n_max] with ``ok(n)`` (assumed monotone), by bisection in log n.
 
     A generator (it yields between evaluations so a node can interleave other work); returns
     n, or None when even n_max does not satisfy ``ok``.
@@ -281,7 +287,7 @@ def _crossing(ok, n0, n_max):
 
 
 def _separated(gap):
-    """A noise-free criterion gap big enough to exceed the margin even 1 sd below its mean."""
+    """Return a noise-free criterion gap that exceeds the margin even 1 sd below its mean."""
     return gap - 2.0 * math.sqrt(max(gap, 0.0)) >= SEPARATION_MARGIN
 
 
@@ -305,7 +311,7 @@ class _AxisAdvisor:
         return None if n is None else max(n - self.n, 0) / self.rate_hz
 
     def steps(self):
-        """Generator: one forecast evaluation per step; fills :attr:`terms`, :attr:`unresolved`."""
+        """Yield one forecast evaluation per step; fills :attr:`terms`, :attr:`unresolved`."""
         axis_terms = self.fit.terms
         n_max = int(self.n * HORIZON)
         for term, params in axis_terms.items():
@@ -410,7 +416,8 @@ class _AxisAdvisor:
 
 
 class StagedAdvice:
-    """Advice for every fitted axis in short steps (for a node between message drains).
+    """
+    Advice for every fitted axis in short steps (for a node between message drains).
 
     ``step()`` runs one forecast evaluation; when :attr:`done`, :attr:`advice` holds the
     :class:`Advice`.  :func:`advise` runs all steps at once.  ``undetected=False`` skips the
@@ -444,7 +451,8 @@ class StagedAdvice:
 
 
 def advise(result, fitted, targets=None, grid=None, undetected=True):
-    """The :class:`Advice` for a record's AllanResult and its FittedModel.
+    """
+    Return the :class:`Advice` for a record's AllanResult and its FittedModel.
 
     Parameters
     ----------
@@ -467,7 +475,8 @@ def advise(result, fitted, targets=None, grid=None, undetected=True):
 
 
 def advice_health(advice, name='recording advice'):
-    """A :class:`~.health.Health` record of the advice (the allan node's status).
+    """
+    Return a :class:`~.health.Health` record of the advice (the allan node's status).
 
     OK when every target is met and no pair is unresolved; WARN naming the longest additional
     time otherwise; STALE while there is no advice (``advice`` None).  Key-values: per detected

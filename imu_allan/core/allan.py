@@ -1,4 +1,5 @@
-"""Overlapping Allan deviation with 68.3 % confidence intervals.
+"""
+Overlapping Allan deviation with 68.3 % confidence intervals.
 
 Estimator (thesis eq. 4.1; NIST SP1065 eq. 11): with rate samples y_k at interval tau0, phase
 x_0 = 0, x_k = tau0 * (y_0 + ... + y_{k-1}) (N = n + 1 phase points) and tau = m tau0,
@@ -30,7 +31,8 @@ DEFAULT_POINTS_PER_DECADE = 10
 
 @dataclass
 class AllanResult:
-    """Allan deviation of a record, per averaging time and axis.
+    """
+    Allan deviation of a record, per averaging time and axis.
 
     Attributes
     ----------
@@ -68,7 +70,8 @@ class AllanResult:
 
     @classmethod
     def from_avar(cls, m, avar, n_samples, rate_hz, axes=None, alpha=None):
-        """Build a result (EDF, intervals) from Allan variances computed elsewhere.
+        """
+        Build a result (EDF, intervals) from Allan variances computed elsewhere.
 
         ``avar`` has shape (T, A) for averaging factors ``m`` (a 1-D array is one axis);
         ``n_samples`` is the number of rate samples behind each estimate (an int, or an array
@@ -104,7 +107,7 @@ def min_record(min_clusters=DEFAULT_MIN_CLUSTERS):
 
 
 def log_grid(stop, points_per_decade):
-    """Unique integers from 1 to ``stop`` spaced ``points_per_decade`` per decade (log)."""
+    """Return unique integers from 1 to ``stop`` spaced ``points_per_decade`` per decade (log)."""
     if points_per_decade <= 0:
         raise ValueError('points_per_decade must be > 0')
     if stop < 1:
@@ -116,7 +119,8 @@ def log_grid(stop, points_per_decade):
 
 def tau_grid(n_samples, points_per_decade=DEFAULT_POINTS_PER_DECADE,
              min_clusters=DEFAULT_MIN_CLUSTERS, m_max=None):
-    """Log-spaced averaging factors m = 1 .. n / min_clusters (unique integers).
+    """
+    Log-spaced averaging factors m = 1 .. n / min_clusters (unique integers).
 
     The guard keeps at least ``min_clusters`` non-overlapping clusters at the longest averaging
     time (the common tau_max = T/10 rule); returns an empty array when even m = 1 fails it.
@@ -127,7 +131,8 @@ def tau_grid(n_samples, points_per_decade=DEFAULT_POINTS_PER_DECADE,
 
 
 def _phase(data):
-    """Phase per axis, shape (A, n + 1), in units of (sample value x samples).
+    """
+    Phase per axis, shape (A, n + 1), in units of (sample value x samples).
 
     The cumulative sum of the de-meaned rate with x_0 = 0, computed axis by axis along
     contiguous memory (a cumulative sum down the columns of an (n, A) array is strided and
@@ -141,7 +146,8 @@ def _phase(data):
 
 
 def avar_reference(data, ms):
-    """Overlapping AVAR, plain numpy: the readable reference the fast path is tested against.
+    """
+    Overlapping AVAR, plain numpy: the readable reference the fast path is tested against.
 
     ``data`` (n, A) rate samples, ``ms`` averaging factors; returns (T, A) in units of the
     samples squared (the sample interval cancels: AVAR = sum d^2 / (2 m^2 (N - 2m)) with d the
@@ -164,7 +170,8 @@ SMALL_WORK = 5e7
 
 
 def avar_function(work):
-    """The AVAR implementation for ``work`` second differences: numpy reference or compiled.
+    """
+    Return the AVAR implementation for ``work`` second differences: numpy reference or compiled.
 
     Both take ``(data, ms)`` and return the same numbers (the tests compare them); the
     compiled one lives in :mod:`.allan_kernel`, imported here on first use so that commands
@@ -195,7 +202,8 @@ def avar_fast(data, ms):
 
 
 def identify_noise(tau, avar):
-    """Power-law exponent alpha of the dominant noise at each (tau, axis).
+    """
+    Power-law exponent alpha of the dominant noise at each (tau, axis).
 
     A non-negative least-squares fit of the five IEEE term shapes in relative error gives the
     contribution of each term; the exponent of the largest one is used.  Robust where the
@@ -226,7 +234,8 @@ def identify_noise(tau, avar):
 
 def allan_deviation(data, rate_hz, taus=None, points_per_decade=DEFAULT_POINTS_PER_DECADE,
                     min_clusters=DEFAULT_MIN_CLUSTERS, axes=None, fast=True):
-    """Overlapping Allan deviation of rate samples with 68.3 % confidence intervals.
+    """
+    Overlapping Allan deviation of rate samples with 68.3 % confidence intervals.
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""Compiled overlapping Allan variance (numba), imported by :mod:`imu_allan.core.allan` on use.
+"""
+Compiled overlapping Allan variance (numba), imported by :mod:`imu_allan.core.allan` on use.
 
 Compiled once per install: the kernels are module-level functions with ``cache=True``, which
 numba keys by this file and the function names, so the machine code compiled by the first
@@ -149,7 +150,8 @@ def _cuts(n, parts):
 
 
 def phase(data):
-    """Phase (A, n + 1) of rate samples (n, A), de-meaned, x_0 = 0: as ``allan._phase``.
+    """
+    Phase (A, n + 1) of rate samples (n, A), de-meaned, x_0 = 0: as ``allan._phase``.
 
     Row-major passes over the samples, each split in two ranges of rows: the column sums, the
     running sums of each range, then the first range's end value added to the second range
@@ -169,7 +171,8 @@ def phase(data):
 
 
 def avar(data, ms):
-    """Overlapping AVAR (T, A) of rate samples (n, A): as ``allan.avar_reference``, compiled.
+    """
+    Overlapping AVAR (T, A) of rate samples (n, A): as ``allan.avar_reference``, compiled.
 
     ``ms``: averaging factors, 1 <= m <= n / 2, any order.
     """

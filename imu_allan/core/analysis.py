@@ -1,4 +1,5 @@
-"""The offline analysis pipeline: validate, preprocess, Allan deviation, fit, verdicts.
+"""
+The offline analysis pipeline: validate, preprocess, Allan deviation, fit, verdicts.
 
 ROS-free and I/O-free: it takes :class:`~imu_allan.formats.samples.Samples` and returns an
 :class:`Analysis`; readers, report writers and the ``analyze`` command sit around it.  Every
@@ -9,7 +10,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
 from .allan import (
     allan_deviation,
     AllanResult,
@@ -20,6 +20,7 @@ from .allan import (
 from .fit import fit_noise_model, FitError, FittedModel
 from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
 from .units import is_gyro, physical_limits, sample_unit
+from ..errors import InputError
 
 #: Motion thresholds on 1-s block means, relative to the record's median: a still MEMS IMU's
 #: 1-s averages wander by ~1e-4 rad/s and ~1e-3 m/s^2; a moving robot by orders more.
@@ -96,7 +97,8 @@ def _validate(samples):
 
 
 def motion_verdict(data, axes, rate_hz):
-    """Is the record static?  Compare 1-s block means with the record median per axis.
+    """
+    Is the record static?  Compare 1-s block means with the record median per axis.
 
     Returns ``(static, details)``: details holds the 95th percentile excursion per axis (SI)
     and the threshold used.

@@ -1,4 +1,5 @@
-"""Wavelet (PyWavelets) and median denoising of IMU rate samples, batch and block-streaming.
+"""
+Wavelet (PyWavelets) and median denoising of IMU rate samples, batch and block-streaming.
 
 Wavelet method (thesis section 4.4.1, MATLAB ``wden`` style): a ``level``-level discrete
 wavelet transform (default ``sym8``, the thesis's choice), each detail level thresholded, the
@@ -48,7 +49,8 @@ def _as_2d(data):
 
 
 def sure_threshold(x):
-    """SURE threshold (in units of x, which must be normalised to unit noise std).
+    """
+    SURE threshold (in units of x, which must be normalised to unit noise std).
 
     Minimises Stein's unbiased risk estimate of soft thresholding over the candidates |x_i|.
     """
@@ -97,7 +99,8 @@ def check_options(method='wavelet', wavelet='sym8', level=12, rule='universal', 
 
 def denoise(data, rate_hz=None, method='wavelet', wavelet='sym8', level=12, rule='universal',
             mode='soft', sigma=None, noise_density=None, n_ref=None, median_window=21):
-    """Denoise rate samples; returns an array shaped like ``data``.
+    """
+    Denoise rate samples; returns an array shaped like ``data``.
 
     Parameters
     ----------
@@ -159,7 +162,8 @@ def denoise(data, rate_hz=None, method='wavelet', wavelet='sym8', level=12, rule
 
 def block_geometry(method='wavelet', wavelet='sym8', level=12, median_window=21, rate_hz=100.0,
                    hop_s=0.1):
-    """Block layout of :class:`BlockDenoiser`: ``(margin, hop, align)`` in samples.
+    """
+    Block layout of :class:`BlockDenoiser`: ``(margin, hop, align)`` in samples.
 
     ``margin`` is the context needed on each side of an output sample for it to equal the
     whole-record transform: (filter length - 1) x 2^level for the wavelet method (the support
@@ -178,7 +182,8 @@ def block_geometry(method='wavelet', wavelet='sym8', level=12, median_window=21,
 
 
 class BlockDenoiser:
-    """Streaming denoiser on overlapping blocks with bounded latency (see module docstring).
+    """
+    Streaming denoiser on overlapping blocks with bounded latency (see module docstring).
 
     Parameters
     ----------

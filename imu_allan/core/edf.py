@@ -1,4 +1,5 @@
-"""Equivalent degrees of freedom and chi-square confidence intervals for the overlapping AVAR.
+"""
+Equivalent degrees of freedom and chi-square confidence intervals for the overlapping AVAR.
 
 The EDF follows Greenhall & Riley (2004), "Uncertainty of stability variances based on finite
 differences" (the algorithm NIST SP1065 and allantools use), for the unmodified, fully
@@ -58,7 +59,8 @@ def _sz(t, f, alpha):
 
 @functools.lru_cache(maxsize=65536)
 def edf_oadev(alpha, m, n_phase):
-    """EDF of the overlapping Allan variance at averaging factor ``m``.
+    """
+    EDF of the overlapping Allan variance at averaging factor ``m``.
 
     Parameters
     ----------
@@ -98,7 +100,8 @@ def _filter_f(alpha, m):
 
 @functools.lru_cache(maxsize=65536)
 def _lag_moments(alpha, m):
-    """Greenhall's basic sum for J = 3m as ``a - b / M``: ``(sz(0)^2, a, b)``.
+    """
+    Greenhall's basic sum for J = 3m as ``a - b / M``: ``(sz(0)^2, a, b)``.
 
     With J = 3m every term of the sum is linear in 1/M (the weights are 1 - j/M), so the sum
     splits into two M-free parts: the EDF of any record length then costs a division.  The
@@ -114,7 +117,8 @@ def _lag_moments(alpha, m):
 
 
 def _lag_sum(j_count, big_m, m, f, alpha, moment=0):
-    """sum_{j=1}^{J-1} (1 - j/M) sz(j/m)^2, exactly, or integrated when J is large.
+    """
+    sum_{j=1}^{J-1} (1 - j/M) sz(j/m)^2, exactly, or integrated when J is large.
 
     In the infinite-filter limit (f = inf) the summand is smooth in j apart from kinks at
     j = m, 2m, so the trapezoid rule on 4096 points plus the half end-points (Euler-Maclaurin)
@@ -134,7 +138,8 @@ def _lag_sum(j_count, big_m, m, f, alpha, moment=0):
 
 
 def chi2_interval(adev, edf, level=CI_LEVEL):
-    """Chi-square interval of a deviation with ``edf`` degrees of freedom (SP1065 eq. 45).
+    """
+    Chi-square interval of a deviation with ``edf`` degrees of freedom (SP1065 eq. 45).
 
     Returns ``(low, high)`` with the same shape as ``adev``.
     """

@@ -1,4 +1,5 @@
-"""Joint, weighted, non-negative fit of noise terms to a measured Allan variance curve.
+"""
+Joint, weighted, non-negative fit of noise terms to a measured Allan variance curve.
 
 Method (per axis)
 -----------------
@@ -96,7 +97,8 @@ class _Problem:
         return np.linalg.cholesky(cov)
 
     def solve(self, shapes, iterations=_IRLS_ITERATIONS, offset=0.0):
-        """IRLS GLS-NNLS; return (coefficients, chi2, whitened design).
+        """
+        IRLS GLS-NNLS; return (coefficients, chi2, whitened design).
 
         ``offset`` is a fixed model part (AVAR per tau) added to ``shapes @ coef``.
         """
@@ -225,7 +227,8 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None):
 
 
 def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
-    """Largest coefficient of an undetected ``term`` the data allow (profile likelihood).
+    """
+    Largest coefficient of an undetected ``term`` the data allow (profile likelihood).
 
     The other ``terms`` are refitted for each trial value; the limit is where chi^2 exceeds
     its minimum by ``delta_chi2`` (4: one-sided ~97.7 %, two-sided 95 %).  Used to give Kalibr,
@@ -276,15 +279,16 @@ class FittedModel:
         return list(self.fits)
 
     def value(self, axis, term, param='value'):
-        """A fitted parameter (SI, continuous time), NaN if the term was not detected."""
+        """Return a fitted parameter (SI, continuous time), NaN if the term was not detected."""
         return self.model.value(axis, term, param)
 
     def interval(self, axis, term, param='value'):
-        """The 68.3 % interval of a parameter, ``(nan, nan)`` if not detected."""
+        """Return the 68.3 % interval of a parameter, ``(nan, nan)`` if not detected."""
         return self.intervals.get(axis, {}).get(term, {}).get(param, (math.nan, math.nan))
 
     def upper_limit(self, axis, term):
-        """95 % upper limit of a term the fit of ``axis`` did not select (SI, cached).
+        """
+        95 % upper limit of a term the fit of ``axis`` did not select (SI, cached).
 
         NaN if the term was selected, nothing was, or the data do not bound it (see
         :func:`upper_limit`).  Exporters write it where a consumer needs a number.
@@ -326,7 +330,8 @@ class FittedModel:
 
 
 def fit_noise_model(result, terms=None, axes=None):
-    """Fit noise terms to every axis of an :class:`~imu_allan.core.allan.AllanResult`.
+    """
+    Fit noise terms to every axis of an :class:`~imu_allan.core.allan.AllanResult`.
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""One first-order Gauss-Markov bias in place of the bias terms a simulator cannot represent.
+"""
+One first-order Gauss-Markov bias in place of the bias terms a simulator cannot represent.
 
 Gazebo (gz-sensors ``GaussianNoiseModel::ApplyImpl``, src/GaussianNoiseModel.cc:128-140) and
 the PX4 SITL ``gazebo_imu_plugin`` (PX4-SITL_gazebo-classic src/gazebo_imu_plugin.cpp:195-213)
@@ -44,7 +45,8 @@ def stationary_sigma(drive, tau_c):
 
 @dataclass
 class GaussMarkovFit:
-    """The one Gauss-Markov standing in for an axis's bias terms.
+    """
+    The one Gauss-Markov standing in for an axis's bias terms.
 
     ``sigma`` is the stationary std (rad/s or m/s^2), ``tau_c`` the correlation time (s),
     ``replaces`` the terms it stands for, ``exact`` whether it reproduces them exactly
@@ -67,7 +69,8 @@ class GaussMarkovFit:
 
 
 def best_gauss_markov(axis_terms, tau_range, rate_hz):
-    """One Gauss-Markov matching the bias terms of one axis over ``tau_range`` (s, (lo, hi)).
+    """
+    One Gauss-Markov matching the bias terms of one axis over ``tau_range`` (s, (lo, hi)).
 
     A single ``gauss_markov`` term is returned as it is; a lone rate random walk K becomes
     sigma_b = K with tau_c = :data:`RANDOM_WALK_TAU_FACTOR` x hi; anything else (bias

@@ -1,4 +1,5 @@
-"""IMU health: fitted noise coefficients against a noise budget, plus stamp checks.
+"""
+IMU health: fitted noise coefficients against a noise budget, plus stamp checks.
 
 ROS-free.  The allan node turns the :class:`Health` records built here into
 ``diagnostic_msgs/DiagnosticStatus`` entries on ``/diagnostics``; tests and offline tools use
@@ -57,7 +58,8 @@ class NoiseBudget:
 
     @classmethod
     def from_dict(cls, data, where='budget'):
-        """Build from the file layout (the schema of :mod:`imu_allan.core.model`).
+        """
+        Build from the file layout (the schema of :mod:`imu_allan.core.model`).
 
         Raises :class:`~imu_allan.core.model.ModelError` (an InputError) naming ``where``.
         """
@@ -95,7 +97,8 @@ def _fmt(value):
 
 
 def budget_health(coeffs, budget, axes=AXES, prefix=''):
-    """Compare a coefficient table with a budget; one :class:`Health` per axis.
+    """
+    Compare a coefficient table with a budget; one :class:`Health` per axis.
 
     Parameters
     ----------
@@ -104,8 +107,11 @@ def budget_health(coeffs, budget, axes=AXES, prefix=''):
         :data:`~imu_allan.core.units.IEEE_TERMS`, NaN where a term is not detected (the
         ``imu/allan_coeffs`` layout).  None means no estimate yet: every axis is STALE.
     budget : NoiseBudget
+        The limits per axis and term.
     axes : sequence of str
         Axis names of the table rows.
+    prefix : str
+        Prefix of the status names (the node's name and a colon).
 
     Returns
     -------
@@ -162,7 +168,8 @@ def budget_health(coeffs, budget, axes=AXES, prefix=''):
 
 
 class StampMonitor:
-    """Header-stamp checks on a sample stream: order, gaps and rate (bounded memory).
+    """
+    Header-stamp checks on a sample stream: order, gaps and rate (bounded memory).
 
     Out-of-order or repeated stamps (not later than the last kept one) are dropped.  A gap is a
     spacing above ``gap_factor`` sample intervals: the samples on both sides are kept, but the
@@ -185,7 +192,8 @@ class StampMonitor:
         self._recent = {'n': 0, 't0': None, 't1': None, 'gaps': 0, 'out_of_order': 0}
 
     def check(self, t):
-        """Check stamps ``t`` (s, shape (n,)); return ``(keep, break_before)`` boolean arrays.
+        """
+        Check stamps ``t`` (s, shape (n,)); return ``(keep, break_before)`` boolean arrays.
 
         ``break_before[i]`` marks a kept sample that follows a gap.
         """
@@ -245,7 +253,8 @@ RATE_SETTLE_S = 2.0
 
 
 class RateFinder:
-    """Measures a stream's sample rate from its header stamps, holding the samples meanwhile.
+    """
+    Measures a stream's sample rate from its header stamps, holding the samples meanwhile.
 
     The rate is 1 / the median spacing of the increasing stamps (the rule ``analyze`` uses,
     :func:`imu_allan.core.preprocess.check_timing`), fixed once the stamps span ``settle_s``
@@ -290,7 +299,7 @@ class RateFinder:
         return self.rate_hz
 
     def take(self):
-        """The held samples ``(t, data)`` in arrival order; the finder holds none afterwards."""
+        """Return the held samples ``(t, data)`` in arrival order (none are held afterwards)."""
         t, data = np.concatenate(self._t), np.concatenate(self._data)
         self._t, self._data, self.n_held = [], [], 0
         return t, data
@@ -299,11 +308,13 @@ class RateFinder:
 def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
                   excluded_share=math.nan, max_excluded_share=0.5, name='IMU stream',
                   rejected=None):
-    """Health of the input stream: stamps, rate and motion-gate exclusions.
+    """
+    Health of the input stream: stamps, rate and motion-gate exclusions.
 
     Parameters
     ----------
     monitor : StampMonitor
+        The stamp checks of the stream.
     recent : dict
         ``monitor.take_recent()`` for the span since the last report.
     silence_s : float
@@ -320,6 +331,8 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
     rejected : dict, optional
         ``{axis: n}`` samples rejected since the last report as NaN, inf or non-physical
         (``OnlineAllan.take_rejected``): WARN with the counts.
+    name : str
+        Name of the status.
 
     """
     rate = recent['rate_hz'] if math.isfinite(recent['rate_hz']) else monitor.measured_rate()
@@ -362,7 +375,8 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
 
 
 def discrepancy_health(model, result, axes=AXES, prefix=''):
-    """Model-vs-data check for the allan node's ``model_file``: one :class:`Health` per axis.
+    """
+    Model-vs-data check for the allan node's ``model_file``: one :class:`Health` per axis.
 
     Uses :func:`imu_allan.core.discrepancy.gap_summary` (analytic band, milliseconds per axis):
     OK when the measured curve is consistent with the model, WARN with the gap (about 1 means

@@ -1,4 +1,5 @@
-"""Noise models: which terms act on which axis, with continuous-time SI parameters.
+"""
+Noise models: which terms act on which axis, with continuous-time SI parameters.
 
 A :class:`NoiseModel` is what the simulator consumes, what the fit produces and what model
 files hold.  Model file format (YAML, SI units, continuous time)::
@@ -26,12 +27,13 @@ import stat
 
 import yaml
 
-from ..errors import InputError
 from .units import ALL_TERMS, AXES, sensor_of, TERM_PARAMETERS
+from ..errors import InputError
 
 
 class ModelError(InputError):
-    """A model or budget file (or model dictionary) is malformed.
+    """
+    A model or budget file (or model dictionary) is malformed.
 
     ``ModelError('file: problem')`` (one text) and ``ModelError(where, problem)`` both work.
     """
@@ -76,7 +78,8 @@ def _kind(value):
 
 
 def read_yaml_file(path, what='model'):
-    """Load a model or budget YAML file within the schema's bounds.
+    """
+    Load a model or budget YAML file within the schema's bounds.
 
     Raises :class:`ModelError` naming the file: unreadable, a directory or special file,
     larger than :data:`MAX_FILE_BYTES`, binary, not valid YAML, duplicate keys, nested too
@@ -118,7 +121,8 @@ def as_mapping(value, where, name):
 
 
 def as_number(value, where, name, low=0.0, high=MAX_PARAMETER, low_open=False):
-    """Return ``value`` as a finite float in [low, high] (or (low, high]); else ModelError.
+    """
+    Return ``value`` as a finite float in [low, high] (or (low, high]); else ModelError.
 
     Numbers and numeric text (YAML 1.1 reads ``1e-4`` as text) are accepted; true/false,
     lists, mappings, NaN and infinities are not.
@@ -140,7 +144,8 @@ def as_number(value, where, name, low=0.0, high=MAX_PARAMETER, low_open=False):
 
 
 def per_axis_entries(data, where, more_keys=()):
-    """The layout model and budget files share, checked: ``{axis: {term: raw value}}``.
+    """
+    Return the layout model and budget files share, checked: ``{axis: {term: raw value}}``.
 
     Top level: ``gyro`` and ``accel`` (defaults for their three axes), ``axes`` (per-axis
     overrides), ``description`` and ``more_keys``; every section a mapping, axes known.
@@ -269,7 +274,8 @@ DATA_DIR = os.path.join(os.path.dirname(os.path.dirname(__file__)), 'data')
 
 
 def thesis_gx3_25_model():
-    """Measured 3DM-GX3-25 noise from the thesis (Tables 4.1/4.2 averages), SI units.
+    """
+    Measured 3DM-GX3-25 noise from the thesis (Tables 4.1/4.2 averages), SI units.
 
     Gyro ARW 1.98/1.97/2.07 deg/sqrt(h) and bias instability 31/31.66/36.66 deg/h; accel VRW
     0.05 m/s/sqrt(h) and bias instability 2.31/3.55/2.48 m/s/h; 100 Hz.

@@ -1,4 +1,5 @@
-"""The online pipeline the allan node runs, and the staged publish cycle.
+"""
+The online pipeline the allan node runs, and the staged publish cycle.
 
 Stamp checks -> stationarity gate -> streaming
 Allan variance (:mod:`imu_allan.core.streaming`) -> fit.
@@ -13,15 +14,16 @@ import numpy as np
 
 from .allan import AllanResult
 from .fit import fit_noise_model, FitError, FittedModel
-from ..errors import InputError
-from .health import Health, RATE_SETTLE_S, RateFinder, STALE, stream_health, StampMonitor
+from .health import Health, RATE_SETTLE_S, RateFinder, STALE, StampMonitor, stream_health
 from .stationarity import StationarityGate
 from .streaming import StreamingAllan
 from .units import AXES, is_gyro, physical_limits
+from ..errors import InputError
 
 
 class OnlineAllan:
-    """The online pipeline: stamp checks -> stationarity gate -> streaming Allan -> fit.
+    """
+    The online pipeline: stamp checks -> stationarity gate -> streaming Allan -> fit.
 
     ROS-free; the allan node feeds it message batches and ``online_allan`` feeds it a whole
     record, so both produce the same numbers for the same samples.
@@ -124,7 +126,8 @@ class OnlineAllan:
             self.estimator.update(out, still, brk_out)
 
     def _reject_nonphysical(self, data, brk):
-        """Leave out samples with a NaN, inf or non-physical value (``units.PHYSICAL_LIMIT``).
+        """
+        Leave out samples with a NaN, inf or non-physical value (``units.PHYSICAL_LIMIT``).
 
         Counted per axis (:attr:`rejected_total`, :meth:`take_rejected`).  The estimator keeps
         the axes in step, so such a sample is left out of every axis, as a stamp gap is: the
@@ -153,12 +156,16 @@ class OnlineAllan:
         return recent
 
     def result(self, window=False):
-        """Current :class:`~imu_allan.core.allan.AllanResult` (None until enough data)."""
+        """Return current :class:`~imu_allan.core.allan.AllanResult` (None until enough data)."""
         return None if self.estimator is None else self.estimator.result(window=window)
 
     def stream_health(self, silence_s, timeout_s=2.0, rate_tolerance=0.1, name='IMU stream'):
-        """:func:`~imu_allan.core.health.stream_health` of the input, STALE while the rate is
-        being measured; the values say whether tau0 was configured or measured."""
+        """
+        Return the :func:`~imu_allan.core.health.stream_health` of the input.
+
+        STALE while the rate is being measured; the values say whether tau0 was configured
+        or measured.
+        """
         if self.monitor is None:
             values = {'rate_source': self.rate_source, 'samples_held': self.finder.n_held,
                       'settle_s': self.finder.settle_s, 'silence_s': silence_s}
@@ -183,7 +190,8 @@ class OnlineAllan:
 
 
 def check_rate_options(rate_hz, max_tau, window_s, min_clusters, gate_window_s):
-    """Raise InputError naming the first option that does not fit the sample rate (Hz).
+    """
+    Raise InputError naming the first option that does not fit the sample rate (Hz).
 
     ``gate_window_s`` None: no gate.  The allan node checks a configured rate when it starts;
     :class:`OnlineAllan` checks a measured one when it is found.
@@ -199,7 +207,8 @@ def check_rate_options(rate_hz, max_tau, window_s, min_clusters, gate_window_s):
 
 
 class StagedEstimate:
-    """One estimate-and-fit cycle of an :class:`OnlineAllan`, in short steps.
+    """
+    One estimate-and-fit cycle of an :class:`OnlineAllan`, in short steps.
 
     The sums are frozen when the cycle starts; each :meth:`step` then does one axis's EDF and
     intervals or one axis's fit (a few tens of ms), so a node can interleave them with taking
@@ -222,7 +231,7 @@ class StagedEstimate:
 
     @property
     def done(self):
-        """True when every step has run."""
+        """Return True when every step has run."""
         return not self._queue
 
     def step(self):
@@ -282,7 +291,8 @@ class _TagDelay:
 
 def online_allan(data, rate_hz, t=None, axes=None, gate=True, gate_options=None,
                  gap_factor=1.5, window=False, **estimator_options):
-    """Run the online estimator over a whole record; return an ``AllanResult`` (or None).
+    """
+    Run the online estimator over a whole record; return an ``AllanResult`` (or None).
 
     The same code and defaults as the allan node: for the same samples (and options) the
     numbers equal what the node publishes.  ``t`` (s) enables the stamp checks (out-of-order
@@ -294,9 +304,17 @@ def online_allan(data, rate_hz, t=None, axes=None, gate=True, gate_options=None,
     data : array_like
         Shape (n, A), SI units.
     rate_hz : float
-        Sample rate, Hz.
+        Sample rate, Hz (0: measured from ``t``).
+    t : array_like, optional
+        Header stamps, s (n,): enables the stamp checks.
     axes : sequence of str, optional
         Column names (default the first A package axes).
+    gate, gate_options : bool, dict
+        Leave moving spans out, with these gate parameters (as the node).
+    gap_factor : float
+        A stamp spacing above this many sample intervals is a gap.
+    window : bool
+        Return the sliding-window estimate (needs ``window_s``).
     **estimator_options
         :class:`StreamingAllan` parameters: ``max_tau``, ``points_per_decade``, ``taus``,
         ``stride_base``, ``exact``, ``window_s``, ``window_buckets``, ``frame``,

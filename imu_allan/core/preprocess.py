@@ -1,4 +1,5 @@
-"""Preprocessing from the thesis, as options: outliers, time-stamp checks, unit conversion.
+"""
+Preprocessing from the thesis, as options: outliers, time-stamp checks, unit conversion.
 
 * Tukey's fences (thesis section 4.2): a sample below Q1 - F IQR or above Q3 + F IQR (F = 3,
   "extreme" outliers) is replaced by the mean of the inliers of its axis, as the thesis does;
@@ -28,7 +29,7 @@ class OutlierReport:
 
     @property
     def total(self):
-        """Samples replaced over all axes."""
+        """Return the samples replaced over all axes."""
         return int(sum(self.counts.values()))
 
 
@@ -71,7 +72,8 @@ class TimingReport:
 
 
 def count_gaps(steps, nominal, gap_factor=GAP_FACTOR):
-    """Which sample spacings are gaps, and how many samples the gaps lost.
+    """
+    Which sample spacings are gaps, and how many samples the gaps lost.
 
     ``steps`` are spacings (any unit: s, device ticks) and ``nominal`` the regular spacing in
     the same unit; a spacing above ``gap_factor`` x nominal is a gap that lost
@@ -82,8 +84,11 @@ def count_gaps(steps, nominal, gap_factor=GAP_FACTOR):
     gaps = steps > gap_factor * nominal
     missing = int(np.sum(np.round(steps[gaps] / nominal) - 1)) if gaps.any() else 0
     return gaps, missing
+
+
 def nominal_interval(steps, share=0.15, tolerance=0.1, max_factor=8):
-    """The sample interval of a record from its positive time steps (any unit).
+    """
+    Return the sample interval of a record from its positive time steps (any unit).
 
     The median step, unless lost samples made most steps a multiple of the true interval (a
     damaged capture losing half its packets steps by 2, 3 ... intervals): then the largest
@@ -100,7 +105,8 @@ def nominal_interval(steps, share=0.15, tolerance=0.1, max_factor=8):
 
 
 def check_timing(t, gap_factor=GAP_FACTOR):
-    """Analyse time stamps ``t`` (s): rate, gaps, jitter and non-increasing steps.
+    """
+    Analyse time stamps ``t`` (s): rate, gaps, jitter and non-increasing steps.
 
     ``missing_samples`` estimates how many samples the gaps lost; ``jitter`` is the std of
     the regular intervals divided by the nominal interval.

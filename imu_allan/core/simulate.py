@@ -1,4 +1,5 @@
-"""Time-series simulation of a :class:`~imu_allan.core.model.NoiseModel`.
+"""
+Time-series simulation of a :class:`~imu_allan.core.model.NoiseModel`.
 
 Every term is generated with the statistics its analytic Allan variance assumes
 (:mod:`imu_allan.core.terms`), so simulated curves and analytic curves can be compared:
@@ -29,7 +30,8 @@ FLICKER_SPAN = 8
 
 
 def flicker_noise(rng, n, rate_hz, b):
-    """1/f noise with two-sided PSD ``b^2 / (2 pi f)`` between 1/(FLICKER_SPAN T) and fs/2.
+    """
+    1/f noise with two-sided PSD ``b^2 / (2 pi f)`` between 1/(FLICKER_SPAN T) and fs/2.
 
     Shaped white noise in the frequency domain: E|Z_k|^2 = S(f_k) * m * fs gives the discrete
     series the two-sided PSD S (periodogram convention |Y_k|^2 / (m fs)).
@@ -83,7 +85,8 @@ def simulate_axis(terms, n_samples, rate_hz, rng):
 
 
 def simulate(model, n_samples, rate_hz, seed=None, axes=None):
-    """Simulate ``n_samples`` at ``rate_hz`` from a noise model.
+    """
+    Simulate ``n_samples`` at ``rate_hz`` from a noise model.
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""Stationarity gate: find the still spans of an IMU stream (Allan analysis needs a still IMU).
+"""
+Stationarity gate: find the still spans of an IMU stream (Allan analysis needs a still IMU).
 
 ROS-free, streaming, bounded memory.  The stream is cut into windows of ``window_s`` seconds
 (counted in samples from the start of the stream, so decisions do not depend on how the stream
@@ -36,7 +37,8 @@ _FLOOR_EVERY = 8
 
 
 class StationarityGate:
-    """Streaming motion detector; :meth:`update` returns the samples it has decided on.
+    """
+    Streaming motion detector; :meth:`update` returns the samples it has decided on.
 
     Parameters
     ----------
@@ -111,7 +113,7 @@ class StationarityGate:
 
     @property
     def pending(self):
-        """Samples received but not yet decided (at most two windows)."""
+        """Return the samples received but not yet decided (at most two windows)."""
         return self._part_n + (self.w if self._held_raw is not None else 0)
 
     def _floor(self):
@@ -175,7 +177,8 @@ class StationarityGate:
         self._held_raw = raw
 
     def update(self, block):
-        """Feed samples (n, n_axes); return ``(data, still)`` for the samples now decided.
+        """
+        Feed samples (n, n_axes); return ``(data, still)`` for the samples now decided.
 
         The returned samples are the input delayed by one to two windows, in order;
         ``still`` (bool) is True where the sample may enter the Allan estimate.
@@ -213,7 +216,8 @@ class StationarityGate:
         return np.concatenate(out_data), np.concatenate(out_mask)
 
     def flush(self):
-        """Decide everything still pending (end of a record); return ``(data, still)``.
+        """
+        Decide everything still pending (end of a record); return ``(data, still)``.
 
         The held window is decided without a successor; a partial last window takes the
         decision of its predecessor.
@@ -241,7 +245,8 @@ class StationarityGate:
 
 
 def stationary_mask(data, rate_hz, **options):
-    """Mask of the still samples of a whole record; return ``(still, excluded_share)``.
+    """
+    Mask of the still samples of a whole record; return ``(still, excluded_share)``.
 
     ``data`` (n, A) in SI units with gyro columns first (the package axis order); ``options``
     are :class:`StationarityGate` parameters.

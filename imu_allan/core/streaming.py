@@ -1,4 +1,5 @@
-"""Bounded-memory online overlapping Allan variance (the estimator the online pipeline runs).
+"""
+Bounded-memory online overlapping Allan variance (the estimator the online pipeline runs).
 
 Estimator
 ---------
@@ -58,7 +59,8 @@ DEFAULT_FRAME = 1024
 
 def factor_grid(rate_hz, max_tau=DEFAULT_MAX_TAU, points_per_decade=DEFAULT_POINTS_PER_DECADE,
                 taus=None, stride_base=DEFAULT_STRIDE_BASE, exact=False):
-    """Averaging factors and strides the streaming estimator tracks.
+    """
+    Averaging factors and strides the streaming estimator tracks.
 
     Returns ``(m, stride)`` int arrays (sorted, unique).  ``taus`` (s) replaces the log grid.
     Factors above ``stride_base`` are rounded to a multiple of their stride unless ``exact``.
@@ -108,7 +110,8 @@ class _State:
 
 
 class StreamingAllan:
-    """Online overlapping Allan variance with fixed memory (see the module docstring).
+    """
+    Online overlapping Allan variance with fixed memory (see the module docstring).
 
     Parameters
     ----------
@@ -173,12 +176,12 @@ class StreamingAllan:
 
     @property
     def n_used(self):
-        """Samples that entered the estimate (committed frames plus the unfinished one)."""
+        """Return the samples in the estimate (committed frames plus the unfinished one)."""
         return self._st.n_used + int(self._pend_use[:self._pend_n].sum())
 
     @property
     def n_offered(self):
-        """Samples given to :meth:`update`, used or not."""
+        """Return the samples given to :meth:`update`, used or not."""
         return self._st.n_offered + self._pend_n
 
     def memory_bytes(self):
@@ -189,7 +192,8 @@ class StreamingAllan:
     # -- input -------------------------------------------------------------------------------
 
     def update(self, block, use=None, break_before=None):
-        """Add rate samples.
+        """
+        Add rate samples.
 
         Parameters
         ----------
@@ -316,7 +320,7 @@ class StreamingAllan:
     # -- output ------------------------------------------------------------------------------
 
     def _current_state(self):
-        """The state including the unfinished frame (on a copy; the committed one is kept)."""
+        """Return the state with the unfinished frame (on a copy; the committed one is kept)."""
         if self._pend_n == 0:
             return self._st
         st = copy.deepcopy(self._st)
@@ -325,7 +329,8 @@ class StreamingAllan:
         return st
 
     def sums(self, window=False):
-        """Raw running sums: ``(m, stride, sum_sq (F, A), count (F,))`` in sample units.
+        """
+        Raw running sums: ``(m, stride, sum_sq (F, A), count (F,))`` in sample units.
 
         ``sum_sq[f] / (2 m^2 count[f])`` is the Allan variance in the samples' unit squared.
         """
@@ -337,7 +342,8 @@ class StreamingAllan:
         return self.ms, self.strides, st.acc.copy(), st.cnt.copy()
 
     def snapshot(self, window=False, min_clusters=None):
-        """The reportable factors now: ``(m, avar (T, A), n_eff (T,))``, or None.
+        """
+        Return the reportable factors now: ``(m, avar (T, A), n_eff (T,))``, or None.
 
         Only factors whose data span ``min_clusters`` x m samples are included.  ``n_eff`` is
         the span each factor's terms cover (count x stride + 2m - 1 samples), used as the
@@ -354,7 +360,7 @@ class StreamingAllan:
         return m, avar, n_eff[sel]
 
     def result_from(self, snapshot, columns=None):
-        """An AllanResult (EDF, intervals) of a :meth:`snapshot`, optionally some columns."""
+        """Build an AllanResult (EDF, intervals) of a :meth:`snapshot`, optionally some columns."""
         if snapshot is None:
             return None
         m, avar, n_eff = snapshot
@@ -364,7 +370,8 @@ class StreamingAllan:
                                      [self.axes[j] for j in columns])
 
     def result(self, window=False, min_clusters=None):
-        """Allan deviation of everything seen (or of the sliding window) as an AllanResult.
+        """
+        Allan deviation of everything seen (or of the sliding window) as an AllanResult.
 
         None when no factor has enough data yet (see :meth:`snapshot`).
         """

@@ -1,4 +1,5 @@
-"""The noise-term registry (:data:`TERMS`) and the analytic Allan variance of each term.
+"""
+The noise-term registry (:data:`TERMS`) and the analytic Allan variance of each term.
 
 One :class:`TermSpec` per term holds its parameters and units, power-law exponent, Allan
 shape, peak ratio and conventional units; the estimator, the fit, the discrepancy workflow,
@@ -50,7 +51,8 @@ _DISCRETE_FLICKER_MAX_M = 1000
 
 @functools.lru_cache(maxsize=4096)
 def _sampled_flicker(m):
-    """AVAR per B^2 of a *sampled* 1/f series (PSD B^2/(2 pi f) up to Nyquist) at factor m.
+    """
+    AVAR per B^2 of a *sampled* 1/f series (PSD B^2/(2 pi f) up to Nyquist) at factor m.
 
     With the discrete transfer function of the difference of adjacent m-sample means,
     AVAR = 4 int_0^{fs/2} S(f) sin^4(pi f m dt) / (m^2 sin^2(pi f dt)) df; with u = pi f dt
@@ -103,7 +105,8 @@ def white_shape(tau):
 
 
 def random_walk_shape(tau, rate_hz=None):
-    """AVAR of a rate random walk per unit K^2: tau / 3.
+    """
+    AVAR of a rate random walk per unit K^2: tau / 3.
 
     With ``rate_hz`` the exact correction for a *sampled* random walk is added: the AVAR of
     a cumulative sum of white steps at factor m is K^2 dt (2 m^2 + 1) / (6 m), i.e.
@@ -132,7 +135,8 @@ STANDARD_GRAVITY = 9.80665
 
 @dataclass(frozen=True)
 class TermSpec:
-    """Everything the package knows about one noise term, in one place.
+    """
+    Everything the package knows about one noise term, in one place.
 
     Attributes
     ----------
@@ -174,7 +178,7 @@ class TermSpec:
 
     @property
     def deterministic(self):
-        """True for terms whose Allan variance estimate carries no randomness of its own."""
+        """Return True for terms whose Allan variance estimate carries no randomness of its own."""
         return self.alpha is None and self.name != 'gauss_markov'
 
     @property
@@ -202,7 +206,8 @@ class TermSpec:
         return params[self.params[0]], (params[self.params[1]] if self.position else None)
 
     def alpha_at(self, tau, params=None):
-        """Noise exponent per averaging time (array); 0 for deterministic terms.
+        """
+        Noise exponent per averaging time (array); 0 for deterministic terms.
 
         A Gauss-Markov process looks like a random walk (-2) below its correlation time and
         like white noise (0) above it.
@@ -219,7 +224,7 @@ class TermSpec:
         return self.peak_ratio / tau_hi, self.peak_ratio / tau_lo
 
     def position_at_peak(self, tau_peak):
-        """The position that puts the Allan-deviation peak at ``tau_peak`` (s)."""
+        """Return the position that puts the Allan-deviation peak at ``tau_peak`` (s)."""
         if self.name == 'gauss_markov':
             return tau_peak / self.peak_ratio
         return self.peak_ratio / tau_peak

@@ -1,4 +1,5 @@
-"""Axis names, noise-term keys and unit conversions shared by the whole package.
+"""
+Axis names, noise-term keys and unit conversions shared by the whole package.
 
 Everything inside the package is SI: rad/s and m/s^2 for samples, continuous-time noise
 coefficients in the IEEE Std 952 / 1293 units of the term registry

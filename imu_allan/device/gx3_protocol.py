@@ -1,4 +1,5 @@
-"""LORD MicroStrain 3DM-GX3-25 single-byte protocol: command encoders and reply decoders.
+"""
+LORD MicroStrain 3DM-GX3-25 single-byte protocol: command encoders and reply decoders.
 
 ROS-free.  Byte layouts follow the DCP manual v1.14 (docs/references.md):
 
@@ -172,7 +173,8 @@ def rate_for_decimation(decimation):
 
 
 def min_decimation(baud, record_length=31):
-    """Smallest decimation a baud rate can carry for records of ``record_length`` bytes.
+    """
+    Smallest decimation a baud rate can carry for records of ``record_length`` bytes.
 
     DCP-GX3 Table 5 gives the limit for 31-byte records; longer records are limited by the
     byte budget ``baud / 10`` bytes/s (8N1), e.g. 79-byte 0xCC records at 115200 baud: 7.
@@ -219,7 +221,8 @@ def cmd_device_reset():
 
 @dataclass
 class SamplingSettings:
-    """Content of the sampling-settings command/reply (0xDB).
+    """
+    Content of the sampling-settings command/reply (0xDB).
 
     ``decimation``: output rate = 1000 Hz / decimation; ``flags``: data-conditioning bits;
     ``filter_window`` (gyro/accel) and ``mag_window``: 1..32 samples; ``up_compensation`` and
@@ -251,7 +254,8 @@ class SamplingSettings:
 
 
 def cmd_sampling_settings(settings=None, function=1):
-    """Encode sampling settings 0xDB (20 bytes).
+    """
+    Encode sampling settings 0xDB (20 bytes).
 
     ``function``: 0 read only (the settings are ignored and sent as zeros), 1 apply, 2 apply and
     store in non-volatile memory, 3 apply without reply.
@@ -273,7 +277,8 @@ def cmd_read_sampling_settings():
 
 
 def cmd_comm_settings(baud=DEFAULT_BAUD, function=1, port=1, config=0x02):
-    """Communications settings 0xD9 (11 bytes): ``function`` 0 read, 1 temporary, 2 stored.
+    """
+    Communications settings 0xD9 (11 bytes): ``function`` 0 read, 1 temporary, 2 stored.
 
     The reply comes at the old baud rate; the new one applies after it.
     """
@@ -370,7 +375,8 @@ def encode_timer_reply(timer):
 
 @dataclass
 class Record:
-    """One decoded data record: ``code``, ``timer`` (ticks) and float ``fields`` by name.
+    """
+    One decoded data record: ``code``, ``timer`` (ticks) and float ``fields`` by name.
 
     Field units as sent: accel g, gyro rad/s, mag gauss, euler rad, matrix dimensionless.
     """
@@ -411,7 +417,8 @@ def record_dtype(code, little_endian=False):
 
 
 def decode_records(code, packets, little_endian=False):
-    """Decode many records of one code at once (checksums must already be verified).
+    """
+    Decode many records of one code at once (checksums must already be verified).
 
     ``packets`` is a list of records (bytes) or their concatenation.  Returns a dict with
     ``timer`` (n,) int64 ticks and one float32 array (n, k) per field of
@@ -484,7 +491,8 @@ def decode_timer_reply(packet):
 
 
 class TimerUnwrapper:
-    """Turn the u32 device timer into a monotonic 64-bit tick count.
+    """
+    Turn the u32 device timer into a monotonic 64-bit tick count.
 
     A backwards step whose forward distance modulo 2**32 is at most ``max_gap_ticks`` is a
     rollover (add 2**32).  A larger backwards step is a timer *reset* (power cycle, 0xD7): the
@@ -524,7 +532,8 @@ class TimerUnwrapper:
 
 
 def matrix_to_quaternion(matrix):
-    """Quaternions ``(n, 4)`` as ``x, y, z, w`` of the device orientation matrices.
+    """
+    Quaternions ``(n, 4)`` as ``x, y, z, w`` of the device orientation matrices.
 
     ``matrix`` has shape ``(n, 9)`` (row-major M, as sent) or ``(n, 3, 3)``.  M maps earth to
     sensor (``v_sensor = M v_earth``), so the sensor's orientation in the earth frame is the

@@ -1,4 +1,5 @@
-"""Stream framer for the 3DM-GX3-25 single-byte protocol (ROS-free).
+"""
+Stream framer for the 3DM-GX3-25 single-byte protocol (ROS-free).
 
 The protocol has no sync pattern and no length field: a reply is recognised by its header
 byte, the fixed length that header implies, and a valid checksum.  Header values also occur
@@ -36,7 +37,8 @@ class ParserStats:
 
 
 class StreamParser:
-    """Find checksummed packets in a byte stream fed in arbitrary chunks.
+    """
+    Find checksummed packets in a byte stream fed in arbitrary chunks.
 
     ``codes``: reply codes to accept (default: every reply of the protocol).  Use
     :meth:`feed` for each chunk; it returns the complete good packets (``bytes``, header to

@@ -1,4 +1,5 @@
-"""Serial transport to a 3DM-GX3-25 and the device session loop (ROS-free).
+"""
+Serial transport to a 3DM-GX3-25 and the device session loop (ROS-free).
 
 * :class:`SerialLink`: open/read/write/close a pyserial port; every failure becomes a
   :class:`LinkError` with a one-line reason.
@@ -58,10 +59,10 @@ class SerialLink:
 
     @property
     def is_open(self):
-        """True while the port is open."""
+        """Return True while the port is open."""
         return self.serial is not None
 
-    def open(self):
+    def open(self):  # noqa: A003 - the link's own verb, as pyserial names it
         """Open the port; discard anything received before this moment."""
         import serial
         self.close()
@@ -125,7 +126,7 @@ class Backoff:
         self.maximum = maximum
         self.delay = initial
 
-    def next(self):
+    def next(self):  # noqa: A003 - the next delay, as iterators name it
         """Return the delay to wait now and double the next one."""
         delay = self.delay
         self.delay = min(self.maximum, self.delay * 2.0)
@@ -155,7 +156,8 @@ class TimeSync:
         self.minima = deque()
 
     def stamps(self, device_s, host_s):
-        """Host-clock stamps, integer ns, for device times ``device_s`` received at ``host_s``.
+        """
+        Host-clock stamps, integer ns, for device times ``device_s`` received at ``host_s``.
 
         Internally times are relative to a whole-second epoch of the host clock, so float64
         keeps sub-nanosecond resolution (absolute epoch seconds would round to 0.24 us).
@@ -202,7 +204,8 @@ MODES = {
 
 
 def check_rate(rate_hz, baud, mode):
-    """Validate a rate for a baud rate and mode; return ``(decimation, flags)``.
+    """
+    Validate a rate for a baud rate and mode; return ``(decimation, flags)``.
 
     Raise ValueError with a user-facing reason when the link cannot carry the rate (DCP-GX3
     Table 5, extended to longer records by the byte budget) or when orientation is asked for
@@ -251,7 +254,8 @@ class SessionStats:
 
 
 class Gx3Session:
-    """Talk to one 3DM-GX3-25 on a serial port and deliver decoded batches.
+    """
+    Talk to one 3DM-GX3-25 on a serial port and deliver decoded batches.
 
     ``on_batch(code, records, stamps)`` is called from the session thread with ``records``
     from :func:`~imu_allan.device.gx3_protocol.decode_records` (device units) and host-clock
@@ -297,7 +301,8 @@ class Gx3Session:
         self.thread.start()
 
     def stop(self, timeout=5.0):
-        """Ask the loop to end, stop continuous mode and close the port.
+        """
+        Ask the loop to end, stop continuous mode and close the port.
 
         The loop sends the stop command on its way out; the timeout is generous because the
         process exits (ending this daemon thread) once it returns, and a device left streaming
@@ -405,7 +410,7 @@ class Gx3Session:
         self._wait(self.backoff.next())
 
     def _new_epoch(self):
-        """A discontinuity: the next record starts a new gap reference and time anchor."""
+        """Return a discontinuity: the next record starts a new gap reference and time anchor."""
         self._last_ticks = None
         self.unwrapper = p.TimerUnwrapper()
         self.sync.reset()
@@ -547,7 +552,7 @@ class Gx3Session:
         return True
 
     def _change_baud(self):
-        """The device did not answer at our baud: try the factory 115200, switch it with 0xD9."""
+        """Handle a device that did not answer at our baud: try 115200, switch it with 0xD9."""
         self.link.set_baud(p.DEFAULT_BAUD)
         self.link.write(p.cmd_stop_continuous())
         reply = self._request(p.cmd_comm_settings(self.baud, function=1), p.COMM_SETTINGS)
@@ -556,4 +561,3 @@ class Gx3Session:
             return None
         self.log('info', f'{self.link.port}: device switched from 115200 to {self.baud} baud')
         return self._request(p.cmd_firmware_version(), p.FIRMWARE_VERSION)
-

@@ -1,4 +1,5 @@
-"""The simulated 3DM-GX3-25: its protocol state, noise, terminal, faults and run loop.
+"""
+The simulated 3DM-GX3-25: its protocol state, noise, terminal, faults and run loop.
 
 Used by the ``gx3_sim`` command (:mod:`imu_allan.cli.gx3_sim`, which documents the behaviour)
 and by tests: ``Simulator(model, rate_hz=200.0, seed=1, ...)`` takes the :class:`SimConfig`
@@ -18,10 +19,10 @@ import tty
 
 import numpy as np
 
+from . import gx3_protocol as p
 from ..core.model import thesis_gx3_25_model
 from ..core.simulate import simulate
 from ..core.units import AXES, STANDARD_GRAVITY
-from . import gx3_protocol as p
 
 JUNK_BYTES = bytes(b for b in range(256) if b not in p.REPLY_LENGTHS)
 #: Field of the simulated magnetometer, gauss (a mid-latitude Earth field).
@@ -40,7 +41,8 @@ ID_STRINGS = {0: '6223', 1: '6223.01234', 2: '3DM-GX3-25', 3: '5g 300d/s', 4: 'S
 
 @dataclass
 class SimConfig:
-    """How the simulated device powers up and misbehaves (the ``gx3_sim`` options).
+    """
+    How the simulated device powers up and misbehaves (the ``gx3_sim`` options).
 
     Units: rates in Hz, times in s, probabilities per record; ``stream`` is a data command
     code (int, or hex text such as ``'C2'``) to stream from power-up.
@@ -131,7 +133,7 @@ class NoiseSource:
         self.block = np.zeros((0, 6))
         self.i = 0
 
-    def next(self, rate_hz):
+    def next(self, rate_hz):  # noqa: A003 - the next noise sample
         """Next sample (6 values in AXES order) at ``rate_hz``."""
         if rate_hz != self.rate or self.i >= len(self.block):
             n = max(16, int(self.BLOCK_SECONDS * rate_hz))
@@ -343,14 +345,15 @@ class Device:
         return p.encode_mode_reply(current if m in (0, 1, 2) else m, code)
 
     def delayed_due(self, now):
-        """Replies whose delay has expired."""
+        """Return replies whose delay has expired."""
         due = [r for t, r in self.delayed if t <= now]
         self.delayed = [(t, r) for t, r in self.delayed if t > now]
         return due
 
 
 class Terminal:
-    """The pseudo-terminal pair.
+    """
+    The pseudo-terminal pair.
 
     The simulator keeps a slave fd open so the port survives a driver closing and reopening it.
     """
@@ -372,7 +375,7 @@ class Terminal:
 
     @property
     def name(self):
-        """What a driver should open."""
+        """Return what a driver should open."""
         return self.link or self.path
 
     def read(self):
@@ -387,7 +390,7 @@ class Terminal:
             raise
 
     def host_speed(self):
-        """The termios output speed constant the host set (None if unknown)."""
+        """Return the termios output speed constant the host set (None if unknown)."""
         try:
             return termios.tcgetattr(self.master)[5]
         except termios.error:
@@ -461,7 +464,8 @@ class Simulator:
     """The run loop: terminal I/O, pacing, faults, truth log."""
 
     def __init__(self, model=None, **options):
-        """Set up the terminal and the device.
+        """
+        Set up the terminal and the device.
 
         ``model`` defaults to the thesis 3DM-GX3-25 noise; ``options`` are the
         :class:`SimConfig` fields (or ``config=SimConfig(...)``), checked: ValueError if bad.
@@ -496,7 +500,8 @@ class Simulator:
         return 'ok' if written == len(data) else 'unread'
 
     def baud_matches(self):
-        """True when the host opened the port at the device's baud rate (or did not say).
+        """
+        Return True when the host opened the port at the device's baud rate (or did not say).
 
         A pty carries no real baud rate, but its settings are shared by both ends, so the
         simulator sees the speed the host configured and behaves like a UART at another

@@ -1,4 +1,5 @@
-"""Samples in and out: the Imu CDR codec, rosbag2 (sqlite3, MCAP), ROS 1, CSV, logs, captures.
+"""
+Samples in and out: the Imu CDR codec, rosbag2 (sqlite3, MCAP), ROS 1, CSV, logs, captures.
 
 Nothing is imported here, so that commands can list :data:`FORMATS` without loading a reader.
 """

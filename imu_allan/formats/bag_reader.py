@@ -1,4 +1,5 @@
-"""Read ``sensor_msgs/msg/Imu`` samples from rosbag2 (sqlite3, MCAP) and ROS 1 bags.
+"""
+Read ``sensor_msgs/msg/Imu`` samples from rosbag2 (sqlite3, MCAP) and ROS 1 bags.
 
 Two paths give identical numbers:
 
@@ -35,14 +36,14 @@ import struct
 
 import numpy as np
 
-from ..core.units import AXES
-from ..errors import InputError
 from .imu_adapter import imu_to_row
 from .imu_cdr import choose_topic, Collector, decode_rows, deserialize, IMU_TYPES, one_line
 from .mcap_scan import MCAP_MAGIC, McapScan
 from .ros1_scan import read_ros1_scan, ROS1_MAGIC, Ros1Scan
 from .samples import Samples
 from .sqlite_pages import SQLITE_MAGIC, SqlitePages, Unsupported
+from ..core.units import AXES
+from ..errors import InputError
 
 
 def bag_kind(path):
@@ -126,7 +127,8 @@ def any_reader(paths, where):
 
 
 def bag_topics(path):
-    """Return ``{topic: (type, message count)}`` of a bag (any supported form).
+    """
+    Return ``{topic: (type, message count)}`` of a bag (any supported form).
 
     Uses the bag's index through rosbags; a damaged MCAP or ROS 1 file is scanned instead
     (counting the readable messages).
@@ -162,7 +164,8 @@ def list_imu_topics(path):
 
 
 def read_bag(path, topic=None, fast=True):
-    """Read the Imu samples of one topic of a bag.
+    """
+    Read the Imu samples of one topic of a bag.
 
     Parameters
     ----------
@@ -233,7 +236,8 @@ INTEGRITY = {
 
 
 def first_frame_id(path, topic):
-    """The ``header.frame_id`` of the first message on ``topic``; '' if rosbags cannot tell.
+    """
+    Return the ``header.frame_id`` of the first message on ``topic``; '' if rosbags cannot tell.
 
     One message through the generic deserializer: the bulk readers skip the frame id.  Cheap
     for rosbag2 (70 ms on a one-hour 100 Hz MCAP) but about 1 s on a one-hour ROS 1 bag, whose
@@ -313,7 +317,7 @@ def _read_generic(where, p, topic):
 
 
 def _mcap_files(p, kind):
-    """The MCAP storage files of a bag, or [] if it is not an uncompressed MCAP bag."""
+    """Return the MCAP storage files of a bag, or [] if it is not an uncompressed MCAP bag."""
     if kind == 'mcap':
         return [p]
     if kind == 'dir':
@@ -324,7 +328,7 @@ def _mcap_files(p, kind):
 
 
 def _sqlite_files(p, kind):
-    """The sqlite3 storage files of a bag, or [] if it is not sqlite3."""
+    """Return the sqlite3 storage files of a bag, or [] if it is not sqlite3."""
     if kind == 'sqlite3':
         return [p]
     if kind == 'dir':
@@ -350,7 +354,8 @@ def _join(ts, ds):
 
 
 def _read_mcap_files(where, files, topic, force_generic=False, checks=None):
-    """Fast path for MCAP storage: scan every file, bulk-decode the chosen topic.
+    """
+    Fast path for MCAP storage: scan every file, bulk-decode the chosen topic.
 
     ``checks`` (a dict) receives ``chunks_without_crc``, the chunks that could not be verified.
     """
@@ -389,7 +394,8 @@ def _read_mcap_files(where, files, topic, force_generic=False, checks=None):
 
 
 def _read_sqlite_files(where, files, topic, force_generic=False):
-    """Fast path for sqlite3 storage: walk the messages B-tree of each file, decode in bulk.
+    """
+    Fast path for sqlite3 storage: walk the messages B-tree of each file, decode in bulk.
 
     Falls back to SQL queries for files the page reader does not handle (write-ahead log
     present, unusual record layout).

@@ -1,4 +1,5 @@
-"""Write ``sensor_msgs/msg/Imu`` samples as real bags (rosbag2 MCAP/sqlite3, ROS 1) with rosbags.
+"""
+Write ``sensor_msgs/msg/Imu`` samples as real bags (rosbag2 MCAP/sqlite3, ROS 1) with rosbags.
 
 Messages are serialized in bulk with numpy into the fixed layout of ``sensor_msgs/Imu`` (see
 :mod:`imu_allan.formats.bag_reader`); the bytes equal what ``rosbags``' ``serialize_cdr`` /
@@ -15,9 +16,9 @@ import struct
 
 import numpy as np
 
+from .imu_cdr import encode_imu
 from ..core.units import AXES
 from ..errors import InputError
-from .imu_cdr import encode_imu
 
 IMU_TYPE = 'sensor_msgs/msg/Imu'
 STORAGES = ('mcap', 'sqlite3', 'ros1')
@@ -43,7 +44,8 @@ def _check_new(path):
 
 def write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', frame_id='imu_link',
                   extra_topics=None, compress=False):
-    """Write samples as an Imu bag.
+    """
+    Write samples as an Imu bag.
 
     Parameters
     ----------
@@ -106,7 +108,8 @@ def write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', frame_id
 
 
 def fix_mcap_chunk_crcs(folder):
-    """Store each chunk's CRC-32 in the MCAP files of a rosbag2 folder written by rosbags.
+    """
+    Store each chunk's CRC-32 in the MCAP files of a rosbag2 folder written by rosbags.
 
     rosbags 0.11 writes ``uncompressed_crc`` 0 ("not computed", MCAP specification, Chunk
     record), so a flipped byte in a chunk would go unnoticed by every reader; this fills in the
@@ -152,7 +155,8 @@ def _write_merged(writer, streams):
 
 
 def copy_bag_with_topic(src, dst, topic, samples, frame_id='imu_link', compress=False):
-    """Copy every connection and message of a bag into a new MCAP rosbag2 and add an Imu topic.
+    """
+    Copy every connection and message of a bag into a new MCAP rosbag2 and add an Imu topic.
 
     Used by ``analyze --denoise`` to write ``imu/data_denoised`` next to the original topics.
     ROS 1 sources are converted to CDR. Messages are written in receive-time order; the new

@@ -1,4 +1,5 @@
-"""The CSV sample format of the contract (design page, section 5).
+"""
+The CSV sample format of the contract (design page, section 5).
 
 Header line ``t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z``: ``t`` in seconds, gyro in
 rad/s, accel in m/s^2. ``t`` is required; any subset of the axis columns may be present (read
@@ -15,9 +16,9 @@ import tempfile
 
 import numpy as np
 
+from .samples import Samples
 from ..core.units import AXES
 from ..errors import InputError
-from .samples import Samples
 
 _NAME = re.compile(r'^[A-Za-z_][A-Za-z0-9_.]*$')
 _BLOCK = 100_000  # rows formatted per write call (bounds memory for long recordings)
@@ -30,7 +31,8 @@ _EPOCH_S = (1.0e9, 4.1e9)  # Unix time in s from 2001 to 2099: tells the unit of
 
 
 def _time_scale(path, t):
-    """Seconds per unit of the ``t`` column, and a warning when it is not 1 (s).
+    """
+    Seconds per unit of the ``t`` column, and a warning when it is not 1 (s).
 
     The median step must give an IMU rate (:data:`IMU_RATE_HZ`).  If it does in seconds, t is
     seconds.  Otherwise the units ms, us, ns that do are candidates; absolute Unix stamps
@@ -127,7 +129,8 @@ def _lines(path, f, lineno):
 
 
 class _Columns:
-    """The final arrays (t, data, extra columns) filled block by block: no concatenation.
+    """
+    The final arrays (t, data, extra columns) filled block by block: no concatenation.
 
     The row count is estimated from the file size and the first block's bytes per line, so
     the arrays are allocated once (grown by doubling if the estimate was short).
@@ -208,7 +211,8 @@ def _parse_block(path, block, first, names):
 
 
 def read_csv(path):
-    """Read a CSV sample file.
+    """
+    Read a CSV sample file.
 
     Returns
     -------

@@ -1,4 +1,5 @@
-"""Gazebo and PX4 SITL IMU noise in SDFormat, both ways: write it, and read what it simulates.
+"""
+Gazebo and PX4 SITL IMU noise in SDFormat, both ways: write it, and read what it simulates.
 
 Two simulators, read from their own source:
 
@@ -80,7 +81,7 @@ def _version():
 
 
 def _num(x):
-    """A float as SDF text (enough digits to round-trip the simulation)."""
+    """Return a float as SDF text (enough digits to round-trip the simulation)."""
     return f'{x:.9g}'
 
 
@@ -105,7 +106,7 @@ def _inflation(inflate):
 
 
 def looks_like_sdf(path):
-    """True when a model file is XML (SDF, world, URDF or a fragment) rather than YAML."""
+    """Return True when a model file is XML (SDF, world, URDF or a fragment) rather than YAML."""
     if str(path).lower().endswith(('.sdf', '.world', '.xml', '.urdf')):
         return True
     try:
@@ -175,7 +176,8 @@ def _float(elem, tag, where, label, default):
 
 @dataclass
 class SimImu:
-    """The IMU noise block of a Gazebo or PX4 SDF file, in the simulator's own terms.
+    """
+    The IMU noise block of a Gazebo or PX4 SDF file, in the simulator's own terms.
 
     ``kind`` is ``'gazebo'`` or ``'px4'``; ``params`` holds, for gazebo, ``{axis: {noise
     field: value, 'type': str}}`` and for PX4 ``{plugin key: value}`` (defaults filled in,
@@ -191,7 +193,7 @@ class SimImu:
     defaulted: list = field(default_factory=list)
 
     def rate_for(self, data_rate_hz=None):
-        """The rate the per-sample values refer to: the SDF's update rate, else the data's."""
+        """Return the rate of the per-sample values: the SDF's update rate, else the data's."""
         rate = self.rate_hz or data_rate_hz
         if self.kind == 'gazebo' and not rate:
             raise InputError(self.source, 'the sensor has no <update_rate>: give the data rate '
@@ -199,7 +201,8 @@ class SimImu:
         return rate
 
     def noise_model(self, data_rate_hz=None):
-        """The :class:`NoiseModel` the simulator really produces, and notes on the conversion.
+        """
+        Return the :class:`NoiseModel` the simulator really produces, and notes on the conversion.
 
         Gazebo: white N = sqrt(stddev^2 + precision^2 / 12) / sqrt(f) (the rounding term only
         where gz-sensors rounds); Gauss-Markov sigma = dynamic_bias_stddev x sqrt(tau / 2).
@@ -268,7 +271,8 @@ class SimImu:
         return NoiseModel(terms, rate), notes
 
     def corrected(self, result, data_source=None):
-        """The same file with the discrepancy workflow's additions in the simulator's terms.
+        """
+        Return the same file with the discrepancy workflow's additions in the simulator's terms.
 
         ``result`` is a :class:`~imu_allan.core.discrepancy.DiscrepancyResult` run with this
         file's :meth:`noise_model`.  Only the axes (Gazebo) or sensors (PX4) the workflow
@@ -325,7 +329,8 @@ def _single_block(root, where):
 
 
 def read_sim_model(path):
-    """Read a Gazebo ``<imu>`` (or an .sdf / world file holding one) or a PX4 plugin block.
+    """
+    Read a Gazebo ``<imu>`` (or an .sdf / world file holding one) or a PX4 plugin block.
 
     Returns a :class:`SimImu`.  Raises :class:`InputError` naming the file for anything that is
     not one readable noise block: not XML, no or several IMU blocks, a noise type gz-sensors
@@ -390,7 +395,8 @@ def read_sim_model(path):
 
 
 def gazebo_values(axis_terms, rate_hz, tau_range, precision=None, inflate=(1.0, 1.0)):
-    """gz-sensors ``<noise>`` values of one axis, and comment lines on how they were made.
+    """
+    gz-sensors ``<noise>`` values of one axis, and comment lines on how they were made.
 
     stddev = N sqrt(f) (per sample); ``precision`` given (the file's own) is kept and its
     rounding noise (precision^2 / 12 per sample) taken out of stddev, else it comes from
@@ -441,7 +447,8 @@ def _gm_weight(fit, tau_range):
 
 
 def px4_values(terms_by_axis, sensor, tau_range, rate_hz, inflate=(1.0, 1.0)):
-    """PX4 plugin values of one sensor (one value for its axes: the worst axis), and notes.
+    """
+    PX4 plugin values of one sensor (one value for its axes: the worst axis), and notes.
 
     NoiseDensity = the largest N; RandomWalk / BiasCorrelationTime = the driving density and
     tau of the Gauss-Markov (:func:`best_gauss_markov`) with the largest Allan variance over
@@ -478,7 +485,7 @@ def _steps_text(steps, axis, axis_terms):
     for step in steps:
         params = axis_terms.get(step.effect, {})
         shown = ', '.join(f'{k} {v:.4g}' + ('' if k in ('tau_c', 'frequency_hz') else
-                                             f' {si_unit(axis, step.effect)}')
+                                            f' {si_unit(axis, step.effect)}')
                           for k, v in params.items()) if params else 'refitted'
         where = (f' at {step.tau_range[0]:.3g}-{step.tau_range[1]:.3g} s'
                  if step.tau_range else '')
@@ -523,7 +530,8 @@ def _serialize(root, fragment):
 
 
 def _model_input(fitted, rate_hz, source=None):
-    """(terms per axis, rate, tau range, upper limits, source) of an Analysis / fit / model.
+    """
+    (terms per axis, rate, tau range, upper limits, source) of an Analysis / fit / model.
 
     95 % upper limits of undetected white noise and random walk come from an Analysis's
     ``upper_limits`` or a fit's ``upper_limit(axis, term)`` method, whichever exists.
@@ -572,7 +580,8 @@ def _header(kind, source, rate, tau_range, inflate, extra):
 
 
 def export_gazebo(fitted, rate_hz=None, inflate=1.0, source=None):
-    """Gazebo (gz-sensors) SDF ``<sensor type="imu">`` with one ``<noise>`` per axis.
+    """
+    Gazebo (gz-sensors) SDF ``<sensor type="imu">`` with one ``<noise>`` per axis.
 
     Parameters
     ----------
@@ -633,7 +642,8 @@ def export_gazebo(fitted, rate_hz=None, inflate=1.0, source=None):
 
 
 def export_px4(fitted, rate_hz=None, inflate=1.0, source=None):
-    """PX4 SITL ``gazebo_imu_plugin`` block: continuous densities, worst axis per sensor.
+    """
+    PX4 SITL ``gazebo_imu_plugin`` block: continuous densities, worst axis per sensor.
 
     Same arguments as :func:`export_gazebo`; ``values`` is ``{plugin key: value}`` plus
     ``rate_hz`` and ``upper_limits``.

@@ -1,4 +1,5 @@
-"""Read a raw 3DM-GX3-25 serial byte capture (``--format gx3raw``) into :class:`Samples`.
+"""
+Read a raw 3DM-GX3-25 serial byte capture (``--format gx3raw``) into :class:`Samples`.
 
 The capture is decoded through the same :class:`~imu_allan.device.gx3_stream.StreamParser` the
 driver uses, so bad checksums, junk and truncated packets are handled identically.  The record
@@ -14,6 +15,7 @@ columns ``mag_x, mag_y, mag_z``.
 
 import numpy as np
 
+from .samples import Samples
 from ..core.preprocess import count_gaps, nominal_interval
 from ..core.units import AXES, GYRO_AXES, STANDARD_GRAVITY
 from ..device.gx3_protocol import (
@@ -25,7 +27,6 @@ from ..device.gx3_protocol import (
 )
 from ..device.gx3_stream import StreamParser
 from ..errors import InputError
-from .samples import Samples
 
 #: Record codes usable as IMU samples, best first: code -> axes it provides.
 SAMPLE_CODES = {

@@ -1,4 +1,5 @@
-"""The one adapter from a ``sensor_msgs/msg/Imu`` message to numpy.
+"""
+The one adapter from a ``sensor_msgs/msg/Imu`` message to numpy.
 
 Live nodes (rclpy messages) and the offline tool (rosbags message objects) both call these
 functions, so both see exactly the same numbers for the same message. Only attribute access is
@@ -12,7 +13,8 @@ from ..core.units import AXES
 
 
 def stamp_seconds(stamp):
-    """Return a ``builtin_interfaces/Time`` (``sec``, ``nanosec``) as float seconds.
+    """
+    Return a ``builtin_interfaces/Time`` (``sec``, ``nanosec``) as float seconds.
 
     ROS 1 messages deserialized by rosbags use the same ``sec``/``nanosec`` names.
     """
@@ -20,7 +22,8 @@ def stamp_seconds(stamp):
 
 
 def imu_to_row(msg):
-    """Convert one Imu message to ``(stamp_s, row)``.
+    """
+    Convert one Imu message to ``(stamp_s, row)``.
 
     Parameters
     ----------
@@ -43,7 +46,8 @@ def imu_to_row(msg):
 
 
 def imus_to_arrays(msgs):
-    """Convert a sequence of Imu messages to ``(t, data)``.
+    """
+    Convert a sequence of Imu messages to ``(t, data)``.
 
     Returns
     -------
@@ -67,7 +71,8 @@ def imus_to_arrays(msgs):
 
 
 def cdr_to_arrays(blobs):
-    """Convert serialized (CDR) Imu messages to ``(t, data)`` like :func:`imus_to_arrays`.
+    """
+    Convert serialized (CDR) Imu messages to ``(t, data)`` like :func:`imus_to_arrays`.
 
     The live nodes take raw bytes from their subscription and decode them here in bulk with
     the bag reader's fixed-layout decoder (:func:`imu_allan.formats.imu_cdr.decode_rows`), about

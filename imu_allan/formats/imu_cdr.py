@@ -1,4 +1,5 @@
-"""The one ``sensor_msgs/Imu`` codec: bulk encoding and decoding of its fixed byte layouts.
+"""
+The one ``sensor_msgs/Imu`` codec: bulk encoding and decoding of its fixed byte layouts.
 
 A CDR Imu is: 4-byte encapsulation header (``00 01`` = little-endian CDR), ``int32 sec``,
 ``uint32 nanosec``, ``uint32`` frame_id length (with the trailing NUL), the frame_id bytes,
@@ -23,8 +24,8 @@ import struct
 
 import numpy as np
 
-from ..errors import InputError
 from .imu_adapter import imu_to_row
+from ..errors import InputError
 
 IMU_TYPE = 'sensor_msgs/msg/Imu'
 IMU_TYPES = {IMU_TYPE, 'sensor_msgs/Imu'}
@@ -63,7 +64,8 @@ def _u32(rows, start):
 
 
 def decode_rows(rows, ros1):
-    """Bulk-decode equal-length serialized Imu messages.
+    """
+    Bulk-decode equal-length serialized Imu messages.
 
     Parameters
     ----------
@@ -116,7 +118,8 @@ def decode_rows(rows, ros1):
 
 
 def set_covariance_diagonals(blobs, variances):
-    """Serialized CDR Imu messages with new angular-velocity / linear-acceleration variances.
+    """
+    Return serialized CDR Imu messages with new angular-velocity / linear-acceleration variances.
 
     Parameters
     ----------
@@ -164,12 +167,13 @@ def set_covariance_diagonals(blobs, variances):
 
 
 def _words(u8):
-    """The 8-byte little-endian word at every byte offset of ``u8`` (an overlapping view)."""
+    """Return the 8-byte little-endian word at every byte offset of ``u8`` (overlapping view)."""
     return np.ndarray(shape=(max(u8.shape[0] - 7, 0),), dtype='<u8', buffer=u8, strides=(1,))
 
 
 def decode_at(u8, off, length, ros1):
-    """Bulk-decode serialized Imu messages of one length found at byte offsets of a buffer.
+    """
+    Bulk-decode serialized Imu messages of one length found at byte offsets of a buffer.
 
     Same result as :func:`decode_rows` on the gathered rows, but only the header and the 48
     bytes of angular velocity and linear acceleration are gathered, as 8 words per message
@@ -304,7 +308,8 @@ def map_file(f):
 
 
 def deserialize(blob, ros1=False):
-    """Deserialize one Imu: CDR with the Jazzy typestore, ROS 1 (``ros1``) with the Noetic one.
+    """
+    Deserialize one Imu: CDR with the Jazzy typestore, ROS 1 (``ros1``) with the Noetic one.
 
     Each typestore is built once, on first use.
     """
@@ -348,7 +353,8 @@ def choose_topic(path, topics, topic):
 
 
 def seconds_to_stamps(t):
-    """Split times in s into (sec, nanosec) int64 arrays and the same instants in int64 ns.
+    """
+    Split times in s into (sec, nanosec) int64 arrays and the same instants in int64 ns.
 
     Split before scaling (floor, then the fraction to ns), so a stamp of 1.7e9 s keeps its
     nanoseconds (t * 1e9 alone would round to 256 ns there).
@@ -365,7 +371,8 @@ def seconds_to_stamps(t):
 
 
 def encode_imu(t, data6, frame_id='imu_link', ros1=False):
-    """Serialize Imu messages in bulk.
+    """
+    Serialize Imu messages in bulk.
 
     Parameters
     ----------
@@ -430,7 +437,7 @@ _SENTINEL_STAMP = (0x7A5A5A01, 0x3A5A5A02)
 
 
 def _sentinel(k):
-    """A float64 with a distinctive bit pattern (found again in serialized bytes)."""
+    """Return a float64 with a distinctive bit pattern (found again in serialized bytes)."""
     return struct.unpack('<d', struct.pack('<Q', 0x1A2B3C4D5E6F0100 + k))[0]
 
 
@@ -442,7 +449,8 @@ def _find_once(raw, pattern):
 
 
 class CdrPacker:
-    """Serialize a batch of messages by patching a CDR template with numpy.
+    """
+    Serialize a batch of messages by patching a CDR template with numpy.
 
     The template is the configured message (frame_id, covariances) serialized once by rclpy
     with sentinel values in the fields that change per message (stamp and float64 vectors);

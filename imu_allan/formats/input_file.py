@@ -1,4 +1,5 @@
-"""Input files as the readers may use them: regular files and folders, nothing that blocks.
+"""
+Input files as the readers may use them: regular files and folders, nothing that blocks.
 
 A FIFO (``analyze <(cat bag.mcap)``, a named pipe) is drained into a temporary file once a
 writer appears, so every reader can seek and map it as usual; with no writer within
@@ -35,7 +36,8 @@ atexit.register(_cleanup)
 
 
 def regular_input(path, wait_s=None):
-    """Return a path the readers can open: ``path`` itself, or a temporary copy of a FIFO.
+    """
+    Return a path the readers can open: ``path`` itself, or a temporary copy of a FIFO.
 
     ``wait_s`` (default :data:`FIFO_WAIT_S`) bounds the wait for a FIFO's writer.
 

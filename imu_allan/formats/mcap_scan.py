@@ -1,4 +1,5 @@
-"""Direct scanning of MCAP files for ``sensor_msgs/Imu`` messages.
+"""
+Direct scanning of MCAP files for ``sensor_msgs/Imu`` messages.
 
 Handing over one raw message at a time (``AnyReader``: about 500 k/s for MCAP) would cap the
 fast path below 1 M messages/s, so records and chunks are walked directly (zstd/lz4 chunk
@@ -14,8 +15,8 @@ import struct
 
 import numpy as np
 
-from ..errors import InputError
 from .imu_cdr import Collector, deserialize, IMU_TYPES, map_file, one_line
+from ..errors import InputError
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 
@@ -37,18 +38,21 @@ _DECOMPRESS = {'': bytes, 'zstd': _zstd_decompress, 'lz4': lz4_decompress}
 
 
 def decompress_chunk(compression, data, size):
-    """The records of a chunk (bytes); ValueError for an unknown compression or wrong size."""
+    """Return the records of a chunk (bytes); ValueError for unknown compression or size."""
     if compression not in _DECOMPRESS:
         raise ValueError(f'unknown chunk compression {compression!r}')
     raw = _DECOMPRESS[compression](data)
     if len(raw) != size:
         raise ValueError('chunk size mismatch')
     return raw
+
+
 _MCAP_OPS = frozenset(range(0x01, 0x11))  # record opcodes of MCAP v0 (0x80-0xFF: private)
 
 
 class McapScan:
-    """Walk the records of an MCAP file, collecting the messages of the wanted Imu channels.
+    """
+    Walk the records of an MCAP file, collecting the messages of the wanted Imu channels.
 
     Works without the summary section, so a truncated file yields what precedes the damage.
     """
@@ -104,7 +108,8 @@ class McapScan:
                 pass  # a numpy view still refers to it; the GC closes it later
 
     def _read_summary(self, buf, size):
-        """Pre-read schemas, channels and chunk offsets from the summary, if the footer is intact.
+        """
+        Pre-read schemas, channels and chunk offsets from the summary, if the footer is intact.
 
         With them a damaged first chunk (which holds the channel definitions) or a damaged
         record header does not cost the rest of the file: the walk resumes at the next chunk.

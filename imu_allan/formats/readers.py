@@ -1,4 +1,5 @@
-"""One entry point for every input format: ``read_samples(path, fmt='auto', topic=None)``.
+"""
+One entry point for every input format: ``read_samples(path, fmt='auto', topic=None)``.
 
 Formats: ``rosbag2`` (folder with ``metadata.yaml``, bare ``.db3`` or ``.mcap``), ``ros1``
 (``.bag``), ``csv`` (contract CSV), ``thesis`` (thesis text log), ``gx3raw`` (raw 3DM-GX3-25
@@ -8,12 +9,12 @@ signatures, the first text lines, the GX3 command bytes 0xCB/0xC2/0xCF).
 
 from pathlib import Path
 
-from ..errors import InputError
 from . import FORMATS
 from .bag_reader import bag_kind, MCAP_MAGIC, read_bag, ROS1_MAGIC, SQLITE_MAGIC
 from .csv_samples import read_csv
 from .input_file import regular_input
 from .thesis_log import looks_like_thesis_log, read_thesis_log
+from ..errors import InputError
 
 _GX3_CODES = (0xCB, 0xC2, 0xCF)
 
@@ -62,7 +63,8 @@ def detect_format(path):
 
 
 def read_samples(path, fmt='auto', topic=None, fast=True):
-    """Read IMU samples from any supported input.
+    """
+    Read IMU samples from any supported input.
 
     Parameters
     ----------

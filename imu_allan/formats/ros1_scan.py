@@ -1,4 +1,5 @@
-"""Direct reading of ROS 1 bags (format 2.0, http://wiki.ros.org/Bags/Format/2.0).
+"""
+Direct reading of ROS 1 bags (format 2.0, http://wiki.ros.org/Bags/Format/2.0).
 
 rosbags' ROS 1 reader yields about 150-200 k raw messages/s and needs the index at the end of
 the file; scanning the chunks (none/bz2/lz4) directly slices runs of equal message records with
@@ -12,9 +13,9 @@ import struct
 
 import numpy as np
 
-from ..errors import InputError
 from .imu_cdr import choose_topic, Collector, deserialize, IMU_TYPES, map_file, one_line
 from .mcap_scan import lz4_decompress
+from ..errors import InputError
 
 ROS1_MAGIC = b'#ROSBAG V2.0\n'
 
@@ -76,7 +77,8 @@ class Ros1Scan:
                 pass  # a numpy view still refers to the map; the GC frees it
 
     def _read_index(self, buf, size):
-        """Pre-read the connections and chunk infos of the index section, if it is intact.
+        """
+        Pre-read the connections and chunk infos of the index section, if it is intact.
 
         With them a damaged first chunk (which holds the connection records) does not cost the
         intact chunks, and a skipped chunk's lost messages can be counted.

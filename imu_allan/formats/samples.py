@@ -9,7 +9,8 @@ from ..core.units import AXES
 
 @dataclass
 class Samples:
-    """Time-stamped IMU samples in SI units.
+    """
+    Time-stamped IMU samples in SI units.
 
     Attributes
     ----------
@@ -49,5 +50,5 @@ class Samples:
 
     @property
     def n(self):
-        """Number of samples."""
+        """Return the number of samples."""
         return int(self.t.shape[0])

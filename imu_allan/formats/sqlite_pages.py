@@ -1,4 +1,5 @@
-"""Direct reading of rosbag2 sqlite3 files by walking their SQLite pages.
+"""
+Direct reading of rosbag2 sqlite3 files by walking their SQLite pages.
 
 File format: https://sqlite.org/fileformat.html.
 
@@ -13,8 +14,8 @@ import struct
 
 import numpy as np
 
-from ..errors import InputError
 from .imu_cdr import decode_at, map_file
+from ..errors import InputError
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
 
@@ -71,7 +72,8 @@ def _be_ints(u8, pos, serial):
 
 
 def _record_headers(u8, rec):
-    """Parse 4-column record headers at ``rec``: (size, 4 serial types, consistent flag).
+    """
+    Parse 4-column record headers at ``rec``: (size, 4 serial types, consistent flag).
 
     The cells of one table mostly share one header (same column types, same blob length), so
     the first header is parsed and compared byte-wise with the others; only the differing ones
@@ -143,7 +145,8 @@ class SqlitePages:
         return raw[0::2] * 256 + raw[1::2]
 
     def leaf_pages(self, root):
-        """Return the leaf page numbers of a table B-tree in key order (missing ones counted).
+        """
+        Return the leaf page numbers of a table B-tree in key order (missing ones counted).
 
         Expands interior pages in place until only leaves remain (SQLite B-trees are balanced,
         so this takes one pass per tree level); page types are checked with numpy.
@@ -279,11 +282,12 @@ class SqlitePages:
 
     @property
     def damaged(self):
-        """True if the file is shorter than its header says or the tree lost pages."""
+        """Return True if the file is shorter than its header says or the tree lost pages."""
         return bool(self.declared > self.npages or self.size % self.page_size or self.lost_pages)
 
     def read_messages(self, root, topic_ids, coll):
-        """Feed the messages of ``topic_ids`` to a collector, in numpy batches.
+        """
+        Feed the messages of ``topic_ids`` to a collector, in numpy batches.
 
         An intact file is read along the B-tree; a damaged one by trying every table-leaf
         page (a cut file can lose the interior pages that lead to intact leaves). Only cells

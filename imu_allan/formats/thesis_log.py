@@ -1,4 +1,5 @@
-r"""Reader for the thesis text logs (the thesis, figure 4.2; docs/references.md).
+r"""
+Reader for the thesis text logs (the thesis, figure 4.2; docs/references.md).
 
 Format: a few header lines, for example::
 
@@ -19,9 +20,9 @@ import re
 
 import numpy as np
 
+from .samples import Samples
 from ..core.units import AXES, STANDARD_GRAVITY
 from ..errors import InputError
-from .samples import Samples
 
 _NUM = r'[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?'
 _INT = r'[-+]?\d+'
@@ -83,7 +84,8 @@ def looks_like_thesis_log(text):
 
 
 def read_thesis_log(path):
-    """Read a thesis-format log.
+    """
+    Read a thesis-format log.
 
     Returns
     -------

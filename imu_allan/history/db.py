@@ -1,4 +1,5 @@
-"""The DuckDB history of ``analyze --db FILE``: tables ``inputs`` and ``measurements``.
+"""
+The DuckDB history of ``analyze --db FILE``: tables ``inputs`` and ``measurements``.
 
 One row of ``inputs`` per analysed input (its absolute path, size, modification time, status,
 error, when and by which version), and the noise coefficients of the ``ok`` ones in
@@ -61,7 +62,7 @@ MEASUREMENT_COLUMNS = ('input', 'topic', 'imu_id', 'start_utc', 'duration_s', 'r
 
 
 def utc(seconds):
-    """A naive UTC datetime (DuckDB TIMESTAMP) from seconds since 1970 (float)."""
+    """Return a naive UTC datetime (DuckDB TIMESTAMP) from seconds since 1970 (float)."""
     return datetime(1970, 1, 1) + timedelta(seconds=float(seconds))
 
 
@@ -131,7 +132,8 @@ def known_inputs(path):
 
 
 def record(con, entry, rows):
-    """Write one input: its ``inputs`` row and its ``measurements`` rows, in one transaction.
+    """
+    Write one input: its ``inputs`` row and its ``measurements`` rows, in one transaction.
 
     Parameters
     ----------
@@ -164,5 +166,5 @@ def record(con, entry, rows):
 
 
 def abspath(path):
-    """The absolute form of an input path as stored in the ``input`` columns."""
+    """Return the absolute form of an input path as stored in the ``input`` columns."""
     return os.path.abspath(str(path).rstrip('/') or '/')

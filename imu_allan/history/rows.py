@@ -3,12 +3,13 @@
 import math
 from pathlib import Path
 
-from ..core.units import si_unit, TERM_PARAMETERS
 from .db import utc
+from ..core.units import si_unit, TERM_PARAMETERS
 
 
 def namespace_of(topic):
-    """The robot/namespace part of an Imu topic name ('' when it has none).
+    """
+    Return the robot/namespace part of an Imu topic name ('' when it has none).
 
     The namespace is what precedes the ``imu`` segment (``/robot3/imu/data_raw`` ->
     ``robot3``); a topic with no ``imu`` segment keeps all but its last segment
@@ -32,7 +33,8 @@ def _finite(value):
 
 
 def measurement_rows(report, input_path, analyzed_at, imu_id=None):
-    """The ``measurements`` rows (dicts) of one report.
+    """
+    Return the ``measurements`` rows (dicts) of one report.
 
     Parameters
     ----------

@@ -1,4 +1,5 @@
-"""Per-IMU trends of white noise N and bias instability B from the history, and their flags.
+"""
+Per-IMU trends of white noise N and bias instability B from the history, and their flags.
 
 ROS-free; reads the ``measurements`` table (:mod:`imu_allan.history.db`).  Only static records
 count (a moving IMU's Allan deviation measures the motion) and only detected values make a
@@ -41,7 +42,8 @@ MIN_FLEET = 20
 
 @dataclass
 class Series:
-    """One quantity of one IMU over time (SI, continuous-time).
+    """
+    One quantity of one IMU over time (SI, continuous-time).
 
     ``start`` naive UTC datetimes; ``value``, ``low``, ``high`` arrays (detected values and
     their 68.3 % intervals); ``axes`` which axis each point is (the worst axis varies);
@@ -176,7 +178,7 @@ def _flag(imu, s, i, kind, reference, why):
 
 
 def history_flags(imu):
-    """Flags of one IMU whose latest per-axis value left its own history."""
+    """Return flags of one IMU whose latest per-axis value left its own history."""
     flags = []
     for (_sensor, _term, axis), s in imu.series.items():
         i = _latest(imu, s)
@@ -200,7 +202,7 @@ def history_flags(imu):
 
 
 def fleet_flags(imus):
-    """Flags of IMUs whose latest worst-axis value is above the fleet's 95th percentile."""
+    """Return flags of IMUs whose latest worst-axis value is above the fleet's 95th percentile."""
     flags = []
     for sensor in SENSORS:
         for term in TREND_TERMS:

@@ -1,4 +1,5 @@
-"""Thin rclpy nodes: parameters, QoS, timers and publishing; the numerics live in core/.
+"""
+Thin rclpy nodes: parameters, QoS, timers and publishing; the numerics live in core/.
 
 Importing this package is what starting a node does, so it sets the process-wide BLAS default
 here, before numpy loads (see :mod:`imu_allan.cli` for why); a value already set wins.

@@ -1,4 +1,5 @@
-"""allan: live Allan deviation and noise coefficients of an IMU stream, with health diagnostics.
+"""
+allan: live Allan deviation and noise coefficients of an IMU stream, with health diagnostics.
 
 Subscribes ``imu/data_raw`` (sensor_msgs/Imu, sensor-data QoS with a deep queue, overridable)
 and publishes every ``publish_period`` seconds:
@@ -38,6 +39,17 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from .allan_plot import PlotPublisher
+from .common import (
+    apply_changes,
+    declare_parameter_table,
+    diagnostic_status,
+    node_main,
+    Param,
+    polled_subscription,
+    take_batch,
+    validate_on_set,
+)
 from ..core import health as hm
 from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
 from ..core.model import NoiseModel
@@ -51,17 +63,6 @@ from ..report.coeffs_layout import (
     coefficient_table,
     DEVIATION_LABELS,
     deviation_table,
-)
-from .allan_plot import PlotPublisher
-from .common import (
-    apply_changes,
-    declare_parameter_table,
-    diagnostic_status,
-    node_main,
-    Param,
-    polled_subscription,
-    take_batch,
-    validate_on_set,
 )
 
 DESCRIPTION = ('Live Allan deviation and noise coefficients (with 68.3 % intervals) of '
@@ -171,7 +172,7 @@ def check_parameters(p):
 
 
 def multiarray(table, labels):
-    """A row-major ``std_msgs/Float64MultiArray`` of a numpy array with dimension labels."""
+    """Return a row-major ``std_msgs/Float64MultiArray`` of a numpy array with dimension labels."""
     msg = Float64MultiArray()
     stride = int(table.size)
     for label, size in zip(labels, table.shape):
@@ -319,6 +320,7 @@ class AllanNode(Node):
             msgs = set_covariance_diagonals(msgs, self._cov_variance)
         for blob in msgs:
             self._pub_cov.publish(blob)
+
     def _start_advice(self, result, fitted):
         """Start the recording advice on a finished estimate (at most every advice_period)."""
         now = time.monotonic()
@@ -343,7 +345,7 @@ class AllanNode(Node):
             self._advice = None
 
     def _load_model(self):
-        """The reference noise model for the discrepancy check (validated on set)."""
+        """Return the reference noise model for the discrepancy check (validated on set)."""
         self.model_file = self.params['model_file']
         self.model = NoiseModel.from_yaml(self.model_file) if self.model_file else None
 

@@ -1,4 +1,5 @@
-"""The allan node's live figure on ``imu/allan_plot/compressed`` (sensor_msgs/CompressedImage).
+"""
+The allan node's live figure on ``imu/allan_plot/compressed`` (sensor_msgs/CompressedImage).
 
 The figure is :class:`imu_allan.report.plots.LiveFigure`: the Allan deviation panels
 ``analyze`` draws (measured points, 68.3 % bands, fitted model and terms), gyroscopes and
@@ -18,7 +19,7 @@ TOPIC = 'imu/allan_plot/compressed'
 
 
 def title(node_name, result):
-    """The figure's title: node, record length and rate, time of the estimate (UTC)."""
+    """Return the figure's title: node, record length and rate, time of the estimate (UTC)."""
     seconds = result.n_samples / result.rate_hz
     span = (f'{seconds / 3600:.2f} h' if seconds >= 3600 else f'{seconds / 60:.1f} min'
             if seconds >= 60 else f'{seconds:.1f} s')

@@ -1,4 +1,5 @@
-"""Shared plumbing for the rclpy nodes.
+"""
+Shared plumbing for the rclpy nodes.
 
 ``--help`` without ROS, the Jazzy spin/shutdown pattern, parameter descriptors and diagnostic
 status building.
@@ -13,7 +14,8 @@ import sys
 
 
 def handle_help(executable, description, parameters, argv=None):
-    """Print a help text and exit 0 when ``-h``/``--help`` comes before ``--ros-args``.
+    """
+    Print a help text and exit 0 when ``-h``/``--help`` comes before ``--ros-args``.
 
     ``parameters`` is the node's :class:`Param` table.
     """
@@ -32,25 +34,26 @@ def handle_help(executable, description, parameters, argv=None):
 
 
 def float_range(low, high, step=0.0):
-    """A ``FloatingPointRange`` for a parameter descriptor."""
+    """Return a ``FloatingPointRange`` for a parameter descriptor."""
     from rcl_interfaces.msg import FloatingPointRange
     return [FloatingPointRange(from_value=float(low), to_value=float(high), step=float(step))]
 
 
 def int_range(low, high, step=1):
-    """An ``IntegerRange`` for a parameter descriptor."""
+    """Return an ``IntegerRange`` for a parameter descriptor."""
     from rcl_interfaces.msg import IntegerRange
     return [IntegerRange(from_value=int(low), to_value=int(high), step=int(step))]
 
 
 def descriptor(description, read_only=False, **kwargs):
-    """A ``ParameterDescriptor`` with a description (and optional ranges)."""
+    """Return a ``ParameterDescriptor`` with a description (and optional ranges)."""
     from rcl_interfaces.msg import ParameterDescriptor
     return ParameterDescriptor(description=description, read_only=read_only, **kwargs)
 
 
 def diagnostic_status(name, level, message, hardware_id='', values=None):
-    """Build a ``diagnostic_msgs/DiagnosticStatus``; ``level`` is 0 OK, 1 WARN, 2 ERROR, 3 STALE.
+    """
+    Build a ``diagnostic_msgs/DiagnosticStatus``; ``level`` is 0 OK, 1 WARN, 2 ERROR, 3 STALE.
 
     ``values`` is a mapping turned into string key/value pairs (floats with 6 significant
     digits).
@@ -94,7 +97,8 @@ def run_node(node_factory, args=None):
 
 
 def node_main(executable, description, parameters, factory, args=None):
-    """Entry point of a node: ``--help`` without spinning, then spin; bad parameters exit 2.
+    """
+    Entry point of a node: ``--help`` without spinning, then spin; bad parameters exit 2.
 
     ``parameters`` is the node's :class:`Param` table; ``factory`` builds the node.  A refused
     parameter prints one line naming it (no traceback).
@@ -113,7 +117,8 @@ def node_main(executable, description, parameters, factory, args=None):
 
 @dataclass(frozen=True)
 class Param:
-    """One row of a node's parameter table (the one format every node uses).
+    """
+    One row of a node's parameter table (the one format every node uses).
 
     ``range`` is ``(low, high)`` for numbers (a float parameter also accepts an integer on the
     command line, ``-p rate_hz:=200``), ``choices`` the allowed values, ``read_only`` refuses
@@ -123,7 +128,7 @@ class Param:
     name: str
     default: object
     description: str
-    range: tuple = None
+    range: tuple = None  # noqa: A003 - the descriptor's own word
     read_only: bool = False
     choices: tuple = None
 
@@ -152,7 +157,8 @@ def check_value(param, value):
 
 
 def declare_parameter_table(node, table):
-    """Declare every :class:`Param` with a descriptor; return the checked values as a dict.
+    """
+    Declare every :class:`Param` with a descriptor; return the checked values as a dict.
 
     Raises InputError (the node's ``main`` prints it as one line, exit status 2) for a value
     given on the command line or in a parameter file that the table refuses.
@@ -179,7 +185,8 @@ def declare_parameter_table(node, table):
 
 
 def validate_on_set(params, table, check=None):
-    """An on-set-parameters callback: each change checked by its table row, then ``check``.
+    """
+    Return an on-set-parameters callback: each change checked by its table row, then ``check``.
 
     ``params`` is the node's current dict; ``check(candidate dict)`` does cross-field checks
     and raises InputError with the reason.  Names outside the table (QoS overrides) pass.
@@ -215,7 +222,8 @@ def apply_changes(params, table, changes):
 
 
 def polled_subscription(node, msg_type, topic, depth, overrides=True, raw=False):
-    """A deep sensor-data subscription that the executor never waits on.
+    """
+    Return a deep sensor-data subscription that the executor never waits on.
 
     Messages queue in the middleware and a timer takes them in batches with
     :func:`take_batch`: at 1 kHz this costs a few percent of a core where one executor callback

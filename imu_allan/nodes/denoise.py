@@ -1,4 +1,5 @@
-"""denoise: wavelet (or median) denoising of imu/data_raw, republished as imu/data_denoised.
+"""
+denoise: wavelet (or median) denoising of imu/data_raw, republished as imu/data_denoised.
 
 Subscribes ``imu/data_raw`` (sensor-data QoS, deep queue, taken in batches by a timer) and
 publishes ``imu/data_denoised`` (sensor_msgs/Imu): the same messages (header stamps, frame,
@@ -21,11 +22,6 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
-from ..core.health import RateFinder
-from ..core.units import AXES, IEEE_TERMS
-from ..errors import InputError
-from ..formats.imu_adapter import imus_to_arrays
-from ..report.coeffs_layout import decode_table
 from .common import (
     apply_changes,
     declare_parameter_table,
@@ -35,6 +31,11 @@ from .common import (
     take_batch,
     validate_on_set,
 )
+from ..core.health import RateFinder
+from ..core.units import AXES, IEEE_TERMS
+from ..errors import InputError
+from ..formats.imu_adapter import imus_to_arrays
+from ..report.coeffs_layout import decode_table
 
 DESCRIPTION = ('Wavelet (PyWavelets) or median denoising of imu/data_raw on overlapping blocks '
                'with bounded latency; publishes imu/data_denoised with the original stamps.')
@@ -81,7 +82,7 @@ def check_parameters(p):
 
 
 def make_denoiser(p):
-    """A :class:`BlockDenoiser` for six axes from a parameter dictionary."""
+    """Return a :class:`BlockDenoiser` for six axes from a parameter dictionary."""
     from ..core.denoise import BlockDenoiser
     return BlockDenoiser(p['rate_hz'], len(AXES), hop_s=p['hop_s'], method=p['method'],
                          wavelet=p['wavelet'], level=p['level'], rule=p['rule'],
@@ -89,7 +90,8 @@ def make_denoiser(p):
 
 
 def white_noise_from_coeffs(data, dims):
-    """White-noise coefficient N per axis (6,) from an ``imu/allan_coeffs`` payload, or None.
+    """
+    White-noise coefficient N per axis (6,) from an ``imu/allan_coeffs`` payload, or None.
 
     ``dims`` is the layout as ``(label, size)`` pairs.
     """
@@ -128,7 +130,7 @@ class DenoiseNode(Node):
         self._timer = self.create_timer(self.params['drain_period'], self.drain)
 
     def _new_denoiser(self):
-        """A denoiser for the configured rate, or a RateFinder until the rate is measured."""
+        """Return a denoiser for the configured rate, or a RateFinder until it is measured."""
         rate = self.params['rate_hz']
         self.finder = None if rate else RateFinder()
         self.denoiser = make_denoiser(self.params) if rate else None

@@ -1,4 +1,5 @@
-"""driver: LORD MicroStrain 3DM-GX3-25 (single-byte protocol) -> sensor_msgs/Imu.
+"""
+driver: LORD MicroStrain 3DM-GX3-25 (single-byte protocol) -> sensor_msgs/Imu.
 
 A thin node around :class:`imu_allan.device.serial_link.Gx3Session`, which runs in a thread:
 it opens the port (retrying with back-off), configures the device, frames the byte stream,
@@ -30,10 +31,6 @@ from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, MagneticField
 
-from ..device import gx3_protocol as p
-from ..device.serial_link import check_rate, Gx3Session, MODES
-from ..errors import InputError
-from ..formats.imu_cdr import CdrPacker, split_stamps
 from .common import (
     apply_changes,
     declare_parameter_table,
@@ -42,6 +39,10 @@ from .common import (
     Param,
     validate_on_set,
 )
+from ..device import gx3_protocol as p
+from ..device.serial_link import check_rate, Gx3Session, MODES
+from ..errors import InputError
+from ..formats.imu_cdr import CdrPacker, split_stamps
 
 DESCRIPTION = ('Reads a LORD MicroStrain 3DM-GX3-25 over a serial port (single-byte '
                'protocol) and publishes imu/data_raw, imu/data (orientation modes), imu/mag '
@@ -264,8 +265,6 @@ class DriverNode(Node):
     def close(self):
         """Stop the session thread (it stops continuous mode and closes the port)."""
         self.session.stop()
-
-
 
 
 def main(args=None):

@@ -1,4 +1,5 @@
-"""The recording advice of ``analyze``: the ``advice`` JSON block and the closing sentence.
+"""
+The recording advice of ``analyze``: the ``advice`` JSON block and the closing sentence.
 
 JSON (design.md section 6, key ``advice``)::
 
@@ -22,7 +23,7 @@ from ..core.units import si_unit
 
 
 def compute_advice(analysis, options, targets=None):
-    """The :class:`~imu_allan.core.advisor.Advice` of an analysis, on ``analyze``'s grid."""
+    """Return the :class:`~imu_allan.core.advisor.Advice` of an analysis, on ``analyze``'s grid."""
     m_max = None if options.tau_max is None else int(options.tau_max * analysis.rate_hz)
     staged = StagedAdvice(analysis.result, analysis.fit, targets,
                           analysis_grid(options.points_per_decade, options.min_clusters, m_max))
@@ -43,7 +44,7 @@ def _time_entry(entry, **extra):
 
 
 def advice_to_json(advice):
-    """The ``advice`` block (JSON-ready)."""
+    """Return the ``advice`` block (JSON-ready)."""
     axes, undetected = {}, []
     for axis, terms in advice.axes.items():
         axes[axis] = {}

@@ -1,4 +1,5 @@
-"""The numbers on ``imu/allan_coeffs`` and ``imu/allan_deviation`` (the contract layouts).
+"""
+The numbers on ``imu/allan_coeffs`` and ``imu/allan_deviation`` (the contract layouts).
 
 ``imu/allan_coeffs``: dims ``axis`` (6) x ``term`` (5: :data:`~imu_allan.core.units.IEEE_TERMS`)
 x ``stat`` (3: value, ci_low, ci_high; 68.3 %), row-major, ``data_offset`` 0, SI units,
@@ -21,7 +22,8 @@ STATS = ('value', 'ci_low', 'ci_high')
 
 
 def coefficient_table(fitted, axes=AXES):
-    """The ``imu/allan_coeffs`` numbers: array (axis, term, stat) = (A, 5, 3), NaN if absent.
+    """
+    Return the ``imu/allan_coeffs`` numbers: array (axis, term, stat) = (A, 5, 3), NaN if absent.
 
     ``stat`` is ``value, ci_low, ci_high`` (68.3 %); terms in
     :data:`~imu_allan.core.units.IEEE_TERMS` order; SI units.  ``fitted`` is a
@@ -42,7 +44,8 @@ def coefficient_table(fitted, axes=AXES):
 
 
 def deviation_table(result, axes=AXES):
-    """The ``imu/allan_deviation`` numbers: array (1 + len(axes), T): tau then ADEV per axis.
+    """
+    Return the ``imu/allan_deviation`` numbers: array (1 + len(axes), T): tau then ADEV per axis.
 
     Axes missing from ``result`` are NaN rows.
     """
@@ -57,7 +60,8 @@ def deviation_table(result, axes=AXES):
 
 
 def decode_table(data, dims):
-    """Array of a row-major multiarray payload: ``data`` (flat) and ``dims`` ((label, size)...).
+    """
+    Array of a row-major multiarray payload: ``data`` (flat) and ``dims`` ((label, size)...).
 
     Raises ValueError when the sizes do not match the data (``data_offset`` must be 0).
     """
@@ -88,7 +92,8 @@ def _check_labels(dims, labels, topic):
 
 
 def decode_coefficients(source, dims=None):
-    """The ``imu/allan_coeffs`` array (axis, term, stat) = (6, 5, 3), SI, NaN if not detected.
+    """
+    Return the ``imu/allan_coeffs`` array (axis, term, stat) = (6, 5, 3), SI, NaN if not detected.
 
     ``source`` is a ``std_msgs/Float64MultiArray`` (rclpy or rosbags: the same field names), or
     the flat data with ``dims`` as ``((label, size), ...)``.  Labels and sizes are checked
@@ -120,7 +125,8 @@ def decode_deviation(source, dims=None):
 
 
 def coefficient_terms(table, axes=AXES):
-    """Detected terms of a decoded coefficient table, per axis, in ``analyze --json``'s shape.
+    """
+    Return detected terms of a decoded coefficient table, per axis, in ``analyze --json``'s shape.
 
     ``{axis: {term: {value, ci, unit, time, conventional: {value, unit, ci}}}}``; terms that
     are NaN (not detected) are left out; an interval end that is NaN becomes None (JSON null).

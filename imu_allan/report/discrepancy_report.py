@@ -1,4 +1,5 @@
-"""Reports of the discrepancy workflow: the JSON report, the console summary and the plots.
+"""
+Reports of the discrepancy workflow: the JSON report, the console summary and the plots.
 
 The plots (matplotlib, Agg): ``step<k>_<axis>.png`` per accepted step (measured curve with its
 68 % band, the model band before and after), ``gap_per_step.png`` and ``overview.png``.
@@ -26,7 +27,7 @@ def _clean(value):
 
 
 def report_dict(result, source):
-    """The JSON report (contract fields plus source and method)."""
+    """Return the JSON report (contract fields plus source and method)."""
     out = result.to_dict()
     out['source'] = source
     return _clean(out)

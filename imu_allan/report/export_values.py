@@ -1,4 +1,5 @@
-"""The numbers every exporter starts from: a fitted term per axis, inflated, or its upper limit.
+"""
+The numbers every exporter starts from: a fitted term per axis, inflated, or its upper limit.
 
 One place for the rules the Kalibr file introduced and every exporter shares:
 
@@ -33,7 +34,8 @@ def check_inflate(inflate):
 
 
 class ExportValues:
-    """Per-axis values of a fitted model, ready for an exporter (SI, continuous time).
+    """
+    Per-axis values of a fitted model, ready for an exporter (SI, continuous time).
 
     ``fitted`` is a :class:`~imu_allan.core.fit.FittedModel` or an
     :class:`~imu_allan.core.analysis.Analysis` (its ``fit`` is used).
@@ -74,7 +76,7 @@ class ExportValues:
         self.used[key] = {'axes': list(axes), 'upper': [a for a, u in zip(axes, upper) if u]}
 
     def worst(self, sensor, term, key):
-        """The largest value over the sensor's axes (None if none is known), for ``key``."""
+        """Return the largest value over the sensor's axes (None if none is known), for ``key``."""
         best = None
         for axis in self.axes(sensor):
             value, upper = self.value(axis, term)

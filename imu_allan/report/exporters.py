@@ -1,4 +1,5 @@
-"""Exporters: the fitted noise model in the keys, units and time base each consumer reads.
+"""
+Exporters: the fitted noise model in the keys, units and time base each consumer reads.
 
 Which consumer wants what (keys, units, continuous-time density or per-sample value, and the
 line of its source where it converts) is documented in ``docs/exports.md``; each builder below
@@ -41,8 +42,8 @@ import math
 from pathlib import Path
 from typing import Callable
 
-from ..errors import InputError
 from .export_values import check_inflate, ExportValues
+from ..errors import InputError
 
 EXPORT_DIR = 'export'
 #: Standard gravity written where a consumer wants a gravity magnitude (m/s^2).
@@ -73,7 +74,7 @@ def register(exporter):
 
 
 def exporter_names():
-    """Registered exporter names, in registration order."""
+    """Return registered exporter names, in registration order."""
     return list(EXPORTERS)
 
 
@@ -108,7 +109,7 @@ def parse_inflate(text, option='--inflate'):
 
 
 def add_arguments(parser):
-    """The ``--export`` and ``--inflate`` options of ``analyze`` (one-line errors, exit 2)."""
+    """Add the ``--export`` and ``--inflate`` options of ``analyze`` (one-line errors, exit 2)."""
     import argparse
 
     def checked(parse):
@@ -136,7 +137,7 @@ def _version():
 
 
 def header_lines(exporter, values):
-    """The provenance every file starts with, as lines without the comment marker."""
+    """Return the provenance every file starts with, as lines without the comment marker."""
     if exporter.per_axis:
         axis_rule = 'per axis (x, y, z)'
     else:
@@ -169,7 +170,7 @@ def header_lines(exporter, values):
 
 
 def _num(value):
-    """A float as text both PyYAML and OpenCV read as a real (always a dot and an exponent)."""
+    """Return a float as text PyYAML and OpenCV read as a real (always a dot and an exponent)."""
     return 'null' if value is None else f'{value:.6e}'
 
 
@@ -523,7 +524,8 @@ def _prepare(fitted, name, rate_hz, inflate, source, topic):
 
 
 def export(fitted, name, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw'):
-    """The data one exporter writes, as a dict (SI; time base as the consumer wants it).
+    """
+    Return the data one exporter writes, as a dict (SI; time base as the consumer wants it).
 
     ``fitted`` is a FittedModel (from :func:`imu_allan.fit_noise_model`) or an Analysis;
     ``rate_hz`` the IMU rate the consumer runs at (default: the rate of the fit);
@@ -548,4 +550,4 @@ def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
 
 
 # Exporters defined elsewhere register themselves on import (at the end: they import this).
-from . import sim_exporters  # noqa: E402, F401, I001
+from . import sim_exporters  # noqa: E402, F401, I001, I100

@@ -1,4 +1,5 @@
-"""The ``fleet`` command's per-IMU trend plot (matplotlib, Agg backend).
+"""
+The ``fleet`` command's per-IMU trend plot (matplotlib, Agg backend).
 
 One PNG per ``imu_id``: a 2 x 2 grid, rows gyroscope and accelerometer, columns white noise N
 and bias instability B, against the record's start time (UTC).  Each axis (x red, y green,

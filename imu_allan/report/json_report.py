@@ -1,4 +1,5 @@
-"""Reports of an :class:`~imu_allan.core.analysis.Analysis`: JSON, console text, Kalibr.
+"""
+Reports of an :class:`~imu_allan.core.analysis.Analysis`: JSON, console text, Kalibr.
 
 JSON follows the contract in docs/interfaces.md (SI units, continuous-time coefficients) and
 adds ``verdict``, ``timing``, ``outliers`` and ``kalibr`` blocks.
@@ -8,8 +9,8 @@ import math
 
 import numpy as np
 
-from ..core.units import sample_unit
 from .kalibr import kalibr_values
+from ..core.units import sample_unit
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
              'intervals with Greenhall-Riley EDF; joint GLS non-negative fit')
@@ -20,7 +21,8 @@ def _floats(values):
 
 
 def analysis_to_json(analysis, samples=None):
-    """The report dictionary of one analysis (JSON-ready).
+    """
+    Return the report dictionary of one analysis (JSON-ready).
 
     ``upper_limits``: ``{axis: {term: 95 % upper limit}}`` of undetected N and K (SI).  With
     the :class:`~imu_allan.formats.samples.Samples` analysed, also ``recording``: the Imu
@@ -72,7 +74,7 @@ def _fmt(value):
 
 
 def console_summary(analysis):
-    """A human-readable summary: terms in SI and conventional units, then the verdict."""
+    """Return a human-readable summary: terms in SI and conventional units, then the verdict."""
     lines = [f'{analysis.source}: {analysis.n_samples} samples at {analysis.rate_hz:.6g} Hz, '
              f'{analysis.duration_s:.1f} s ({analysis.duration_s / 3600:.2f} h); averaging times '
              f'{analysis.result.tau[0]:.3g} .. {analysis.result.tau[-1]:.4g} s',
@@ -107,4 +109,3 @@ def console_summary(analysis):
     if analysis.integrity:
         lines.append(f'integrity: {analysis.integrity}')
     return '\n'.join(lines)
-

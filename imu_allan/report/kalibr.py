@@ -10,7 +10,8 @@ TERMS = (('noise_density', 'white_noise'), ('random_walk', 'rate_random_walk'))
 
 
 def kalibr_values(analysis):
-    """Kalibr ``imu.yaml`` values: continuous-time, the worst axis per sensor.
+    """
+    Kalibr ``imu.yaml`` values: continuous-time, the worst axis per sensor.
 
     ``*_noise_density`` is the white-noise coefficient N; ``*_random_walk`` is the rate random
     walk K (bias random walk).  Where the data do not show a term, its 95 % upper limit is used
@@ -32,7 +33,7 @@ def kalibr_values(analysis):
 
 
 def kalibr_yaml_text(values, per_axis, topic='/imu/data_raw', header=()):
-    """The text of a Kalibr ``imu.yaml`` from :func:`kalibr_values` output."""
+    """Return the text of a Kalibr ``imu.yaml`` from :func:`kalibr_values` output."""
     lines = [f'# {line}' for line in header]
     lines += ['# Kalibr IMU noise model from imu_allan (continuous-time, SI units).',
               '# *_noise_density = white noise N (rad/s/sqrt(Hz), m/s^2/sqrt(Hz));',

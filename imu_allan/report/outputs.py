@@ -1,4 +1,5 @@
-"""The ``--out DIR`` files: report.json, Kalibr imu.yaml, allan_results.csv and PNG plots.
+"""
+The ``--out DIR`` files: report.json, Kalibr imu.yaml, allan_results.csv and PNG plots.
 
 Files are first written into a staging folder next to DIR and moved in only when all of them
 succeeded, so a failed run never leaves a half-written report behind.
@@ -12,11 +13,11 @@ from pathlib import Path
 import shutil
 import tempfile
 
-from ..core.units import AXES, IEEE_TERMS, si_unit
-from ..errors import InputError
 from . import plots
 from .json_report import analysis_to_json
 from .kalibr import write_kalibr_yaml
+from ..core.units import AXES, IEEE_TERMS, si_unit
+from ..errors import InputError
 
 
 def write_results_csv(path, analysis, denoised=None):
@@ -46,7 +47,8 @@ def _cell(value):
 
 def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/imu/data_raw',
                   extra=None, exports=None):
-    """Write every report file into ``out_dir`` atomically; returns the list of file names.
+    """
+    Write every report file into ``out_dir`` atomically; returns the list of file names.
 
     ``extra(staging_dir)`` may write more files (e.g. a bag) into the staging folder first;
     ``exports = (names, inflate)`` writes those exporters' files into ``export/``.

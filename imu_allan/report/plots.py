@@ -1,4 +1,5 @@
-"""PNG plots of an analysis (matplotlib, Agg backend, no screen needed).
+"""
+PNG plots of an analysis (matplotlib, Agg backend, no screen needed).
 
 * ``adev_<sensor>.png``: Allan deviation per axis with its 68.3 % band, each fitted term's line
   (dashed), the total model (solid), slope guides -1, -1/2, 0, +1/2, +1 (grey), and the
@@ -27,7 +28,7 @@ _SLOPES = (-1.0, -0.5, 0.0, 0.5, 1.0)
 
 
 def _slope_guides(ax, tau, adev):
-    """A fan of the IEEE slopes (-1 .. +1, 0.7 decade long) below the curves, at the left."""
+    """Draw a fan of the IEEE slopes (-1 .. +1, 0.7 decade long) below the curves, at the left."""
     t0 = tau[0] * 1.3
     span = min(10.0 ** 0.7, tau[-1] / t0)
     y0 = np.nanmin(adev) / 3.0
@@ -42,7 +43,8 @@ def _slope_guides(ax, tau, adev):
 
 
 def draw_adev(ax, result, fitted, axes, denoised=None):
-    """Draw one sensor's Allan deviation panel on a matplotlib ``Axes``.
+    """
+    Draw one sensor's Allan deviation panel on a matplotlib ``Axes``.
 
     The measured overlapping ADEV of each of ``axes`` (points) with its 68.3 % band, each
     fitted term of ``fitted`` (a :class:`~imu_allan.core.fit.FittedModel`, or None before the
@@ -103,7 +105,8 @@ def plot_adev(path, analysis, sensor, denoised=None):
 
 
 class LiveFigure:
-    """The allan node's live figure: gyroscope and accelerometer panels side by side, as PNG.
+    """
+    The allan node's live figure: gyroscope and accelerometer panels side by side, as PNG.
 
     Each panel is :func:`draw_adev`, the drawing ``analyze``'s plots use.  Object API only (no
     pyplot state), so a worker thread can render while the node keeps taking messages.  The

@@ -1,4 +1,5 @@
-"""The simulator exporters: Gazebo's SDF ``<imu>`` noise and PX4 SITL's gazebo_imu_plugin.
+"""
+The simulator exporters: Gazebo's SDF ``<imu>`` noise and PX4 SITL's gazebo_imu_plugin.
 
 Registered in :mod:`imu_allan.report.exporters` (``--export gazebo,px4``); the files and their
 conversions are :func:`imu_allan.formats.gazebo_sdf.export_gazebo` and ``export_px4``.  Each
@@ -6,8 +7,8 @@ file starts with the common provenance header (an XML comment), then the writer'
 the simulator's terms.
 """
 
-from ..formats.gazebo_sdf import export_gazebo, export_px4, GAZEBO_FILE, PX4_FILE
 from .exporters import Exporter, register
+from ..formats.gazebo_sdf import export_gazebo, export_px4, GAZEBO_FILE, PX4_FILE
 
 
 def _source(values):

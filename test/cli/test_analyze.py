@@ -4,12 +4,11 @@ import json
 import math
 
 from conftest import run_command
-import numpy as np
-import pytest
-
 from imu_allan import simulate, thesis_gx3_25_model
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
 
 
 @pytest.fixture(scope='module')
@@ -115,8 +114,8 @@ def test_bad_input_one_line_exit_2(tmp_path, name, content, needle):
 
 
 @pytest.mark.parametrize('target, needle', [('bias_instability=5', 'outside'),
-                                             ('drift=0.1', "unknown term 'drift'"),
-                                             ('white_noise=abc', 'not a number')])
+                                            ('drift=0.1', "unknown term 'drift'"),
+                                            ('white_noise=abc', 'not a number')])
 def test_bad_target_one_line_exit_2(sim_csv, target, needle):
     proc = run_command('analyze', sim_csv, '--target', target)
     assert proc.returncode == 2 and proc.stdout == ''
@@ -164,8 +163,8 @@ def test_out_dir_has_every_report_file_and_nothing_half_written(sim_csv, tmp_pat
     rows = (out / 'allan_results.csv').read_text().splitlines()
     assert rows[0].startswith('term,unit_gyro,unit_accel,gyro_x,gyro_y,gyro_z,accel_x')
     assert [r.split(',')[0] for r in rows[1:]] == ['quantization', 'white_noise',
-                                                  'bias_instability', 'rate_random_walk',
-                                                  'rate_ramp']
+                                                   'bias_instability', 'rate_random_walk',
+                                                   'rate_ramp']
     # a failing run leaves no staging folder or partial files behind
     bad = tmp_path / 'bad.csv'
     bad.write_text(_header() + _rows(5))

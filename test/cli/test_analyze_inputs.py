@@ -1,4 +1,5 @@
-"""``analyze`` on every input kind.
+"""
+``analyze`` on every input kind.
 
 Real bags, a four-format round trip, several inputs, exported samples, denoising into a new
 bag, and bad bags (one line, exit 2, no partial output).
@@ -8,13 +9,12 @@ import json
 import math
 
 from conftest import run_command
-import numpy as np
-import pytest
-
 from imu_allan import NoiseModel, simulate
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
 
 # Static 6-axis model, 40 min at 100 Hz: long enough for white noise and bias instability.
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.8e-4, 'bias_instability': 1.5e-4},

@@ -1,4 +1,5 @@
-"""``analyze --online`` gives exactly the allan node's numbers for the same samples.
+"""
+``analyze --online`` gives exactly the allan node's numbers for the same samples.
 
 test_allan_node shows over DDS that the node publishes what ``OnlineAllan`` computes with the
 node's parameters; this test closes the chain: ``analyze --online`` on the same samples equals
@@ -8,8 +9,6 @@ that ``OnlineAllan`` to the last bit (both deviations and fitted terms).
 import json
 
 from conftest import run_command
-import numpy as np
-
 from imu_allan import simulate, thesis_gx3_25_model
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.units import AXES, IEEE_TERMS
@@ -17,6 +16,7 @@ from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
 from imu_allan.report.coeffs_layout import coefficient_table
+import numpy as np
 
 
 def test_analyze_online_equals_the_node_pipeline(tmp_path):

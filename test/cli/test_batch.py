@@ -1,4 +1,5 @@
-"""``analyze`` on a real Dask cluster with a DuckDB history (imu_allan.cli.batch).
+"""
+``analyze`` on a real Dask cluster with a DuckDB history (imu_allan.cli.batch).
 
 A real ``dask scheduler`` and two ``dask worker`` processes (Dask's own command line, on
 127.0.0.1, random ports, no dashboard) analyse a folder of 21 small bags in all three
@@ -16,9 +17,6 @@ import subprocess
 import sys
 
 from conftest import executable, run_command
-import numpy as np
-import pytest
-
 from imu_allan import NoiseModel, simulate
 from imu_allan.cli.analyze import _options, build_parser
 from imu_allan.cli.batch import analyze_task, scan_inputs
@@ -26,6 +24,8 @@ from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.samples import Samples
 from imu_allan.history.db import connect, MEASUREMENT_COLUMNS
 from imu_allan.history.rows import measurement_rows
+import numpy as np
+import pytest
 
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.8e-4, 'bias_instability': 1.5e-4},
                               'accel': {'white_noise': 8.3e-4, 'bias_instability': 7e-4}})
@@ -63,7 +63,7 @@ def bag_folder(tmp_path_factory):
 
 @pytest.fixture(scope='module')
 def cluster(tmp_path_factory):
-    """A real scheduler and two single-threaded workers without nanny (a kill is a death)."""
+    """Start a real scheduler and two single-threaded workers without nanny (a kill is a death)."""
     dask = str(Path(sys.executable).parent / 'dask')
     env = dict(os.environ, DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES='2',
                OPENBLAS_NUM_THREADS='1', NUMBA_NUM_THREADS='1')
@@ -107,7 +107,7 @@ def _rows(db):
 
 
 def _serial(paths):
-    """The serial path: the same per-input function, here, one input after another."""
+    """Return the serial path: the same per-input function, here, one input after another."""
     args = build_parser().parse_args(['x', *OPTIONS])
     out = {}
     for p in paths:

@@ -1,10 +1,9 @@
 """What every command shares: one parser (no abbreviations), one error guard."""
 
-import pytest
-
 from imu_allan.cli import analyze, discrepancy, gx3_sim
 from imu_allan.cli.common import guarded
 from imu_allan.errors import InputError
+import pytest
 
 
 @pytest.mark.parametrize('module, argv', [
@@ -23,7 +22,7 @@ def test_abbreviated_options_are_refused(module, argv, capsys):
 
 
 def test_guard_turns_bad_input_into_one_line_and_status_2(capsys):
-    """InputError and OSError: one stderr line naming the input, exit status 2."""
+    """Bad input (InputError, OSError): one stderr line naming the input, exit status 2."""
     @guarded
     def bad(argv=None):
         raise InputError('data.csv', 'no samples')

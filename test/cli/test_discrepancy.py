@@ -4,15 +4,14 @@ import json
 import math
 
 from conftest import run_command
-import numpy as np
-import pytest
-
 from imu_allan.core.allan import allan_deviation
 from imu_allan.core.discrepancy import gap_summary
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
 
 RATE = 100.0
 MINUTES = 20.0
@@ -24,7 +23,7 @@ TRUTH = NoiseModel({'gyro_x': {**BASE, 'rate_random_walk': {'value': 2.5e-4}},
 
 @pytest.fixture(scope='module')
 def recording(tmp_path_factory):
-    """A 20 min, 100 Hz CSV with two gyro axes (seeded)."""
+    """Return a 20 min, 100 Hz CSV with two gyro axes (seeded)."""
     n = int(MINUTES * 60 * RATE)
     data = simulate(TRUTH, n, RATE, seed=11)
     path = tmp_path_factory.mktemp('disc') / 'two_axes.csv'

@@ -1,4 +1,5 @@
-"""``discrepancy DATA --model FILE.sdf`` (built executable): a Gazebo SDF as the model under test.
+"""
+``discrepancy DATA --model FILE.sdf`` (built executable): a Gazebo SDF as the model under test.
 
 The data are the re-implemented gz-sensors noise of ``EXAMPLE_SDF`` (``formats/sim_reference``)
 plus a rate random walk on gyro_x that the file lacks; 15 min at 100 Hz, fixed seeds.
@@ -8,13 +9,12 @@ import json
 
 from conftest import run_command
 from formats.sim_reference import EXAMPLE_SDF, gz_noise_params, gz_simulate
-import numpy as np
-import pytest
-
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
 
 RATE = 100.0
 N = 15 * 60 * 100
@@ -23,7 +23,7 @@ AXES = ('gyro_x', 'gyro_y')
 
 @pytest.fixture(scope='module')
 def files(tmp_path_factory):
-    """The recording (CSV) and the simulator's file the data do not fully follow."""
+    """Return the recording (CSV) and the simulator's file the data do not fully follow."""
     folder = tmp_path_factory.mktemp('sdf')
     data = gz_simulate(gz_noise_params(EXAMPLE_SDF), AXES, N, RATE, seed=1)
     hidden = NoiseModel({'gyro_x': {'rate_random_walk': {'value': 3e-4}}})
@@ -36,7 +36,8 @@ def files(tmp_path_factory):
 
 
 def test_sdf_model_names_the_effect_and_corrected_sdf_closes_the_gap(files):
-    """The random walk is named on gyro_x; corrected.sdf, run again, starts with a smaller gap.
+    """
+    The random walk is named on gyro_x; corrected.sdf, run again, starts with a smaller gap.
 
     The second run starts from corrected.sdf: the workflow's own simulation of what that file
     really simulates must be closer to the data (initial gap of gyro_x below half the first

@@ -1,4 +1,5 @@
-"""``fleet``: trends and flags from a DuckDB history of 5 simulated IMUs over 12 weeks.
+"""
+``fleet``: trends and flags from a DuckDB history of 5 simulated IMUs over 12 weeks.
 
 The history is written through the same code path as ``analyze --db`` (``History.record``
 with the report of ``analyze_samples`` on each record), but from samples simulated in memory:
@@ -11,15 +12,14 @@ from datetime import datetime
 import json
 
 from conftest import run_command
-import numpy as np
-import pytest
-
 from imu_allan import NoiseModel, simulate
 from imu_allan.cli.batch import History
 from imu_allan.core.analysis import AnalysisOptions, analyze_samples
 from imu_allan.formats.samples import Samples
 from imu_allan.history.db import connect, utc
 from imu_allan.report.json_report import analysis_to_json
+import numpy as np
+import pytest
 
 GYRO_N, ACCEL_N = 5.8e-4, 8.3e-4
 RATE, N = 50.0, 3000  # one minute at 50 Hz: N to about +-1.3 % (68.3 %)
@@ -71,7 +71,8 @@ def test_history_has_every_record_once(fleet_db):
 
 
 def test_exactly_the_degrading_imu_is_flagged(fleet_db, tmp_path):
-    """robot3's N rose 30 % (about 20 of its interval half-widths): flagged; nobody else.
+    """
+    robot3's N rose 30 % (about 20 of its interval half-widths): flagged; nobody else.
 
     Every healthy IMU faces 8 history tests (2 axes x N, B x rise, fall) at about 4 sigma and
     4 fleet tests, so a false flag among the four would be a 1-in-100 event, not the seed's.

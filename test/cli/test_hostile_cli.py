@@ -1,4 +1,5 @@
-"""Hostile command lines: one clean line and exit 2, never a traceback or a hang.
+"""
+Hostile command lines: one clean line and exit 2, never a traceback or a hang.
 
 Real subprocesses of the built executables, each bounded by a timeout.  Most cases fail at
 argument or file checks, before any numerics (about a second each); one small analysis checks
@@ -8,11 +9,10 @@ that a result which cannot be written is an error.
 import subprocess
 
 from conftest import executable, run_command
-import numpy as np
-import pytest
-
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
 
 
 def _one_clean_line(proc, *needles):

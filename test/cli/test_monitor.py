@@ -1,4 +1,5 @@
-"""The built ``monitor`` command over real DDS: JSON snapshot, terminal redraw, timeout.
+"""
+The built ``monitor`` command over real DDS: JSON snapshot, terminal redraw, timeout.
 
 * ``--once --json`` against the built allan node fed 60 s of simulated data
   (``nodes/allan_feed.py``) returns exactly the coefficients a direct subscriber decodes;
@@ -21,17 +22,15 @@ import threading
 import time
 
 from conftest import DOMAIN, executable, ros_env, run_command
-from nodes.allan_feed import AllanFeed
-import numpy as np
-import pytest
-
 from imu_allan.cli.monitor import format_interval, REDRAW
 from imu_allan.core.units import AXES, conventional, IEEE_TERMS
 from imu_allan.nodes.allan import multiarray
 from imu_allan.report.coeffs_layout import COEFF_LABELS, decode_coefficients
+from nodes.allan_feed import AllanFeed
+import numpy as np
+import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
-
 
 
 def test_once_json_equals_a_direct_subscriber(ros_context):
@@ -69,7 +68,7 @@ def test_once_json_equals_a_direct_subscriber(ros_context):
 
 
 def _table(scale):
-    """A coefficient table: white noise and bias instability on every axis, times ``scale``."""
+    """Return a coefficient table: white noise and bias instability on every axis, x ``scale``."""
     table = np.full((len(AXES), len(IEEE_TERMS), 3), np.nan)
     for k, term in ((1, 'white_noise'), (2, 'bias_instability')):
         base = (1e-4 if term == 'white_noise' else 2e-5) * scale
@@ -93,7 +92,7 @@ def _read_until(fd, text, timeout, seen):
 
 
 def _threads(pid):
-    """What each thread of a process waits in (kernel wait channel), for a failure message."""
+    """Return what each thread of a process waits in (kernel wait channel), for a message."""
     out = {}
     for tid in os.listdir(f'/proc/{pid}/task'):
         with open(f'/proc/{pid}/task/{tid}/comm') as comm, \

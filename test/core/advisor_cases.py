@@ -1,4 +1,5 @@
-"""Does the recording advisor's prediction come true?  Cases shared by test_advisor.py.
+"""
+Does the recording advisor's prediction come true?  Cases shared by test_advisor.py.
 
 For several simulated noise models (one gyro axis at 10 Hz, 20-30 min base records) and seeds:
 analyse the base record, ask the advisor how much longer to record until each fitted term of
@@ -54,7 +55,8 @@ def analyse(model, n, seed, terms):
 
 
 def cases(models=MODELS, seeds=SEEDS, skip=()):
-    """Yield one row per (model, seed, term): predicted time and achieved half-width.
+    """
+    Yield one row per (model, seed, term): predicted time and achieved half-width.
 
     Terms in ``skip`` are left out (the test leaves out white noise: its 1/sqrt(T) forecast
     is the easy case, and every case costs a long record).

@@ -1,4 +1,5 @@
-"""Hidden-effect cases for the discrepancy workflow tests (shared by the test modules).
+"""
+Hidden-effect cases for the discrepancy workflow tests (shared by the test modules).
 
 Every case is white noise N = 1e-3 plus bias instability B = 3e-4 (units of the axis) plus at
 most one hidden effect sized so that it is below the white-noise level sample to sample (its
@@ -15,12 +16,11 @@ a comparable share of the curve:
 
 import math
 
-import numpy as np
-
 from imu_allan.core.discrepancy import run_discrepancy
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.core.units import AXES
+import numpy as np
 
 N_WHITE = 1e-3
 B_FLICKER = 3e-4
@@ -76,7 +76,7 @@ def run_case(per_axis, rate_hz, minutes, seed, **kwargs):
 
 
 def covered(step, truth_params, level='ci95'):
-    """True when every true parameter of the step's effect lies inside its interval."""
+    """Return True when every true parameter of the step's effect lies inside its interval."""
     for name, value in truth_params.items():
         entry = step.parameters.get(name)
         if entry is None:
@@ -144,7 +144,8 @@ def null_suite(seeds=range(10)):
 
 
 def missing_base_suite(seeds=range(10)):
-    """Single-axis runs where the start lacks white noise or bias instability.
+    """
+    Single-axis runs where the start lacks white noise or bias instability.
 
     Twice the length of the six-axis runs (one axis is cheap): the flicker floor then spans a
     decade of averaging times instead of the last few points.

@@ -1,12 +1,11 @@
-"""The recording advisor (core/advisor.py): targets, forecasts, unresolved pairs, health.
+"""
+The recording advisor (core/advisor.py): targets, forecasts, unresolved pairs, health.
 
 Budget: about 20 s in all, most of it the statistical test (one gyro axis at 10 Hz).
 """
 
 import json
 import math
-
-import pytest
 
 from core.advisor_cases import cases, RATE_HZ, rel_halfwidth, SEEDS
 from imu_allan.core import health
@@ -25,6 +24,7 @@ from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.errors import InputError
 from imu_allan.report.advice import advice_sentence, advice_to_json
+import pytest
 
 
 def test_parse_targets_merges_over_the_defaults():
@@ -56,7 +56,8 @@ def _record(model, seconds, seed, rate_hz=RATE_HZ, axes=('gyro_x',)):
 
 
 def test_forecast_at_the_current_length_reproduces_the_fit():
-    """A target just under the current half-width needs only a little more data (< 60 %).
+    """
+    A target just under the current half-width needs only a little more data (< 60 %).
 
     At the current length the forecast equals the fit's own covariance evaluated at its model
     curve, so meeting 0.9 x the current precision of a 1/sqrt(T) term takes about 23 % more:
@@ -79,7 +80,8 @@ def test_met_targets_need_no_more_time():
 
 
 def test_the_prediction_comes_true():
-    """Achieved half-width within a factor 1.5 of the target for >= 80 % of the cases.
+    """
+    Achieved half-width within a factor 1.5 of the target for >= 80 % of the cases.
 
     Cases: white + B, white + K, white + B + K and white + Gauss-Markov, seeds 1 and 2 (the
     table in docs/method.md runs three and includes white noise), each fitted term of the
@@ -98,7 +100,8 @@ def test_the_prediction_comes_true():
 
 
 def test_ten_minutes_of_white_and_b_report_the_unresolved_pair():
-    """The issue's case: 10 min at 100 Hz, white + B; one gyro axis gets K instead of B.
+    """
+    The issue's case: 10 min at 100 Hz, white + B; one gyro axis gets K instead of B.
 
     Instead of a silent NaN for B, that axis is reported as unresolved (B vs K) with a finite
     time until the two separate, in JSON that has no NaN, and the sentence names it.

@@ -1,4 +1,5 @@
-"""Overlapping Allan deviation, its averaging-time grid and its confidence intervals.
+"""
+Overlapping Allan deviation, its averaging-time grid and its confidence intervals.
 
 Oracles: NBS14 10-point data set (allantools' Stable32-checked test, anchors 10.4), the
 Greenhall-Riley EDF values of anchors 10.2, and allantools itself on random data.
@@ -9,13 +10,12 @@ import subprocess
 import sys
 
 import allantools
-import numpy as np
-import pytest
-
 from imu_allan import allan_deviation
 from imu_allan.core import allan_kernel
 from imu_allan.core.allan import avar_fast, avar_function, avar_reference, identify_noise, tau_grid
 from imu_allan.core.edf import chi2_interval, edf_oadev
+import numpy as np
+import pytest
 
 NBS14_FREQ = [892, 809, 823, 798, 671, 644, 883, 903, 677]
 
@@ -48,7 +48,8 @@ def test_kernel_choice_by_size():
 
 
 def test_short_record_does_not_import_numba():
-    """A one-minute record in a fresh interpreter never imports numba.
+    """
+    A one-minute record in a fresh interpreter never imports numba.
 
     Importing it and loading the kernel take 0.5-1 s, more than the whole estimate with numpy.
     """

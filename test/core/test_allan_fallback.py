@@ -1,4 +1,5 @@
-"""numba is optional: without it the numpy reference estimator gives the same numbers.
+"""
+numba is optional: without it the numpy reference estimator gives the same numbers.
 
 The child process blocks the import (``sys.modules['numba'] = None`` makes ``import numba``
 raise ImportError, as on a platform with no numba package) and asks twice for the compiled
@@ -10,9 +11,8 @@ import json
 import subprocess
 import sys
 
-import numpy as np
-
 from imu_allan.core.allan import avar_fast, tau_grid
+import numpy as np
 
 CHILD = """
 import json, sys
@@ -27,8 +27,11 @@ print(json.dumps([first.tolist(), second.tolist()]))
 
 
 def test_without_numba_same_numbers_and_one_log_line():
-    """Same AVAR within float rounding (the compiled kernel sums in another order, fastmath);
-    exactly one stderr line, naming numba and what to install."""
+    """
+    Without numba: the same AVAR, and one log line naming numba and what to install.
+
+    Same within float rounding (the compiled kernel sums in another order, fastmath).
+    """
     out = subprocess.run([sys.executable, '-c', CHILD], capture_output=True, text=True,
                          timeout=120)
     assert out.returncode == 0, out.stderr

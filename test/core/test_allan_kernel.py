@@ -1,4 +1,5 @@
-"""Tests of the compiled AVAR kernel (imu_allan/core/allan_kernel.py).
+"""
+Tests of the compiled AVAR kernel (imu_allan/core/allan_kernel.py).
 
 Every fast path is compared with the numpy reference (``allan.avar_reference``, ``allan._phase``)
 on shapes that reach its edges: odd lengths, block boundaries, m near n / 2, groups of four
@@ -12,11 +13,10 @@ import shutil
 import subprocess
 import sys
 
-import numpy as np
-import pytest
-
 from imu_allan.core import allan_kernel
 from imu_allan.core.allan import _phase, avar_reference
+import numpy as np
+import pytest
 
 # Cases (samples, axes, averaging factors): chosen to cross the kernel's branches.
 _N_BLOCK = allan_kernel.BLOCK
@@ -31,7 +31,8 @@ _N_BLOCK = allan_kernel.BLOCK
     (40_000, 1, np.unique(np.geomspace(1, 20_000, 60).astype(int)).tolist()),  # one axis
 ])
 def test_fast_avar_equals_reference(n, axes, ms):
-    """Same AVAR as the numpy reference to 1e-9 relative.
+    """
+    Same AVAR as the numpy reference to 1e-9 relative.
 
     Both sum the same exact terms; only the rounding order differs (~1e-13 here).
     """
@@ -44,7 +45,8 @@ def test_fast_avar_equals_reference(n, axes, ms):
 
 
 def test_fast_phase_equals_reference():
-    """The compiled phase equals the numpy cumulative sum to rounding.
+    """
+    The compiled phase equals the numpy cumulative sum to rounding.
 
     Two ranges of rows are integrated in parallel, then joined.  The result equals the reference
     up to a drift k * delta from the mean's rounding (summed in another order; |delta| < 1e-14
@@ -100,7 +102,7 @@ def _env(tmp_path, **extra):
 
 
 def _module_copy(tmp_path):
-    """The kernel module alone in a fresh folder (its own source, so its own cache entries)."""
+    """Copy the kernel module alone into a fresh folder (own source, so own cache entries)."""
     folder = tmp_path / 'pkg'
     folder.mkdir()
     shutil.copy(allan_kernel.__file__, folder / 'allan_kernel.py')
@@ -108,7 +110,8 @@ def _module_copy(tmp_path):
 
 
 def test_second_process_compiles_nothing(tmp_path):
-    """A second process compiles nothing.
+    """
+    A second process compiles nothing.
 
     With a fresh NUMBA_CACHE_DIR the first process saves the compiled kernel; the second loads
     it and saves no new entry (numba's NUMBA_DEBUG_CACHE lines and the folder agree).
@@ -129,7 +132,8 @@ def test_second_process_compiles_nothing(tmp_path):
 
 
 def test_read_only_install_caches_in_user_folder_and_says_so(tmp_path):
-    """A read-only install caches the kernel in the user cache folder.
+    """
+    A read-only install caches the kernel in the user cache folder.
 
     Where the module's __pycache__ cannot be created (here a file is in its place, which
     also stops root), the kernel is cached in the user cache folder, the first process says so

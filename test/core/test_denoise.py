@@ -1,12 +1,11 @@
 """Wavelet / median denoising: block streaming == batch, latency, effect on Allan deviation."""
 
-import numpy as np
-import pytest
-
 from imu_allan.core.allan import allan_deviation
 from imu_allan.core.denoise import block_geometry, BlockDenoiser, denoise, sure_threshold
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulate import simulate
+import numpy as np
+import pytest
 
 RATE = 100.0
 
@@ -35,7 +34,8 @@ def signal():
     ('sym8', 4, 'universal', 'soft'), ('sym8', 6, 'minimax', 'hard'),
     ('db4', 5, 'universal', 'hard'), ('haar', 3, 'minimax', 'soft')])
 def test_block_output_equals_whole_record_batch(signal, wavelet, level, rule, mode):
-    """With a given noise level, every streamed sample equals the batch on the whole record.
+    """
+    With a given noise level, every streamed sample equals the batch on the whole record.
 
     Both run the same float operations on the same coefficients, so the tolerance is 1e-12
     (rounding only); a wrong block alignment or margin gives errors of order 0.1.
@@ -93,7 +93,8 @@ def test_sure_threshold_and_options():
 
 
 def test_sym8_12_levels_drop_white_noise_tenfold_keep_long_tau():
-    """Thesis settings on simulated 3DM-GX3-25 data: white-noise ADEV down >= 10x, long tau kept.
+    """
+    Thesis settings on simulated 3DM-GX3-25 data: white-noise ADEV down >= 10x, long tau kept.
 
     White-noise level = ADEV at tau = 1 s (where the thesis model is 98 % white noise, the
     IEEE read-off point of N).  Long tau = 160-520 s (> 4 x 2^12 samples, below T/10): the
@@ -113,7 +114,8 @@ def test_sym8_12_levels_drop_white_noise_tenfold_keep_long_tau():
 
 
 def test_noise_from_allan_coeffs_equals_whole_record_batch(signal):
-    """noise_source=allan: the stream equals the whole-record batch with sigma = N sqrt(fs).
+    """
+    noise_source=allan: the stream equals the whole-record batch with sigma = N sqrt(fs).
 
     N comes from an imu/allan_coeffs payload; the threshold's n is the block length.
     """

@@ -2,9 +2,6 @@
 
 import math
 
-import numpy as np
-import pytest
-
 from imu_allan.core.allan import allan_deviation
 from imu_allan.core.discrepancy import (
     excursion_band,
@@ -17,6 +14,8 @@ from imu_allan.core.discrepancy import (
 )
 from imu_allan.core.model import ModelError, NoiseModel
 from imu_allan.core.simulate import simulate
+import numpy as np
+import pytest
 
 RATE = 100.0
 N = 60000  # 10 min
@@ -35,7 +34,8 @@ def null_runs():
 
 
 def test_gap_is_about_one_for_the_true_model(null_runs):
-    """Under the true model E[gap^2] = 1 by construction; check it on 120 curves.
+    """
+    Under the true model E[gap^2] = 1 by construction; check it on 120 curves.
 
     The mean of gap^2 over 120 curves has a standard error of about
     sqrt(2 / T_eff / 120) ~ 0.05 (T_eff ~ 7), so [0.8, 1.2] is a 4-sigma window.
@@ -58,7 +58,8 @@ def test_gap_is_about_one_for_the_true_model(null_runs):
 
 
 def test_band_spread_matches_simulation(null_runs):
-    """The analytic spread of ln(adev) matches the scatter of 120 simulated curves.
+    """
+    The analytic spread of ln(adev) matches the scatter of 120 simulated curves.
 
     The std of 120 samples has a relative standard error of ~6.5 %; a 25 % band allows for that
     and the EDF approximations at the longest averaging times.

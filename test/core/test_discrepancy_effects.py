@@ -1,4 +1,5 @@
-"""Hidden-effect suite of the discrepancy workflow.
+"""
+Hidden-effect suite of the discrepancy workflow.
 
 Cases (see ``discrepancy_cases.py`` for the sizes and why each effect is hidden):
 
@@ -14,8 +15,6 @@ All seeds are fixed, so the counts are reproducible; the tolerances are what the
 (>= 90 % named, >= 95 % clean) and are met with a margin (docs/discrepancy.md lists the
 measured rates).
 """
-
-import pytest
 
 from core.discrepancy_cases import (
     effect_suite,
@@ -33,6 +32,7 @@ from core.discrepancy_cases import (
 from imu_allan.core.discrepancy import run_discrepancy
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulate import simulate
+import pytest
 
 
 @pytest.fixture(scope='module')
@@ -58,7 +58,8 @@ def test_names_the_hidden_effect(effect_records):
 
 
 def test_parameters_within_their_intervals(effect_records):
-    """True parameters inside the reported 95 % intervals.
+    """
+    True parameters inside the reported 95 % intervals.
 
     With honest intervals 95 % of the named cases would cover; 85 % leaves room for the
     approximations (sandwich covariance, log-normal intervals) while still failing for intervals
@@ -108,7 +109,8 @@ PAIRS = (('quantization', 'rate_random_walk'), ('gauss_markov', 'rate_ramp'),
 
 @pytest.mark.parametrize('rate, minutes, seed', [(50.0, 30.0, 71), (200.0, 10.0, 72)])
 def test_two_effects_hidden_together(rate, minutes, seed):
-    """Both effects found on every axis of a six-axis run (either order), gap consistent.
+    """
+    Both effects found on every axis of a six-axis run (either order), gap consistent.
 
     One miss in six pairs is tolerated per run (a pair's weaker effect can be partly absorbed by
     the first one's refit); the issue's requirement is checked over 12 pairs: >= 10 complete.
@@ -121,7 +123,8 @@ def test_two_effects_hidden_together(rate, minutes, seed):
 
 
 def test_thesis_scenario():
-    """3DM-GX3-25 with the thesis's coefficients plus a rate random walk it never looked for.
+    """
+    3DM-GX3-25 with the thesis's coefficients plus a rate random walk it never looked for.
 
     One hour at 100 Hz; the RRW crosses the flicker floor near 20 s (gyros; K = 4e-5
     rad/s^2/sqrt(Hz) = 0.5 deg/h/sqrt(h)) and 20-45 s (accelerometers; K = 1.7e-4

@@ -1,4 +1,5 @@
-"""Fit round trips on simulated data with known coefficients, interval honesty, pitfalls.
+"""
+Fit round trips on simulated data with known coefficients, interval honesty, pitfalls.
 
 Models (continuous-time SI):
 * thesis 3DM-GX3-25: ARW ~2 deg/sqrt(h), bias instability ~30 deg/h; VRW 0.05 m/s/sqrt(h),
@@ -10,12 +11,11 @@ Models (continuous-time SI):
 
 import math
 
-import numpy as np
-import pytest
-
 from imu_allan import allan_deviation, fit_noise_model, NoiseModel, simulate, thesis_gx3_25_model
 from imu_allan.core.fit import fit_axis
 from imu_allan.core.terms import FLICKER_FLOOR
+import numpy as np
+import pytest
 
 ADIS = NoiseModel.from_dict({
     'gyro': {'white_noise': 1.6968e-4, 'bias_instability': 14.5 * math.pi / 180 / 3600,
@@ -34,7 +34,8 @@ def _round_trip(model, seed):
 @pytest.mark.parametrize('name,model,seed', [('thesis', thesis_gx3_25_model(), 21),
                                              ('adis16448', ADIS, 22)])
 def test_round_trip_six_axes_two_hours(name, model, seed):
-    """White noise within 3 %; the other true terms found and inside their intervals.
+    """
+    White noise within 3 %; the other true terms found and inside their intervals.
 
     One fixed seed checks 6 axes x 1-2 other terms.  A 68.3 % interval misses a third of the
     time by construction (test_interval_coverage checks that rate over 50 seeds), so here every
@@ -65,7 +66,8 @@ def test_round_trip_six_axes_two_hours(name, model, seed):
 
 
 def test_interval_coverage_over_50_seeds():
-    """Share of 68.3 % intervals that contain the truth: 55-80 % for N, B and K.
+    """
+    Share of 68.3 % intervals that contain the truth: 55-80 % for N, B and K.
 
     50 fixed seeds of a single ADIS16448-like gyro axis, 2 h at 100 Hz, fitted with the true
     terms.  With p = 0.683 the binomial std over 50 draws is 6.6 %, so 55-80 % is +-2 sigma;
@@ -111,7 +113,8 @@ def test_unknown_term_is_refused():
 # --- pitfalls of anchors section 10.8 -----------------------------------------------------
 
 def test_pitfall_half_overlap_bias_not_present():
-    """Half-overlapping block differences underestimate ADEV by 1/sqrt(2) (allan_variance_ros #28).
+    """
+    Half-overlapping block differences underestimate ADEV by 1/sqrt(2) (allan_variance_ros #28).
 
     Density 0.0025 at 400 Hz for 1 h: ours recovers 0.0025, a half-overlap implementation of
     the same data gives ~0.00179.

@@ -2,9 +2,6 @@
 
 import math
 
-import numpy as np
-import pytest
-
 from imu_allan.core import terms
 from imu_allan.core.gauss_markov import (
     best_gauss_markov,
@@ -12,6 +9,8 @@ from imu_allan.core.gauss_markov import (
     RANDOM_WALK_TAU_FACTOR,
     stationary_sigma,
 )
+import numpy as np
+import pytest
 
 RATE = 100.0
 BAND = (0.01, 300.0)
@@ -45,7 +44,8 @@ def test_a_random_walk_is_a_long_gauss_markov_within_one_percent():
 
 
 def test_bias_instability_fit_follows_the_total_curve():
-    """White noise + B: the fitted Gauss-Markov keeps the total ADEV close over the band.
+    """
+    White noise + B: the fitted Gauss-Markov keeps the total ADEV close over the band.
 
     One Gauss-Markov cannot be flat over four decades.  The fit weights ln ADEV by
     1/sqrt(tau) (the spread of a measured ln ADEV grows as sqrt(tau)), so it is within 10 %

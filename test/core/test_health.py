@@ -2,12 +2,11 @@
 
 import math
 
-import numpy as np
-import pytest
-
 from imu_allan.core import health as hm
 from imu_allan.core.units import AXES, DEG, HOUR, IEEE_TERMS, STANDARD_GRAVITY
 from imu_allan.errors import InputError
+import numpy as np
+import pytest
 
 
 def test_packaged_budget_is_the_datasheet_in_si():

@@ -1,4 +1,5 @@
-"""Hostile samples at the analysis: no silent wrong answer.
+"""
+Hostile samples at the analysis: no silent wrong answer.
 
 Non-finite and non-physical values (beyond ``units.PHYSICAL_LIMIT``) are refused naming the
 axis, value, sample and stamp; the outlier report says ``replaced`` only when asked; lost
@@ -6,15 +7,14 @@ samples are counted from the true interval even when most steps are multiples of
 Records are 2,000 samples (well under a second each).
 """
 
-import numpy as np
-import pytest
-
 from imu_allan.core.analysis import AnalysisOptions, analyze_samples
 from imu_allan.core.preprocess import check_timing, nominal_interval
 from imu_allan.core.units import PHYSICAL_LIMIT
 from imu_allan.errors import InputError
 from imu_allan.formats.samples import Samples
 from imu_allan.report.json_report import analysis_to_json
+import numpy as np
+import pytest
 
 N = 2000
 

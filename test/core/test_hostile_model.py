@@ -1,15 +1,15 @@
-"""Hostile model and budget files: one schema, one line naming the file, never a traceback.
+"""
+Hostile model and budget files: one schema, one line naming the file, never a traceback.
 
 Every command and node reads model files through ``NoiseModel.from_yaml`` and budget files
 through ``NoiseBudget.from_yaml``; both validate against the schema of
 :mod:`imu_allan.core.model`.  Each case runs in milliseconds.
 """
 
-import pytest
-
 from imu_allan.core.health import NoiseBudget
 from imu_allan.core.model import NoiseModel
 from imu_allan.errors import InputError
+import pytest
 
 BAD = [
     ('gyro: 5\n', 'gyro must be a mapping'),

@@ -1,4 +1,5 @@
-"""The online pipeline (the allan node's) under NaN, inf and non-physical samples.
+"""
+The online pipeline (the allan node's) under NaN, inf and non-physical samples.
 
 Such values are rejected before the gate and the estimator, counted per axis, and reported by
 ``stream_health`` as WARN with the counts; the estimate stays finite and no numpy warning
@@ -7,12 +8,11 @@ escapes.  20,000 samples at 100 Hz with fixed seeds: about a second.
 
 import warnings
 
-import numpy as np
-import pytest
-
 from imu_allan.core import health as hm
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.units import AXES
+import numpy as np
+import pytest
 
 RATE = 100.0
 N = 20_000

@@ -1,10 +1,9 @@
 """Thesis preprocessing: Tukey outlier replacement, time-stamp gaps and jitter, units."""
 
 
+from imu_allan.core.preprocess import check_timing, replace_outliers, tukey_fences
 import numpy as np
 import pytest
-
-from imu_allan.core.preprocess import check_timing, replace_outliers, tukey_fences
 
 
 def test_tukey_replaces_extreme_outliers_with_inlier_mean_and_counts_them():

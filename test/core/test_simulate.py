@@ -2,9 +2,6 @@
 
 import math
 
-import numpy as np
-import pytest
-
 from imu_allan import allan_deviation, NoiseModel, simulate
 from imu_allan.core.simulate import flicker_noise
 from imu_allan.core.terms import (
@@ -15,6 +12,8 @@ from imu_allan.core.terms import (
     sinusoid_shape,
     term_avar,
 )
+import numpy as np
+import pytest
 
 
 def test_flicker_floor_constant():

@@ -1,12 +1,11 @@
 """Stationarity gate on synthetic motion, and the gated online estimate."""
 
-import numpy as np
-import pytest
-
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.online import online_allan
 from imu_allan.core.simulate import simulate
 from imu_allan.core.stationarity import StationarityGate, stationary_mask
+import numpy as np
+import pytest
 
 RATE = 100.0
 N = 60000  # 600 s
@@ -14,7 +13,8 @@ N = 60000  # 600 s
 
 @pytest.fixture(scope='module')
 def moving_record():
-    """600 s of the thesis model (gravity on z) with four kinds of motion.
+    """
+    600 s of the thesis model (gravity on z) with four kinds of motion.
 
     * 100-110 s: a turn about z at 0.5 rad/s (ramped in and out over 0.5 s);
     * 200-205 s: vibration, 0.3 rad/s and 2 m/s^2 rms on every axis;
@@ -45,7 +45,8 @@ def moving_record():
 
 
 def test_gate_finds_motion_and_keeps_still_time(moving_record):
-    """Every moving sample excluded; at most 2 % of the clearly still samples lost.
+    """
+    Every moving sample excluded; at most 2 % of the clearly still samples lost.
 
     "Clearly still" leaves out the hold time (1 s) and one gate window (0.2 s) around each
     motion, which the gate excludes on purpose.

@@ -1,13 +1,12 @@
 """The bounded-memory online Allan estimator against the batch overlapping estimator."""
 
-import numpy as np
-import pytest
-
 from imu_allan.core.allan import allan_deviation
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.online import online_allan, OnlineAllan
 from imu_allan.core.simulate import simulate
 from imu_allan.core.streaming import factor_grid, StreamingAllan
+import numpy as np
+import pytest
 
 RATE = 100.0
 
@@ -45,7 +44,8 @@ def _phase(data):
 
 
 def test_exact_mode_equals_batch_estimator(record):
-    """exact=True: every tracked factor equals allan_deviation(..., taus=...) to 1e-10.
+    """
+    exact=True: every tracked factor equals allan_deviation(..., taus=...) to 1e-10.
 
     Any difference beyond float rounding (the sums are taken in another order and on a
     rebased phase) would be a bug; 1e-10 relative is many orders above rounding and far below
@@ -152,7 +152,8 @@ def test_pipeline_memory_constant():
 
 
 def test_sliding_window_shows_a_change():
-    """White noise that triples: the 60 s window reports the new level, the whole run does not.
+    """
+    White noise that triples: the 60 s window reports the new level, the whole run does not.
 
     Window terms are defined exactly (terms whose newest sample lies in the newest buckets),
     so the windowed sum equals the batch sum over those terms to rounding.

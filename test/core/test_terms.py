@@ -2,10 +2,6 @@
 
 import math
 
-import numpy as np
-import pytest
-from scipy.optimize import brentq, minimize_scalar
-
 from imu_allan.core.terms import (
     gauss_markov_shape,
     ID_ALPHA,
@@ -13,6 +9,9 @@ from imu_allan.core.terms import (
     sinusoid_shape,
     TERMS,
 )
+import numpy as np
+import pytest
+from scipy.optimize import brentq, minimize_scalar
 
 RATE = 100.0
 

@@ -1,7 +1,5 @@
 """Axis names, term keys and unit conversions (core/units.py), against the anchors' values."""
 
-import pytest
-
 from imu_allan.core.units import (
     ALL_TERMS,
     AXES,
@@ -12,6 +10,7 @@ from imu_allan.core.units import (
     si_unit,
     TERM_PARAMETERS,
 )
+import pytest
 
 
 def test_unit_conversions():
@@ -19,11 +18,11 @@ def test_unit_conversions():
     # 1 m/s/sqrt(h) = 1/60 m/s^2/sqrt(Hz)
     assert conventional('gyro_x', 'white_noise', 2.9089e-4)[0] == pytest.approx(1.0, rel=1e-4)
     assert conventional('gyro_y', 'bias_instability', 4.8481e-6)[0] == pytest.approx(1.0,
-                                                                                  rel=1e-4)
+                                                                                     rel=1e-4)
     assert conventional('accel_x', 'white_noise', 1 / 60) == pytest.approx((1.0,
                                                                            'm/s/sqrt(h)'))
     assert conventional('gyro_z', 'rate_random_walk', 8.0802e-8)[0] == pytest.approx(1.0,
-                                                                                   rel=1e-4)
+                                                                                     rel=1e-4)
 
 
 def test_si_units_per_sensor_and_continuous_time():

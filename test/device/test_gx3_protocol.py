@@ -5,14 +5,13 @@ import random
 import struct
 
 from conftest import SHARED_DATA
-import numpy as np
-import pytest
-import yaml
-
 from imu_allan.device import gx3_protocol as p
 from imu_allan.device.gx3_stream import parse_bytes, StreamParser
 from imu_allan.errors import InputError
 from imu_allan.formats.gx3raw import read_gx3raw
+import numpy as np
+import pytest
+import yaml
 
 DATA = str(SHARED_DATA / 'gx3_25_captures')
 needs_data = pytest.mark.skipif(not os.path.isdir(DATA),
@@ -84,7 +83,7 @@ def test_full_capture_mixed_records():
     norm = np.linalg.norm(samples.data[:, 3:], axis=1)
     assert np.all(np.abs(norm - 9.80665) < 0.5)
     mag = np.linalg.norm(np.column_stack([samples.extra[k] for k in ('mag_x', 'mag_y',
-                                                                    'mag_z')]), axis=1)
+                                                                     'mag_z')]), axis=1)
     assert np.all((mag > 20e-6) & (mag < 70e-6))
 
 

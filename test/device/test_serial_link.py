@@ -6,15 +6,15 @@ import subprocess
 import sys
 import time
 
+from imu_allan.device import gx3_protocol as p
+from imu_allan.device.gx3_stream import StreamParser
+from imu_allan.device.serial_link import Backoff, check_rate, LinkError, SerialLink, TimeSync
 import numpy as np
 import pytest
 import serial
 
-from imu_allan.device import gx3_protocol as p
-from imu_allan.device.gx3_stream import StreamParser
-from imu_allan.device.serial_link import Backoff, check_rate, LinkError, SerialLink, TimeSync
-
 # --------------------------------------------------------------------------------- time sync
+
 
 def simulate_arrivals(seconds=60.0, rate=100.0, drift=1e-4, batch=5, seed=0):
     """Device times, true host sampling times and jittered arrival times (s)."""
@@ -39,7 +39,8 @@ def run_sync(sync, device, arrival, batch=5):
 
 
 def test_time_sync_even_spacing_and_drift():
-    """Spacing = device spacing within the slew bound despite jitter; drift is followed.
+    """
+    Spacing = device spacing within the slew bound despite jitter; drift is followed.
 
     Tolerances: spacing error <= max_slew (5e-4) + 1 ns rounding, by construction; after
     convergence the stamp leads the true sampling time by at most the minimum delay over the
@@ -58,7 +59,8 @@ def test_time_sync_even_spacing_and_drift():
 
 
 def test_time_sync_reanchors_on_discontinuities():
-    """A host-clock step is taken once the minimum window has seen only the new offset.
+    """
+    A host-clock step is taken once the minimum window has seen only the new offset.
 
     The device clock runs on evenly while the host clock steps 5 s forward: the old minimum
     still holds for the 10 s window, then the offset re-anchors (one jump), and a device time
@@ -115,10 +117,9 @@ def test_serial_link_errors(tmp_path):
 def test_cdr_packer_matches_rclpy_serializer():
     """Patched CDR bytes deserialize to the values; identical to rclpy's own bytes."""
     pytest.importorskip('rclpy')
+    from imu_allan.nodes.driver import CdrPacker, split_stamps
     from rclpy.serialization import deserialize_message, serialize_message
     from sensor_msgs.msg import Imu, MagneticField
-
-    from imu_allan.nodes.driver import CdrPacker, split_stamps
     msg = Imu()
     msg.header.frame_id = 'gx3_frame'
     msg.angular_velocity_covariance = [0.5] * 9

@@ -1,4 +1,5 @@
-"""The simulators' own IMU noise, re-implemented from their source for the tests.
+"""
+The simulators' own IMU noise, re-implemented from their source for the tests.
 
 Independent of :mod:`imu_allan.formats.gazebo_sdf`: the SDF is read here with a few lines of
 ElementTree and the noise applied exactly as the C++ does, vectorised.
@@ -68,7 +69,7 @@ def _gauss_markov(rng, n, drive, tau, dt, bias0, first_step):
 
 
 def _first(path_or_text, tag):
-    """The first ``tag`` element of an XML text or file (the root itself if it is one)."""
+    """Return the first ``tag`` element of an XML text or file (the root itself if it is one)."""
     text = path_or_text
     if not str(text).lstrip().startswith('<'):
         with open(text, encoding='utf-8') as stream:

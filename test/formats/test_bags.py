@@ -4,14 +4,13 @@ import os
 import shutil
 
 from conftest import SHARED_DATA
-import numpy as np
-import pytest
-from rosbags.typesys import get_typestore, Stores
-
 from imu_allan.errors import InputError
 from imu_allan.formats.bag_reader import bag_topics, list_imu_topics, read_bag
 from imu_allan.formats.bag_writer import copy_bag_with_topic, write_imu_bag
 from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
+from rosbags.typesys import get_typestore, Stores
 
 DATA = SHARED_DATA / 'bags'
 needs_data = pytest.mark.skipif(not DATA.is_dir(),
@@ -275,7 +274,8 @@ def test_corrupt_compressed_chunk_is_skipped(tmp_path):
 
 
 def test_damaged_sqlite_and_ros1(tmp_path):
-    """A cut sqlite3 or ROS 1 bag gives its readable messages (original values) and a warning.
+    """
+    A cut sqlite3 or ROS 1 bag gives its readable messages (original values) and a warning.
 
     rosbags refuses both (SQLite sees a malformed image, ROS 1 needs the index at the end);
     the direct readers salvage the complete pages / chunks, on the fast and generic paths.
@@ -381,7 +381,8 @@ def test_write_bag_with_second_imu_samples(tmp_path):
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
 def test_random_damage_gives_samples_or_input_error(tmp_path, storage):
-    """Overwrite random byte ranges or cut the file: never a traceback, only InputError or data.
+    """
+    Overwrite random byte ranges or cut the file: never a traceback, only InputError or data.
 
     16 seeded variants per storage (overwrites of 1-63 bytes at 1-3 places, or a cut), each
     read on both paths. Damage inside a message's numbers cannot be detected (rosbags writes

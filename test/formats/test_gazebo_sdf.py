@@ -1,4 +1,5 @@
-"""Gazebo / PX4 SDF noise in and out, checked against the simulators' own noise code.
+"""
+Gazebo / PX4 SDF noise in and out, checked against the simulators' own noise code.
 
 The simulators are re-implemented from their source in ``sim_reference.py`` (gz-sensors
 ``GaussianNoiseModel::ApplyImpl``, PX4 ``GazeboImuPlugin::addNoise``; files and lines cited
@@ -7,9 +8,6 @@ Statistical checks use fixed seeds; each states its tolerance.
 """
 
 import math
-
-import numpy as np
-import pytest
 
 from formats.sim_reference import (
     EXAMPLE_SDF,
@@ -26,6 +24,8 @@ from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.errors import InputError
 from imu_allan.formats import gazebo_sdf
+import numpy as np
+import pytest
 
 RATE = 100.0
 
@@ -75,7 +75,7 @@ def _write(tmp_path, name, text):
 
 
 def _gaps(model, measured):
-    """The package's gap (:func:`measure_gap`, 1 % level) of each axis against a model."""
+    """Return the package's gap (:func:`measure_gap`, 1 % level) of each axis against a model."""
     return {axis: measure_gap(np.log(measured.adev[:, j]),
                               model_band(model.terms[axis], measured.tau, measured.m,
                                          measured.n_samples, measured.rate_hz))
@@ -91,7 +91,8 @@ def _consistent(model, data, rate, axes):
 
 
 def test_gazebo_reader_gives_what_gz_sensors_simulates(tmp_path):
-    """N = stddev/sqrt(f) (+ precision^2/12 rounding), GM sigma = drive sqrt(tau/2); data agree.
+    """
+    N = stddev/sqrt(f) (+ precision^2/12 rounding), GM sigma = drive sqrt(tau/2); data agree.
 
     Five minutes of the re-implemented gz-sensors noise at the file's 200 Hz: every axis's
     Allan deviation is consistent with the read model (the package's own gap test at 1 %),
@@ -209,7 +210,8 @@ def _dominated(axis_terms, tau):
 
 @pytest.mark.parametrize('kind', ['gazebo', 'px4'])
 def test_exported_file_simulates_the_fitted_model(fitted, kind):
-    """The simulator's noise from the exported file has the fitted model's Allan deviation.
+    """
+    The simulator's noise from the exported file has the fitted model's Allan deviation.
 
     Eight runs of the re-implemented simulator, as long as the fitted record; the mean of
     their ln ADEV must lie inside the fitted model's 68 % band for one record (centre +- one
@@ -247,7 +249,8 @@ def test_exported_file_simulates_the_fitted_model(fitted, kind):
 
 
 def test_export_header_and_upper_limits(fitted):
-    """The comment states rate, per-sample / driving density, axis rule, version; limits marked.
+    """
+    The comment states rate, per-sample / driving density, axis rule, version; limits marked.
 
     An axis whose random walk was not detected gets its 95 % upper limit, marked as such.
     """
@@ -303,7 +306,8 @@ HIDDEN = {
 
 @pytest.mark.parametrize('effect', sorted(HIDDEN))
 def test_hidden_effect_named_and_corrected_sdf_closer(tmp_path, effect):
-    """Simulator data + an effect the SDF lacks: named on gyro_x; corrected.sdf simulates closer.
+    """
+    Simulator data + an effect the SDF lacks: named on gyro_x; corrected.sdf simulates closer.
 
     The data are the re-implemented gz-sensors noise of EXAMPLE_SDF plus the hidden term on
     gyro_x (fixed seeds).  The workflow must name it on gyro_x and add nothing on gyro_y.  The
@@ -348,7 +352,8 @@ def test_hidden_effect_named_and_corrected_sdf_closer(tmp_path, effect):
 
 
 def test_px4_block_hidden_random_walk_named_and_corrected(tmp_path):
-    """PX4: a random walk on both gyros the block lacks is named; the corrected block is closer.
+    """
+    PX4: a random walk on both gyros the block lacks is named; the corrected block is closer.
 
     Data from the re-implemented plugin (white + short Gauss-Markov) plus a random walk on
     gyro_x and gyro_y (the plugin has one value per sensor).  corrected.sdf rewrites the gyro

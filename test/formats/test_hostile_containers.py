@@ -1,4 +1,5 @@
-"""Damaged bag containers: identical samples, or a warning naming the damage, or InputError.
+"""
+Damaged bag containers: identical samples, or a warning naming the damage, or InputError.
 
 Never a changed result without a warning.  Each storage is written once with the package's
 own writer (MCAP chunks now carry real CRC-32s) and damaged with seeded byte flips over the
@@ -8,17 +9,16 @@ the whole file runs in a few seconds.
 
 import shutil
 
-import numpy as np
-import pytest
-from rosbags.rosbag1 import Writer as Ros1Writer
-from rosbags.rosbag2 import Reader as Rosbag2Reader
-from rosbags.typesys import get_typestore, Stores
-
 from imu_allan.errors import InputError
 from imu_allan.formats.bag_reader import read_bag
 from imu_allan.formats.bag_writer import encode_imu, write_imu_bag
 from imu_allan.formats.mcap_scan import McapScan
 from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
+from rosbags.rosbag1 import Writer as Ros1Writer
+from rosbags.rosbag2 import Reader as Rosbag2Reader
+from rosbags.typesys import get_typestore, Stores
 
 N = 3000
 
@@ -37,7 +37,7 @@ def _flipped(raw, seed, flips=20):
 
 
 def _outcome(path, ref):
-    """'same', 'warned' or 'refused'; fails on a changed result without a warning."""
+    """Return 'same', 'warned' or 'refused'; fails on a changed result without a warning."""
     try:
         got = read_bag(path)
     except InputError as exc:
@@ -100,7 +100,7 @@ def test_byte_flips_never_change_the_result_silently(tmp_path, storage):
 
 
 def _ros1_bag(path):
-    """A ROS 1 bag with lz4 chunks of about 270 messages (11 chunks)."""
+    """Return a ROS 1 bag with lz4 chunks of about 270 messages (11 chunks)."""
     rows, stamps = encode_imu(_samples().t, _samples().data, ros1=True)
     writer = Ros1Writer(path)
     writer.set_compression(Ros1Writer.CompressionFormat.LZ4)

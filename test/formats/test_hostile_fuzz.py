@@ -1,4 +1,5 @@
-"""Property-based fuzzing of every parser: arbitrary bytes and mutated valid files.
+"""
+Property-based fuzzing of every parser: arbitrary bytes and mutated valid files.
 
 Each reader is called in-process on (a) arbitrary bytes and (b) a valid file of its format
 with seeded byte flips and a truncation. The property: it returns well-formed samples (or a
@@ -12,9 +13,6 @@ import signal
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-import numpy as np
-import pytest
-
 from imu_allan.core.health import NoiseBudget
 from imu_allan.core.model import NoiseModel
 from imu_allan.device.gx3_protocol import encode_record
@@ -25,6 +23,8 @@ from imu_allan.formats.csv_samples import read_csv, write_csv
 from imu_allan.formats.gx3raw import read_gx3raw
 from imu_allan.formats.samples import Samples
 from imu_allan.formats.thesis_log import read_thesis_log
+import numpy as np
+import pytest
 
 FUZZ = settings(derandomize=True, max_examples=40, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.too_slow,

@@ -1,4 +1,5 @@
-"""Hostile text, raw and special-file inputs at the readers.
+"""
+Hostile text, raw and special-file inputs at the readers.
 
 * CSV time columns in ms, us or ns are recognised from the sample spacing: converted with a
   warning that says so, or refused with the reason when the unit cannot be told;
@@ -12,9 +13,6 @@ import os
 import threading
 import time
 
-import numpy as np
-import pytest
-
 from imu_allan.core.preprocess import check_timing
 from imu_allan.device.gx3_protocol import encode_record
 from imu_allan.errors import InputError
@@ -22,6 +20,8 @@ from imu_allan.formats import input_file
 from imu_allan.formats.csv_samples import read_csv
 from imu_allan.formats.gx3raw import read_gx3raw
 from imu_allan.formats.readers import read_samples
+import numpy as np
+import pytest
 
 N = 400
 
@@ -111,7 +111,8 @@ def test_raw_capture_losses_counted_from_the_device_timer(tmp_path, seed):
 
 
 def test_csv_read_in_blocks_with_a_line_limit(tmp_path, monkeypatch):
-    """Blocks of lines give the same samples; a bad line in a later block is named exactly.
+    """
+    Blocks of lines give the same samples; a bad line in a later block is named exactly.
 
     A file with no line breaks is refused after MAX_LINE characters, not read whole.
     """

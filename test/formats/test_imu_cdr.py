@@ -1,12 +1,11 @@
 """The one Imu message -> numpy adapter, with rclpy and rosbags messages, and the bulk codecs."""
 
-import numpy as np
-import pytest
-from rosbags.typesys import get_typestore, Stores
-
 from imu_allan.formats.imu_adapter import imu_to_row, imus_to_arrays
 from imu_allan.formats.imu_cdr import decode_rows as _decode_rows
 from imu_allan.formats.imu_cdr import encode_imu
+import numpy as np
+import pytest
+from rosbags.typesys import get_typestore, Stores
 
 IMU = 'sensor_msgs/msg/Imu'
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
@@ -88,10 +87,9 @@ def test_bulk_decoder_rejects_big_endian_cdr():
 
 def test_cdr_to_arrays_equals_the_message_adapter_on_rclpy_bytes():
     """Bulk decoding of raw bytes (the allan node's intake) equals the per-message adapter."""
+    from imu_allan.formats.imu_adapter import cdr_to_arrays, imus_to_arrays
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import Imu
-
-    from imu_allan.formats.imu_adapter import cdr_to_arrays, imus_to_arrays
     rng = np.random.default_rng(12)
     msgs = []
     for i, frame in enumerate(['imu_link', 'a', 'imu', 'base_imu_frame_0', 'imu_link'] * 7):
@@ -109,15 +107,15 @@ def test_cdr_to_arrays_equals_the_message_adapter_on_rclpy_bytes():
 
 
 def test_covariance_diagonals_patched_in_bytes_as_rclpy_reads_them():
-    """set_covariance_diagonals: rclpy deserializes exactly the intended messages.
+    """
+    set_covariance_diagonals: rclpy deserializes exactly the intended messages.
 
     Diagonals set, off-diagonals and orientation kept, a -1 ("not provided") matrix and NaN
     entries left alone, order and every other field unchanged, over several frame_id lengths.
     """
+    from imu_allan.formats.imu_cdr import set_covariance_diagonals
     from rclpy.serialization import deserialize_message, serialize_message
     from sensor_msgs.msg import Imu
-
-    from imu_allan.formats.imu_cdr import set_covariance_diagonals
     rng = np.random.default_rng(13)
     msgs = []
     for i, frame in enumerate(['imu_link', 'a', 'imu', 'base_imu_frame_0'] * 5):

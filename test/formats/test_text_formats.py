@@ -2,9 +2,6 @@
 
 
 from conftest import SHARED_DATA
-import numpy as np
-import pytest
-
 from imu_allan.core.units import AXES
 from imu_allan.errors import InputError
 from imu_allan.formats.bag_writer import write_imu_bag
@@ -12,6 +9,8 @@ from imu_allan.formats.csv_samples import read_csv, write_csv
 from imu_allan.formats.readers import detect_format, read_samples
 from imu_allan.formats.samples import Samples
 from imu_allan.formats.thesis_log import read_thesis_log
+import numpy as np
+import pytest
 
 DATA = SHARED_DATA
 
@@ -203,7 +202,8 @@ def test_gx3raw_detected_and_dispatched():
 
 
 def test_thesis_log_fast_and_line_paths_agree(tmp_path):
-    """Long logs are parsed in numpy blocks; a damaged block falls back to line parsing.
+    """
+    Long logs are parsed in numpy blocks; a damaged block falls back to line parsing.
 
     Both must give Python's float() of every field and the exact integer stamps.
     """

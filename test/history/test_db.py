@@ -1,4 +1,5 @@
-"""The DuckDB history: one transaction per input, waiting out another process's lock, ids.
+"""
+The DuckDB history: one transaction per input, waiting out another process's lock, ids.
 
 Budget: about 5 s (one helper process holds the file for 2 s).
 """
@@ -10,11 +11,10 @@ import sys
 import time
 
 import duckdb
-import pytest
-
 from imu_allan.errors import InputError
 from imu_allan.history import db
 from imu_allan.history.rows import imu_id_of, namespace_of
+import pytest
 
 ENTRY = {'input': '/bags/a.mcap', 'size': 10, 'mtime': datetime(2026, 1, 1), 'status': 'ok',
          'error': None, 'analyzed_at': datetime(2026, 1, 2), 'version': '0.1.0'}

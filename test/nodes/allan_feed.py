@@ -1,4 +1,5 @@
-"""A built ``allan`` node fed over real DDS by this process (shared by the live-view tests).
+"""
+A built ``allan`` node fed over real DDS by this process (shared by the live-view tests).
 
 The node runs as a subprocess on the test process's own ROS_DOMAIN_ID with RELIABLE intake
 (its QoS override parameters), so every sample arrives; this process publishes simulated
@@ -11,10 +12,9 @@ import subprocess
 import time
 
 from conftest import executable, ros_env, spin_until
-import numpy as np
-
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
+import numpy as np
 
 RATE = 100.0
 MODEL = NoiseModel.from_dict({

@@ -1,4 +1,5 @@
-"""The built ``allan`` executable over real DDS: coefficients, exactness and diagnostics.
+"""
+The built ``allan`` executable over real DDS: coefficients, exactness and diagnostics.
 
 A publisher in this process streams 300 s of simulated 100 Hz IMU data (about 20x faster than
 real time, stamps 10 ms apart) to the node; a subscriber decodes ``imu/allan_coeffs`` by its
@@ -11,9 +12,6 @@ import subprocess
 import time
 
 from conftest import DOMAIN, executable, ros_env, spin_until
-import numpy as np
-import pytest
-
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.simulate import simulate
@@ -21,6 +19,8 @@ from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
 from imu_allan.report.coeffs_layout import coefficient_table
 from nodes.allan_feed import imu_messages
+import numpy as np
+import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
@@ -106,7 +106,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
         assert spin_until(executor, complete, 60), 'node never reported all samples'
         seen_complete = time.monotonic()
         assert spin_until(executor, lambda: coeffs and coeffs[-1][0] > seen_complete + 0.01
-                           and diags[-1][0] > seen_complete + 0.01, 30)
+                          and diags[-1][0] > seen_complete + 0.01, 30)
         table = _decode_coeffs(coeffs[-1][1])
 
         # 1. The node's numbers equal the offline pipeline on the same samples.
@@ -189,7 +189,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
         true_file, white_file = tmp_path / 'true.yaml', tmp_path / 'white.yaml'
         MODEL.to_yaml(true_file)
         NoiseModel({a: {'white_noise': MODEL.terms[a]['white_noise']}
-                     for a in AXES}).to_yaml(white_file)
+                    for a in AXES}).to_yaml(white_file)
 
         def discrepancy_after(path):
             assert set_path('model_file', path).successful

@@ -1,4 +1,5 @@
-"""The allan node's ``covariance_topic`` over real DDS: live N^2 f covariances for estimators.
+"""
+The allan node's ``covariance_topic`` over real DDS: live N^2 f covariances for estimators.
 
 A publisher in this process streams 50 s of simulated 100 Hz white noise in paced batches to
 the built ``allan`` executable (publish_period 0.5 s); a subscriber takes every message it
@@ -11,12 +12,11 @@ import os
 import subprocess
 
 from conftest import executable, ros_env, spin_until
-import numpy as np
-import pytest
-
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.core.units import IEEE_TERMS
+import numpy as np
+import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
@@ -28,7 +28,7 @@ DRIVER_GYRO, DRIVER_ACCEL = 0.5, 0.25  # the driver's own diagonal variances (pa
 
 @pytest.fixture(scope='module')
 def ros_context():
-    """An rclpy context on this process's own domain id."""
+    """Return an rclpy context on this process's own domain id."""
     os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -37,7 +37,8 @@ def ros_context():
 
 
 def test_covariance_topic_carries_live_per_sample_variances(ros_context):
-    """Every message republished, in order; diagonals = the driver's, then N^2 f of a table.
+    """
+    Every message republished, in order; diagonals = the driver's, then N^2 f of a table.
 
     The first messages (before any estimate) keep the driver's covariances; every later one
     carries exactly (N sqrt(rate_hz))^2 of one published imu/allan_coeffs table per axis (the

@@ -1,4 +1,5 @@
-"""The allan node's live figure on ``imu/allan_plot/compressed``, over real DDS.
+"""
+The allan node's live figure on ``imu/allan_plot/compressed``, over real DDS.
 
 60 s of simulated 100 Hz data (white noise + bias instability on every axis) are fed to the
 built node (``nodes/allan_feed.py``).  While nothing subscribes to the image topic the node
@@ -12,21 +13,18 @@ import os
 import shutil
 
 from conftest import DOMAIN
+from nodes.allan_feed import AllanFeed, status_values
 import numpy as np
 import pytest
-
-from nodes.allan_feed import AllanFeed, status_values
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 
-
 def test_figure_published_only_while_subscribed(ros_context, tmp_path):
     """No render without a subscriber; then a non-blank PNG of the LiveFigure's size."""
+    from imu_allan.report.plots import LiveFigure
     import matplotlib.image
     from sensor_msgs.msg import CompressedImage
-
-    from imu_allan.report.plots import LiveFigure
 
     with AllanFeed(ros_context, DOMAIN) as feed:
         done = feed.feed()

@@ -1,4 +1,5 @@
-"""The allan node finds its own rate: a 400 Hz stream, no rate_hz given, over real DDS.
+"""
+The allan node finds its own rate: a 400 Hz stream, no rate_hz given, over real DDS.
 
 tau0 comes from the median stamp spacing over the first 2 s (RateFinder); the samples of those
 seconds are held and fed afterwards, so the published coefficients equal ``analyze --online``'s
@@ -12,15 +13,14 @@ import subprocess
 import time
 
 from conftest import executable, ros_env, spin_until
-import numpy as np
-import pytest
-
 from imu_allan.core.analysis import AnalysisOptions, analyze_samples
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.formats.imu_adapter import imus_to_arrays
 from imu_allan.formats.samples import Samples
 from imu_allan.report.coeffs_layout import coefficient_table
+import numpy as np
+import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 

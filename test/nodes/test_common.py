@@ -4,12 +4,11 @@ import os
 import time
 
 from conftest import REPO
-import pytest
-import yaml
-
 from imu_allan.errors import InputError
 from imu_allan.nodes import allan, denoise, driver
 from imu_allan.nodes.common import check_value, Param
+import pytest
+import yaml
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 DOMAIN = os.getpid() % 100 + 100
@@ -51,14 +50,14 @@ def test_check_value_coerces_and_refuses():
 
 
 def test_take_batch_uses_rclpy_as_this_package_expects():
-    """The polled subscription and take_batch (rclpy internals: handle.take_message) work.
+    """
+    The polled subscription and take_batch (rclpy internals: handle.take_message) work.
 
     Fails if a future rclpy renames or changes what ``take_batch`` relies on: messages
     published to a polled subscription come back from ``take_batch`` in order, raw or not.
     """
-    from sensor_msgs.msg import Imu
-
     from imu_allan.nodes.common import polled_subscription, take_batch
+    from sensor_msgs.msg import Imu
     os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
     context = rclpy.context.Context()
     rclpy.init(context=context)

@@ -5,15 +5,14 @@ import os
 import subprocess
 
 from conftest import executable, ros_env, spin_until
-import numpy as np
-import pytest
-
 from imu_allan.core.allan import allan_deviation
 from imu_allan.core.health import RateFinder
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulate import simulate
 from imu_allan.formats.imu_adapter import imus_to_arrays
 from imu_allan.nodes.denoise import _DEFAULTS, make_denoiser
+import numpy as np
+import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
@@ -23,7 +22,8 @@ N = 6000
 
 
 def test_denoise_node_stream():
-    """60 s of thesis-model data through the node equal the offline BlockDenoiser.
+    """
+    60 s of thesis-model data through the node equal the offline BlockDenoiser.
 
     Every output equals the core with the same settings (1e-12: rounding only), stamps are the
     originals in order, the latency bound holds, and the short-tau ADEV drops (sym8 level 4
@@ -68,7 +68,7 @@ def test_denoise_node_stream():
         pub = node.create_publisher(Imu, 'imu/data_raw', qos)
         assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 30)
         assert spin_until(executor, lambda: node.count_publishers('imu/data_denoised') > 0,
-                           30)
+                          30)
         for i in range(0, N, 500):
             for msg in msgs[i:i + 500]:
                 pub.publish(msg)

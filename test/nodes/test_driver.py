@@ -1,4 +1,5 @@
-"""End to end over real DDS: gx3_sim on a pseudo-terminal -> built driver -> rclpy subscriber.
+"""
+End to end over real DDS: gx3_sim on a pseudo-terminal -> built driver -> rclpy subscriber.
 
 Every published value is checked against the simulator's truth file (what it put on the wire,
 float32 exact), plus units, stamp spacing, counts, covariances and /diagnostics counters, on a
@@ -221,7 +222,8 @@ def trailing_end(rows, pos):
 
 
 def counter_bounds(rows, first, diag, statuses, gaps=False):
-    """Bounds of a diagnostics counter from the truth rows the driver had seen.
+    """
+    Bounds of a diagnostics counter from the truth rows the driver had seen.
 
     The counter was read when ``published`` records had been published and ``packets``
     delivered; anything between (and damaged records right after) may or may not be in it.
@@ -365,7 +367,7 @@ def test_mag_and_orientation_mode(node, procs, tmp_path):
         row = rows[by_stamp[stamp_ns(msg)]]
         f = msg.magnetic_field
         assert (f.x, f.y, f.z) == tuple(float(row[k]) * 1e-4 for k in ('mag_x', 'mag_y',
-                                                                        'mag_z'))
+                                                                       'mag_z'))
         assert 20e-6 < np.linalg.norm([f.x, f.y, f.z]) < 70e-6      # an Earth field, T
     assert list(run.mag[0].magnetic_field_covariance)[::4] == pytest.approx([1e-12] * 3)
     for msg in run.data:
@@ -380,7 +382,8 @@ def test_mag_and_orientation_mode(node, procs, tmp_path):
 # ------------------------------------------------------------------------------------ faults
 
 def test_corrupt_dropped_and_junk(node, procs, tmp_path):
-    """Corrupted, dropped and junk-preceded records: every intact record is published.
+    """
+    Corrupted, dropped and junk-preceded records: every intact record is published.
 
     The checksum, resync and dropped-packet counters match what the simulator did.
     """
@@ -476,7 +479,8 @@ def test_disconnect_and_reconnect(node, procs, tmp_path):
 
 
 def test_baud_switch_to_reach_500_hz(node, procs, tmp_path):
-    """The device powers up at 115200 baud; the driver asked for 460800 switches it (0xD9).
+    """
+    The device powers up at 115200 baud; the driver asked for 460800 switches it (0xD9).
 
     At the wrong rate the simulator cannot read the host and sends garbage (as a UART
     would), so data only flow if the driver really switched the device and itself.

@@ -2,10 +2,9 @@
 
 import json
 
-import pytest
-
 from imu_allan.core.advisor import Advice, DEFAULT_TARGETS, TermAdvice, Unresolved
 from imu_allan.report.advice import advice_sentence, advice_to_json, format_duration
+import pytest
 
 
 def _advice():

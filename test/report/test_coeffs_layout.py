@@ -1,13 +1,11 @@
-"""The topic layouts: encode (the node's tables) then decode (monitor, users) round trip.
+"""
+The topic layouts: encode (the node's tables) then decode (monitor, users) round trip.
 
 Built on a real fit of 5 min of simulated 100 Hz data (fixed seed, about 5 s), so the tables
 hold detected and undetected (NaN) terms.
 """
 
 import math
-
-import numpy as np
-import pytest
 
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.online import OnlineAllan
@@ -23,6 +21,8 @@ from imu_allan.report.coeffs_layout import (
     DEVIATION_LABELS,
     deviation_table,
 )
+import numpy as np
+import pytest
 
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.0e-4, 'bias_instability': 8.0e-4},
                               'accel': {'white_noise': 8.0e-4}})

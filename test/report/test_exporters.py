@@ -1,4 +1,5 @@
-"""Every exporter's file, read back through that consumer's own noise propagation.
+"""
+Every exporter's file, read back through that consumer's own noise propagation.
 
 For each exporter the file is written from a fitted model, its TEXT is parsed (YAML, JSON, the
 MATLAB ``.m`` and the GTSAM ``.py``), its numbers are turned into the noise the consumer itself
@@ -28,14 +29,13 @@ import math
 import re
 
 from conftest import run_command
-import numpy as np
-import pytest
-import yaml
-
 import imu_allan
 from imu_allan.core.model import NoiseModel
 from imu_allan.errors import InputError
 from imu_allan.report.exporters import export, EXPORTERS, parse_inflate, parse_names, write_exports
+import numpy as np
+import pytest
+import yaml
 
 RATE = 100.0
 N_SAMPLES = 180_000  # 30 min
@@ -69,13 +69,13 @@ def files(fitted, tmp_path_factory):
 
 
 def _opencv_yaml(text):
-    """OpenCV FileStorage YAML: drop the ``%YAML:1.0`` directive PyYAML does not accept."""
+    """Parse OpenCV FileStorage YAML: drop the ``%YAML:1.0`` directive PyYAML refuses."""
     assert text.startswith('%YAML:1.0\n')
     return yaml.safe_load(text.split('\n', 1)[1])
 
 
 def _gtsam_py(text):
-    """The variances set in the GTSAM snippet: {setter: [x, y, z]} (parsed, not executed)."""
+    """Return the variances set in the GTSAM snippet: {setter: [x, y, z]} (parsed, not run)."""
     out = {}
     for node in ast.walk(ast.parse(text)):
         if isinstance(node, ast.Call) and getattr(node.func, 'attr', '').startswith('set'):
@@ -105,7 +105,8 @@ def _axes_worst():
 
 
 def _noise_kalibr(files):
-    """Kalibr: the noise its own propagation adds, from its keys.
+    """
+    Kalibr: the noise its own propagation adds, from its keys.
 
     Kalibr: ConfigReader.py:473,491 sigma_d = N / sqrt(1/update_rate) per sample; the bias
     is a continuous random walk of strength K (IccSensors.py:768-773), K sqrt(dt) per sample.
@@ -119,7 +120,8 @@ def _noise_kalibr(files):
 
 
 def _noise_openvins(files):
-    """OpenVINS: the noise its own propagation adds, from its keys.
+    """
+    OpenVINS: the noise its own propagation adds, from its keys.
 
     OpenVINS ov_msckf/src/state/Propagator.cpp:225-228: sigma_w^2 / dt for white noise,
     sigma_wb^2 dt per step for the bias (same continuous reading as Kalibr).
@@ -134,7 +136,8 @@ def _noise_openvins(files):
 
 
 def _noise_vins(files, text=None):
-    """VINS-Fusion: the noise its own propagation adds, from its keys.
+    """
+    VINS-Fusion: the noise its own propagation adds, from its keys.
 
     VINS-Fusion vins_estimator/src/factor/integration_base.h: noise = diag(ACC_N^2, GYR_N^2,
     ACC_N^2, GYR_N^2, ACC_W^2, GYR_W^2) with no dt; V = 0.5 dt for the previous and the current
@@ -148,7 +151,8 @@ def _noise_vins(files, text=None):
 
 
 def _noise_orbslam3(files):
-    """ORB-SLAM3: the noise its own propagation adds, from its keys.
+    """
+    ORB-SLAM3: the noise its own propagation adds, from its keys.
 
     ORB-SLAM3 src/Tracking.cc: sf = sqrt(freq); IMU::Calib(Tbc, Ng*sf, Na*sf, Ngw/sf,
     Naw/sf); src/ImuTypes.cc IntegrateNewMeasurement adds the walk covariance once per sample.
@@ -160,7 +164,8 @@ def _noise_orbslam3(files):
 
 
 def _noise_basalt(files):
-    """Basalt: the noise its own propagation adds, from its keys.
+    """
+    Basalt: the noise its own propagation adds, from its keys.
 
     Basalt: basalt-headers calibration.hpp dicrete_time_*_noise_std = std sqrt(rate);
     include/basalt/linearization/imu_block.hpp:74-77 bias weight 1 / (bias_std sqrt(dt)).
@@ -176,7 +181,8 @@ def _noise_basalt(files):
 
 
 def _noise_gtsam(files):
-    """GTSAM: the noise its own propagation adds, from its keys.
+    """
+    GTSAM: the noise its own propagation adds, from its keys.
 
     GTSAM gtsam/navigation/ImuFactor.cpp:76-83 (aCov / dt) per sample and
     CombinedImuFactor.cpp:157-178 dt * biasAccCovariance per step, from the snippet's text.
@@ -194,7 +200,8 @@ def _noise_gtsam(files):
 
 
 def _noise_lio_sam(files):
-    """LIO-SAM: the noise its own propagation adds, from its keys.
+    """
+    LIO-SAM: the noise its own propagation adds, from its keys.
 
     LIO-SAM src/imuPreintegration.cpp:214-217 covariance = imu*Noise^2 handed to GTSAM
     (divided by dt per sample); :225, :374-375 bias BetweenFactor sigma sqrt(dt) imu*BiasN.
@@ -208,7 +215,8 @@ def _noise_lio_sam(files):
 
 
 def _noise_fast_lio(files, text=None):
-    """FAST-LIO: the noise its own propagation adds, from its keys.
+    """
+    FAST-LIO: the noise its own propagation adds, from its keys.
 
     FAST-LIO src/IMU_Processing.hpp:280-284 Q = diag(cov); IKFoM esekfom.hpp:381
     P += (dt f_w) Q (dt f_w)^T: the rate noise has variance acc_cov per sample, the bias steps
@@ -221,7 +229,8 @@ def _noise_fast_lio(files, text=None):
 
 
 def _noise_matlab(files):
-    """MATLAB: the noise its own propagation adds, from its keys.
+    """
+    MATLAB: the noise its own propagation adds, from its keys.
 
     MATLAB imuSensor with gyroparams/accelparams read as in MathWorks' example "Inertial
     Sensor Noise Analysis Using Allan Variance" (NoiseDensity = N, RandomWalk = K): N sqrt(fs)
@@ -244,7 +253,7 @@ CONSUMERS = {'kalibr': _noise_kalibr, 'openvins': _noise_openvins, 'vins': _nois
 
 
 def _generate(noise, n=N_SAMPLES, seed=SEED):
-    """Samples per axis from (white std, bias step std, midpoint) with one seed per axis."""
+    """Return samples per axis from (white std, bias step std, midpoint) with one seed per axis."""
     axes = sorted(noise)
     data = np.empty((n, len(axes)))
     for j, axis in enumerate(axes):
@@ -258,7 +267,8 @@ def _generate(noise, n=N_SAMPLES, seed=SEED):
 
 
 def _band_scores(fitted, axes, data):
-    """Mean distance of the generated deviation from the fitted model, in 68 % band units.
+    """
+    Mean distance of the generated deviation from the fitted model, in 68 % band units.
 
     For each axis and regime (``'white'``: white noise >= 95 % of the model variance,
     ``'walk'``: rate random walk >= 90 %), the mean over those averaging times of
@@ -308,7 +318,8 @@ def test_consumer_reproduces_the_fitted_allan_deviation(name, fitted, files):
 
 
 def test_wrong_conversion_fails(fitted, files):
-    """Deliberately wrong conversions must fail the same check.
+    """
+    Deliberately wrong conversions must fail the same check.
 
     A missing sqrt(f) (FAST-LIO variances not multiplied by f) is 10x off at 100 Hz, and
     raw Kalibr-style numbers in the VINS file are sqrt(2 f) = 14x off: the check must fail.
@@ -408,8 +419,8 @@ def test_cli_writes_every_export_and_rejects_bad_names(tmp_path):
     for path in (out / 'export').iterdir():
         assert 'white noise x2, bias (random walk, instability) x10' in path.read_text()
     for args, word in ((('--export', 'kalibr,nosuch'), 'nosuch'), (('--export', 'vins',
-                                                                      '--inflate', '0'),
-                                                                     '--inflate')):
+                                                                    '--inflate', '0'),
+                                                                   '--inflate')):
         proc = run_command('analyze', csv, '--out', tmp_path / 'bad', *args, '--quiet')
         assert proc.returncode == 2 and word in proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1

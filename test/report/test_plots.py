@@ -1,4 +1,5 @@
-"""The live figure (``LiveFigure``): PNG of the stated size, not blank, reusable.
+"""
+The live figure (``LiveFigure``): PNG of the stated size, not blank, reusable.
 
 ``analyze``'s own plots (the same :func:`draw_adev`) are exercised by test/cli/test_analyze.py
 through ``--out``.  5 min of simulated 100 Hz data, fixed seed; about 5 s (three renders).
@@ -6,15 +7,14 @@ through ``--out``.  5 min of simulated 100 Hz data, fixed seed; about 5 s (three
 
 import io
 
-import matplotlib.image
-import numpy as np
-import pytest
-
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.simulate import simulate
 from imu_allan.core.units import AXES
 from imu_allan.report.plots import LiveFigure
+import matplotlib.image
+import numpy as np
+import pytest
 
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.0e-4, 'bias_instability': 8.0e-4},
                               'accel': {'white_noise': 8.0e-4, 'bias_instability': 1.5e-3}})

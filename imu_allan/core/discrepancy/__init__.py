@@ -1,4 +1,5 @@
-"""The discrepancy workflow: where do a noise model and measured data disagree, and why.
+"""
+The discrepancy workflow: where do a noise model and measured data disagree, and why.
 
 Given measured IMU samples and a starting noise model (a model file, or a few named terms fitted
 to the data), the workflow

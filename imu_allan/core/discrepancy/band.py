@@ -1,4 +1,5 @@
-"""Where the measured log-deviation of an axis should lie if a noise model were complete.
+"""
+Where the measured log-deviation of an axis should lie if a noise model were complete.
 
 The :class:`Band` (analytic centre and spread of ln adev, from the model's terms and their
 Greenhall EDF, pooled with simulations) and the :class:`Gap` between measured data and a band;
@@ -23,6 +24,7 @@ PRIOR_WEIGHT = 16.0
 ALPHA = 0.01
 Z95 = 1.959964
 
+
 @functools.lru_cache(maxsize=4096)
 def _edf(alpha, m, n_phase):
     return edf_oadev(alpha, int(m), int(n_phase))
@@ -39,7 +41,8 @@ def _term_edf(term, params, tau, ms, n_samples):
 
 @dataclass
 class Band:
-    """Expected measured log-deviation of one axis under a model.
+    """
+    Expected measured log-deviation of one axis under a model.
 
     Attributes
     ----------
@@ -124,7 +127,8 @@ def pool_simulations(band, sims):
 
 @dataclass
 class Gap:
-    """Model-vs-data gap of one axis.
+    """
+    Model-vs-data gap of one axis.
 
     ``z`` per averaging time (units of the spread), ``value`` = sqrt(mean z^2) (about 1 when
     consistent), ``t_eff`` effective independent averaging times, ``p_value`` of
@@ -151,7 +155,8 @@ def _smooth(z):
 
 
 def excursion_band(tau, z, level=2.0):
-    """Contiguous band of averaging times around the largest smoothed excursion |z| > level.
+    """
+    Contiguous band of averaging times around the largest smoothed excursion |z| > level.
 
     Returns ``((tau_lo, tau_hi), tau_peak)``; the band is None when nothing exceeds ``level``.
     """

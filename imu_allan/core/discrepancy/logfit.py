@@ -1,4 +1,5 @@
-"""Fitting noise terms to one axis in log-deviation, with the gap's own metric.
+"""
+Fitting noise terms to one axis in log-deviation, with the gap's own metric.
 
 Weighted least squares of z_i = (ln adev_meas - centre_i) / spread_i over every parameter
 (log amplitudes and, for hump terms, log positions), a sandwich covariance under the measured
@@ -13,14 +14,15 @@ import numpy as np
 from scipy.optimize import least_squares, nnls
 from scipy.stats import chi2
 
+from .band import Z95
 from ..terms import TERMS
 from ..units import ALL_TERMS
-from .band import Z95
 
 _Z68 = 1.0
 
+
 def position_range(term, tau):
-    """Allowed position of a hump term: its ADEV peak must lie inside the measured span."""
+    """Return allowed position of a hump term: its ADEV peak must lie inside the measured span."""
     return TERMS[term].position_range(float(tau[0]), float(tau[-1]))
 
 
@@ -87,7 +89,8 @@ def _nnls_start(prob, names, positions):
 
 
 def fit_terms(prob, names, init=None, hints=None):
-    """Fit ``names`` (all amplitudes and positions free) to a :class:`FitProblem`.
+    """
+    Fit ``names`` (all amplitudes and positions free) to a :class:`FitProblem`.
 
     ``init`` ({term: params}) and ``hints`` ({term: position}) seed the search; hump terms are
     started from a grid of positions over the measured span plus the hints.
@@ -198,7 +201,8 @@ def _sandwich(jac, corr):
 
 
 def improvement_test(delta_q, jac_nuisance, jac_added, corr):
-    """p-value of a drop ``delta_q`` in sum z^2 when columns ``jac_added`` are added.
+    """
+    p-value of a drop ``delta_q`` in sum z^2 when columns ``jac_added`` are added.
 
     Under the null (the smaller model is complete) z ~ N(0, R) and the drop is the quadratic
     form z' P z with P the projection on the added directions orthogonal to the nuisance ones;

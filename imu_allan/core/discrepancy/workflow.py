@@ -6,16 +6,17 @@ import math
 import numpy as np
 from scipy.special import digamma, polygamma
 
+from .band import ALPHA, Band, measure_gap, model_band, pool_simulations
+from .logfit import AxisFit, fit_terms, FitProblem, improvement_test
 from ..allan import allan_deviation, avar_fast
 from ..model import ModelError, NoiseModel
 from ..simulate import simulate
 from ..terms import model_avar, TERMS
 from ..units import ALL_TERMS, AXES
-from .band import ALPHA, Band, measure_gap, model_band, pool_simulations
-from .logfit import AxisFit, fit_terms, FitProblem, improvement_test
 
 #: Default starting terms: the thesis's own model (white noise + bias instability).
 DEFAULT_START = ('white_noise', 'bias_instability')
+
 
 @dataclass
 class Candidate:
@@ -81,7 +82,7 @@ def _effect_band(tau, band, axis_terms, effect, rate_hz):
         return None
     total = model_avar(axis_terms, tau, rate_hz)
     without = model_avar({t: p for t, p in axis_terms.items() if t != effect}, tau,
-                                rate_hz)
+                         rate_hz)
     shift = 0.5 * np.log(np.maximum(total, 1e-300) / np.maximum(without, 1e-300))
     sel = np.nonzero(shift > band.sd)[0]
     if sel.size == 0:
@@ -106,7 +107,8 @@ def _n_params(term):
 
 def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False,
                         gap=None):
-    """Fit every effect the axis lacks; return (candidates, best first; baseline fit).
+    """
+    Fit every effect the axis lacks; return (candidates, best first; baseline fit).
 
     ``current`` is the axis's ``{term: params}``; with ``fixed`` the current parameters came
     from a model file and a pure refit ('recalibration') competes as well.
@@ -235,7 +237,8 @@ def _simulate_axis(axis_terms, axis, measured, n_sims, rng):
 
 
 def _bands(current, axes, measured, n_sims, rng, previous=None):
-    """Analytic bands of every axis pooled with ``n_sims`` simulated runs.
+    """
+    Analytic bands of every axis pooled with ``n_sims`` simulated runs.
 
     Axes whose terms did not change since ``previous`` (a dict of bands) keep their bands:
     re-simulating an unchanged model would only add noise and time.
@@ -275,7 +278,8 @@ def start_model(measured, axes, terms, alpha=ALPHA):
 def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, seed=0,
                     max_steps=4, alpha=ALPHA, points_per_decade=10, min_clusters=10,
                     measured=None):
-    """Run the discrepancy workflow on rate samples.
+    """
+    Run the discrepancy workflow on rate samples.
 
     Parameters
     ----------
@@ -419,7 +423,8 @@ def sample_rate(t):
 
 
 def run_samples(samples, **kwargs):
-    """:func:`run_discrepancy` on a :class:`~imu_allan.formats.samples.Samples` recording.
+    """
+    :func:`run_discrepancy` on a :class:`~imu_allan.formats.samples.Samples` recording.
 
     The sample rate is :func:`sample_rate` of the time stamps.
     """
@@ -427,7 +432,8 @@ def run_samples(samples, **kwargs):
 
 
 def gap_summary(model, result, alpha=ALPHA):
-    """Gap per axis and the effect that fits the excess, for online monitoring.
+    """
+    Gap per axis and the effect that fits the excess, for online monitoring.
 
     Parameters
     ----------
