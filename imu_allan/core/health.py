@@ -31,6 +31,8 @@ from .model import as_number, ModelError, per_axis_entries, read_yaml_file
 from .units import AXES, conventional, IEEE_TERMS, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
+#: Names of the levels (diagnostic_msgs/DiagnosticStatus), for people.
+LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
 #: The packaged 3DM-GX3-25 datasheet budget.
 DEFAULT_BUDGET_FILE = os.path.join(os.path.dirname(os.path.dirname(__file__)), 'data',
