@@ -176,7 +176,7 @@ def _dask_client(args, n_inputs):
     try:
         import dask
         from dask.distributed import Client, LocalCluster
-    except ImportError:
+    except ImportError:  # optional (package.xml says so): one line saying what to install
         raise InputError(where, DASK_HINT) from None
     logging.getLogger('distributed').setLevel(logging.ERROR)
     if args.scheduler:
@@ -198,8 +198,10 @@ def _run_dask(work, args, options, out_dirs, done):
     """Submit one task per input; call ``done(outcomes)`` with each batch that finished."""
     from argparse import Namespace
     client, cluster = _dask_client(args, len(work))  # first: says what to install
-    from dask.distributed import as_completed
-    from distributed import KilledWorker
+    try:
+        from distributed import as_completed, KilledWorker
+    except ImportError:  # cannot happen after _dask_client; keeps the import visibly optional
+        raise InputError('analyze', DASK_HINT) from None
     # each task gets the options, not the list of every input
     task_args = Namespace(**dict(vars(args), inputs=[]))
     try:

@@ -67,8 +67,10 @@ def test_covariance_topic_carries_live_per_sample_variances(ros_context):
         w.x, w.y, w.z, a.x, a.y, a.z = (float(v) for v in row)
         msgs.append(m)
 
+    # the configured rate: the covariances are N^2 f with this f
     cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=0.5',
-           '-p', 'covariance_topic:=imu/data_cov', '-p', 'queue_depth:=20000',
+           '-p', f'rate_hz:={RATE}', '-p', 'covariance_topic:=imu/data_cov',
+           '-p', 'queue_depth:=20000',
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable',
            '-p', 'qos_overrides./imu/data_cov.publisher.reliability:=reliable',
            '-p', 'qos_overrides./imu/data_cov.publisher.depth:=20000']
