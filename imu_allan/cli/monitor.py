@@ -19,7 +19,9 @@ import json
 import math
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
 
 from .common import ArgumentParser, guarded
@@ -261,9 +263,14 @@ def main(argv=None):
     from std_msgs.msg import Float64MultiArray
 
     context = rclpy.Context()
-    # Ctrl-C is Python's KeyboardInterrupt in this thread (spin_once wakes every 0.1 s), so
-    # the node and the context are torn down once, in order, by the finally below; rclpy's own
-    # handler would shut the context down from its signal thread at the same time.
+    # Ctrl-C only sets a flag that the loop checks (spin_once wakes every 0.1 s), so the node
+    # and the context are torn down once, in order, by the finally below.  rclpy's own handler
+    # would shut the context down from its signal thread at the same time, and a
+    # KeyboardInterrupt raised inside rclpy's C++ wait surfaced as a pybind11 cast error
+    # (a traceback, seen under load).
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
     rclpy.init(args=['monitor', *ros_argv], context=context,
                signal_handler_options=SignalHandlerOptions.NO)
     node = None
@@ -278,7 +285,7 @@ def main(argv=None):
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         try:
-            return _loop(executor, state, topics, args, sys.stdout)
+            return _loop(executor, state, topics, args, sys.stdout, stop)
         except (KeyboardInterrupt, ExternalShutdownException):
             return 0
     finally:
@@ -287,13 +294,18 @@ def main(argv=None):
         rclpy.try_shutdown(context=context)
 
 
-def _loop(executor, state, topics, args, out):
+def _loop(executor, state, topics, args, out, stop):
     tty = out.isatty() and not args.json
     start = time.monotonic()
+
+    def running():
+        return executor.context.ok() and not stop.is_set()
     if args.once:
         end = start + args.timeout
-        while state.coeffs is None and time.monotonic() < end and executor.context.ok():
+        while state.coeffs is None and time.monotonic() < end and running():
             executor.spin_once(timeout_sec=0.1)
+        if state.coeffs is None and stop.is_set():
+            return 0
         if state.coeffs is None:
             sys.stderr.write(f'monitor: no coefficients on {topics["coeffs"]} within '
                              f'{args.timeout:g} s (is an allan node running there, on this '
@@ -306,8 +318,7 @@ def _loop(executor, state, topics, args, out):
         _emit(out, state, topics, args, False)
         return 0
     shown, shown_coeffs, last_draw, pending = -1, 0, 0.0, None
-    while executor.context.ok() and (not args.duration
-                                     or time.monotonic() - start < args.duration):
+    while running() and (not args.duration or time.monotonic() - start < args.duration):
         executor.spin_once(timeout_sec=0.1)
         now = time.monotonic()
         if tty:  # redraw on news, and each second for the ages
