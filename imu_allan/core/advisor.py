@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
-from scipy.linalg import solve_triangular
 from scipy.optimize import minimize_scalar
 
 from . import terms as _terms
@@ -43,7 +42,7 @@ from .allan import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noi
 from .edf import edf_oadev
 
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
-from .fit import _fit_terms, _Problem, _shape_columns, SELECTION_PENALTY, upper_limit
+from .fit import fit_terms, Problem, SELECTION_PENALTY, shape_columns, upper_limit
 from .units import IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 
@@ -210,7 +209,7 @@ class _Forecast:
         avar = _terms.model_avar(axis_terms, tau, self.rate_hz)
         alpha = identify_noise(tau, avar[:, None])[:, 0]
         edf = np.array([edf_oadev(int(a), int(m), int(n) + 1) for a, m in zip(alpha, ms)])
-        problem = _Problem(tau, avar, edf, alpha, self.rate_hz)
+        problem = Problem(tau, avar, edf, alpha, self.rate_hz)
         self._cache[(n, key)] = problem
         return problem
 
@@ -220,9 +219,8 @@ class _Forecast:
         if problem is None or problem.tau.size < len(axis_terms):
             return {}
         names = list(axis_terms)
-        shapes = _shape_columns(problem, names, _nonlinear(axis_terms))
-        g = solve_triangular(problem.chol(problem.avar), shapes, lower=True,
-                             check_finite=False)
+        shapes = shape_columns(problem, names, _nonlinear(axis_terms))
+        g = problem.whiten(problem.avar, shapes)
         try:
             cov = np.linalg.inv(g.T @ g)
         except np.linalg.LinAlgError:
@@ -252,12 +250,12 @@ def _best_chi2(problem, names, start):
     """Smallest GLS chi^2 of ``names`` (one nonlinear parameter profiled near ``start``)."""
     nonlinear = [t for t in names if len(TERM_PARAMETERS[t]) > 1]
     if not nonlinear:
-        return problem.solve(_shape_columns(problem, names, {}))[1]
+        return problem.solve(shape_columns(problem, names, {}))[1]
     name = nonlinear[0]
     centre = math.log(start.get(name) or math.sqrt(problem.tau[0] * problem.tau[-1]))
 
     def chi2(log_p):
-        return problem.solve(_shape_columns(problem, names, {name: math.exp(log_p)}))[1]
+        return problem.solve(shape_columns(problem, names, {name: math.exp(log_p)}))[1]
     best = minimize_scalar(chi2, bounds=(centre - 2.0, centre + 2.0), method='bounded',
                            options={'xatol': 0.02})
     return min(float(best.fun), chi2(centre))
@@ -342,7 +340,7 @@ class _AxisAdvisor:
             yield from self._undetected(axis_terms, n_max)
 
     def _data_criterion(self, names):
-        fit = _fit_terms(_Problem(*self.data, self.rate_hz), names)
+        fit = fit_terms(Problem(*self.data, self.rate_hz), names)
         penalty = SELECTION_PENALTY * math.log(max(fit.n_points, 2))
         return fit, fit.chi2 + _n_params(list(fit.terms)) * penalty
 

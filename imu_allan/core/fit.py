@@ -31,7 +31,6 @@ from itertools import combinations
 import math
 
 import numpy as np
-from scipy.linalg import solve_triangular
 from scipy.optimize import minimize_scalar, nnls
 
 from . import terms as _terms
@@ -80,21 +79,30 @@ def correlation_matrix(tau, alpha):
     return base[:, None] * base[None, :] * short + tail[:, None] * tail[None, :] * long
 
 
-class _Problem:
-    """The data of one axis, whitened on demand for a given model curve."""
+class Problem:
+    """
+    The data of one axis, whitened on demand for a given model curve.
+
+    The covariance of the AVAR estimates for a model curve a(tau) is S C S with C the
+    correlation matrix and S = diag(sqrt(2 / EDF) a).  Its Cholesky factor is S L with L the
+    factor of C, so whitening by any model curve is L^-1 S^-1: L^-1 is computed once per
+    problem, and each IRLS step is one small matrix product instead of a factorisation.
+    """
 
     def __init__(self, tau, avar, edf, alpha, rate_hz):
+        """Keep the usable averaging times of one axis (s, AVAR in SI units squared, EDF)."""
         ok = np.isfinite(avar) & (avar > 0) & np.isfinite(edf) & (edf >= _MIN_EDF)
         self.tau = tau[ok]
         self.avar = avar[ok]
         self.edf = edf[ok]
         self.rate_hz = rate_hz
-        self.corr = correlation_matrix(self.tau, alpha[ok]) + 1e-9 * np.eye(ok.sum())
+        corr = correlation_matrix(self.tau, alpha[ok]) + 1e-9 * np.eye(ok.sum())
+        self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(corr)))
+        self._rel_sd = np.sqrt(2.0 / self.edf)
 
-    def chol(self, model):
-        sd = np.sqrt(2.0 / self.edf) * model
-        cov = self.corr * sd[:, None] * sd[None, :]
-        return np.linalg.cholesky(cov)
+    def whiten(self, model, columns):
+        """Return ``columns`` (AVAR per tau, one column each) whitened for ``model`` AVAR."""
+        return self._l_inv @ (columns / (self._rel_sd * model)[:, None])
 
     def solve(self, shapes, iterations=_IRLS_ITERATIONS, offset=0.0):
         """
@@ -102,26 +110,25 @@ class _Problem:
 
         ``offset`` is a fixed model part (AVAR per tau) added to ``shapes @ coef``.
         """
-        model = self.avar.copy()
+        model = self.avar
         coef = np.zeros(shapes.shape[1])
-        target = self.avar - offset
+        design = np.column_stack([shapes, self.avar - offset])
         for _ in range(iterations):
-            low = solve_triangular(self.chol(model), np.column_stack([shapes, target]),
-                                   lower=True, check_finite=False)
+            low = self.whiten(model, design)
             g, y = low[:, :-1], low[:, -1]
             scale = np.linalg.norm(g, axis=0)
             scale[scale == 0] = 1.0
             coef = nnls(g / scale, y, maxiter=50 * shapes.shape[1])[0] / scale
             # keep weights finite where the model vanishes (e.g. a term pinned at zero)
             model = np.maximum(shapes @ coef + offset, 1e-3 * self.avar)
-        low = solve_triangular(self.chol(model), np.column_stack([shapes, target]),
-                               lower=True, check_finite=False)
+        low = self.whiten(model, design)
         g, y = low[:, :-1], low[:, -1]
         resid = y - g @ coef
         return coef, float(resid @ resid), g
 
 
-def _shape_columns(problem, names, nonlinear):
+def shape_columns(problem, names, nonlinear):
+    """AVAR shape of each named term at the problem's averaging times, one column each."""
     return np.column_stack([TERMS[name].shape(problem.tau, problem.rate_hz, nonlinear.get(name))
                             for name in names])
 
@@ -132,13 +139,13 @@ def _nonlinear_range(problem, name):
     return math.log(lo), math.log(hi)
 
 
-def _fit_terms(problem, names):
-    """Fit the named terms; returns AxisFit (profiling tau_c / f0 when present)."""
+def fit_terms(problem, names):
+    """Fit the named terms; return an :class:`AxisFit` (profiling tau_c / f0 when present)."""
     names = list(names)
     nl_names = [n for n in names if TERMS[n].position]
 
     def evaluate(nonlinear):
-        return problem.solve(_shape_columns(problem, names, nonlinear))
+        return problem.solve(shape_columns(problem, names, nonlinear))
 
     nonlinear = {}
     profiles = {}
@@ -203,7 +210,7 @@ def _profile_interval(profile, chi2_min):
 
 def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None):
     """Fit one axis; ``terms=None`` selects the IEEE terms by BIC."""
-    problem = _Problem(np.asarray(tau, float), np.asarray(avar, float),
+    problem = Problem(np.asarray(tau, float), np.asarray(avar, float),
                        np.asarray(edf, float), np.asarray(alpha), rate_hz)
     if problem.tau.size == 0:
         raise FitError('no averaging time with a usable Allan variance')
@@ -211,13 +218,13 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None):
         unknown = [t for t in terms if t not in ALL_TERMS]
         if unknown:
             raise ValueError(f'unknown noise term(s): {", ".join(unknown)}')
-        return _fit_terms(problem, terms)
+        return fit_terms(problem, terms)
     candidates = list(IEEE_TERMS) if problem.tau.size >= 4 else ['white_noise']
     best, best_bic = None, math.inf
     penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
     for k in range(1, len(candidates) + 1):
         for subset in combinations(candidates, k):
-            fit = _fit_terms(problem, subset)
+            fit = fit_terms(problem, subset)
             if len(fit.terms) < k:  # a pinned-at-zero term: the smaller subset covers it
                 continue
             bic = fit.chi2 + len(fit.terms) * penalty
@@ -234,12 +241,12 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
     its minimum by ``delta_chi2`` (4: one-sided ~97.7 %, two-sided 95 %).  Used to give Kalibr,
     which refuses zeros, an honest bound instead of nothing.  Returns NaN if not bounded.
     """
-    problem = _Problem(np.asarray(tau, float), np.asarray(avar, float), np.asarray(edf, float),
+    problem = Problem(np.asarray(tau, float), np.asarray(avar, float), np.asarray(edf, float),
                        np.asarray(alpha), rate_hz)
     others = [t for t in terms if t != term and t in IEEE_TERMS]
     if problem.tau.size < 2 or not others:
         return math.nan
-    base = _shape_columns(problem, others, {})
+    base = shape_columns(problem, others, {})
     extra = TERMS[term].shape(problem.tau, rate_hz)
 
     def chi2(log_c):

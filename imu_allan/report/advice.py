@@ -18,18 +18,15 @@ time after which a term that large would be detected.
 
 import math
 
-from ..core.advisor import analysis_grid, StagedAdvice
+from ..core.advisor import advise, analysis_grid
 from ..core.units import si_unit
 
 
 def compute_advice(analysis, options, targets=None):
     """Return the :class:`~imu_allan.core.advisor.Advice` of an analysis, on ``analyze``'s grid."""
     m_max = None if options.tau_max is None else int(options.tau_max * analysis.rate_hz)
-    staged = StagedAdvice(analysis.result, analysis.fit, targets,
-                          analysis_grid(options.points_per_decade, options.min_clusters, m_max))
-    while not staged.step():
-        pass
-    return staged.advice
+    return advise(analysis.result, analysis.fit, targets,
+                  analysis_grid(options.points_per_decade, options.min_clusters, m_max))
 
 
 def _num(value):
