@@ -37,7 +37,7 @@ import struct
 import numpy as np
 
 from .imu_adapter import imu_to_row
-from .imu_cdr import choose_topic, Collector, decode_rows, deserialize, IMU_TYPES, one_line
+from .imu_cdr import choose_topic, Collector, deserialize, IMU_TYPES, MIN_IMU_BYTES, one_line
 from .mcap_scan import MCAP_MAGIC, McapScan
 from .ros1_scan import read_ros1_scan, ROS1_MAGIC, Ros1Scan
 from .samples import Samples
@@ -189,28 +189,26 @@ def read_bag(path, topic=None, fast=True):
     """
     where = str(path)
     kind, p = bag_kind(path)
-    warnings = []
     checks = {}
+    note = None
     if kind == 'dir':
         storage, files, compressed, note = _dir_storage(p)
         if storage == 'mcap' and not compressed and fast:
-            chosen, t, data, warnings = _read_mcap_files(where, files, topic, checks=checks)
+            res = _read_mcap_files(where, files, topic, checks=checks)
         elif storage == 'sqlite3' and not compressed and fast:
-            chosen, t, data, warnings = _read_sqlite_files(where, files, topic)
+            res = _read_sqlite_files(where, files, topic)
         else:
-            chosen, t, data, warnings = _read_generic(where, p, topic)
-        warnings = ([note] if note else []) + warnings
+            res = _read_generic(where, p, topic)
     elif kind == 'mcap' and fast:
-        chosen, t, data, warnings = _read_mcap_files(where, [p], topic, checks=checks)
+        res = _read_mcap_files(where, [p], topic, checks=checks)
     elif kind == 'sqlite3' and fast:
-        chosen, t, data, warnings = _read_sqlite_files(where, [p], topic)
+        res = _read_sqlite_files(where, [p], topic)
     elif kind == 'ros1' and fast:
-        res = read_ros1_scan(where, p, topic)
-        if res is None:
-            res = _read_ros1_fast(where, p, topic)
-        chosen, t, data, warnings = res
+        res = read_ros1_scan(where, p, topic) or _read_ros1_fast(where, p, topic)
     else:
-        chosen, t, data, warnings = _read_generic(where, p, topic)
+        res = _read_generic(where, p, topic)
+    chosen, t, data, warnings, frame_id = res
+    warnings = ([note] if note else []) + warnings
     if t.shape[0] == 0:
         extra = f' ({"; ".join(warnings)})' if warnings else ''
         raise InputError(path, f'topic {chosen} has no messages{extra}')
@@ -220,7 +218,7 @@ def read_bag(path, topic=None, fast=True):
         integrity = (f'{checks["chunks_without_crc"]} MCAP chunk(s) carry no CRC-32 (their writer '
                      'stored none): their values could not be verified')
     return Samples(t=t, data=data, axes=AXES, source=f'{where}:{chosen}', warnings=warnings,
-                   integrity=integrity, topic=chosen, frame_id=first_frame_id(p, chosen))
+                   integrity=integrity, topic=chosen, frame_id=frame_id)
 
 
 #: What a reader can verify in each storage (said in the report, so a reader of the report
@@ -233,29 +231,6 @@ INTEGRITY = {
     'ros1': 'ROS 1 bags have no checksums: decompression catches most damage in a compressed '
             'chunk, but a damaged value inside a message cannot be detected',
 }
-
-
-def first_frame_id(path, topic):
-    """
-    Return the ``header.frame_id`` of the first message on ``topic``; '' if rosbags cannot tell.
-
-    One message through the generic deserializer: the bulk readers skip the frame id.  Cheap
-    for rosbag2 (70 ms on a one-hour 100 Hz MCAP) but about 1 s on a one-hour ROS 1 bag, whose
-    whole index rosbags reads first; taking it from the bulk decoder's first row would be free.
-    """
-    try:
-        reader = any_reader([path], str(path))
-    except InputError:
-        return ''  # a damaged bag rosbags cannot open: its samples are still good
-    try:
-        conns = [c for c in reader.connections if c.topic == topic]
-        for conn, _, raw in reader.messages(connections=conns):
-            return str(reader.deserialize(raw, conn.msgtype).header.frame_id)
-    except Exception:  # a garbled first message costs the id, not the record
-        pass
-    finally:
-        reader.close()
-    return ''
 
 
 def _read_generic(where, p, topic):
@@ -288,13 +263,17 @@ def _read_generic(where, p, topic):
         conns = [c for c in reader.connections if c.topic == chosen]
         stamps, rows = [], []
         bad = 0
+        frame_id = ''
         try:
             for conn, _, raw in reader.messages(connections=conns):
                 try:
-                    s, row = imu_to_row(reader.deserialize(raw, conn.msgtype))
+                    msg = reader.deserialize(raw, conn.msgtype)
+                    s, row = imu_to_row(msg)
                 except Exception:  # one garbled message: skip it, as the fast path does
                     bad += 1
                     continue
+                if not stamps:
+                    frame_id = str(msg.header.frame_id)
                 stamps.append(s)
                 rows.append(row)
         except Exception as err:
@@ -313,7 +292,7 @@ def _read_generic(where, p, topic):
             reader.close()
     t = np.asarray(stamps, dtype=np.float64)
     data = np.asarray(rows, dtype=np.float64).reshape(len(rows), 6)
-    return chosen, t, data, warnings
+    return chosen, t, data, warnings, frame_id
 
 
 def _mcap_files(p, kind):
@@ -377,20 +356,21 @@ def _read_mcap_files(where, files, topic, force_generic=False, checks=None):
     if encodings - {'cdr'}:
         raise InputError(where, f'topic {chosen} uses message encoding '
                                 f'{", ".join(sorted(encodings - {"cdr"}))}; only CDR is supported')
-    ts, ds, warnings = [], [], []
+    ts, ds, warnings, frames = [], [], [], []
     for scan in scans:
         if chosen in scan.collectors:
             t, d = scan.collectors[chosen].result()
             ts.append(t)
             ds.append(d)
             warnings += scan.collectors[chosen].warnings()
+            frames.append(scan.collectors[chosen].frame_id)
         warnings += scan.warnings
         if checks is not None:
             checks['chunks_without_crc'] = (checks.get('chunks_without_crc', 0)
                                             + scan.chunks_without_crc)
     if not ts:
-        return chosen, np.zeros(0), np.zeros((0, 6)), warnings
-    return chosen, *_join(ts, ds), warnings
+        return chosen, np.zeros(0), np.zeros((0, 6)), warnings, ''
+    return chosen, *_join(ts, ds), warnings, frames[0]
 
 
 def _read_sqlite_files(where, files, topic, force_generic=False):
@@ -412,20 +392,22 @@ def _read_sqlite_files(where, files, topic, force_generic=False):
             raise InputError(where, f'damaged sqlite3 bag, no topic readable '
                                     f'({opened[0].warnings[0]})')
         chosen = choose_topic(where, topics, topic)
-        ts, ds, warnings = [], [], []
+        ts, ds, warnings, frames = [], [], [], []
         for src in opened:
             ids = [tid for tid, name, _ in src.topic_rows if name == chosen]
-            coll = Collector(False, deserialize, force_generic)
+            coll = Collector(False, deserialize, force_generic,
+                             capacity=src.path.stat().st_size // MIN_IMU_BYTES)
             if ids:
                 src.read(ids, coll)
             t, d = coll.result()
             warnings += src.warnings + coll.warnings()
             ts.append(t)
             ds.append(d)
+            frames.append(coll.frame_id)
     finally:
         for src in opened:
             src.close()
-    return chosen, *_join(ts, ds), warnings
+    return chosen, *_join(ts, ds), warnings, next((f for f in frames if f), '')
 
 
 class _SqliteSource:
@@ -493,37 +475,13 @@ class _SqliteSource:
         except sqlite3.Error as err:
             self.warnings.append(f'{self.path.name}: read stopped after {len(blobs)} messages '
                                  f'({err}); the rest is skipped')
-        _add_blobs(coll, stamps, blobs)
+        coll.add_blobs(stamps, blobs)
 
     def close(self):
         if self.pages is not None:
             self.pages.close()
         if self.con is not None:
             self.con.close()
-
-
-def _add_blobs(coll, stamps, blobs):
-    """Feed blobs to a collector grouped by length, keeping their order numbers."""
-    n = len(blobs)
-    if n == 0:
-        return
-    lens = np.fromiter(map(len, blobs), dtype=np.int64, count=n)
-    times = np.asarray(stamps, dtype=np.int64)
-    base = coll.count
-    for length in np.unique(lens):
-        idx = np.nonzero(lens == length)[0]
-        if idx.size == n:
-            joined = b''.join(blobs)
-        else:
-            joined = b''.join([blobs[i] for i in idx])
-        rows = np.frombuffer(joined, dtype=np.uint8).reshape(idx.size, int(length))
-        ok, t, data = decode_rows(rows, coll.ros1)
-        if coll.force_generic:
-            ok[:] = False
-        for j in np.nonzero(~ok)[0]:
-            t[j], data[j] = coll.generic(blobs[idx[j]])
-        coll.parts.append((base + idx, times[idx], t, data))
-    coll.count = base + n
 
 
 def _read_ros1_fast(where, p, topic):
@@ -548,9 +506,9 @@ def _read_ros1_fast(where, p, topic):
             if not blobs:
                 raise InputError(where, f'cannot read messages: {one_line(err)}') from None
             warnings.append(f'read stopped after {len(blobs)} messages: {one_line(err)}')
-        _add_blobs(coll, stamps, blobs)
+        coll.add_blobs(stamps, blobs)
         t, data = coll.result()
         warnings += coll.warnings()
     finally:
         reader.close()
-    return chosen, t, data, warnings
+    return chosen, t, data, warnings, coll.frame_id

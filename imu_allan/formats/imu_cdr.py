@@ -63,6 +63,16 @@ def _u32(rows, start):
     return np.ascontiguousarray(rows[:, start:start + 4]).view('<u4')[:, 0]
 
 
+def _stamp(sec, nsec):
+    """
+    Stamps in s from sec and nanosec: the adapter's float operations, NaN where nanosec >= 1e9.
+
+    A nanosecond field of 1e9 or more is no time (builtin_interfaces/Time): such a message is
+    damaged, and its NaN stamp makes the collector drop and count it.
+    """
+    return np.where(nsec < 1e9, sec + nsec * 1e-9, np.nan)
+
+
 def decode_rows(rows, ros1):
     """
     Bulk-decode equal-length serialized Imu messages.
@@ -110,8 +120,7 @@ def decode_rows(rows, ros1):
         else:
             sec = _u32(sub, 4).view('<i4').astype(np.float64)
         nsec = _u32(sub, 8).astype(np.float64)
-        # Same float operations as the adapter: sec + nanosec * 1e-9.
-        t[sel] = sec + nsec * 1e-9
+        t[sel] = _stamp(sec, nsec)
         data[sel, :3] = _take_f8(sub, start + 8 * _GYRO_OFF, 3)
         data[sel, 3:] = _take_f8(sub, start + 8 * _ACCEL_OFF, 3)
     return ok, t, data
@@ -205,17 +214,42 @@ def decode_at(u8, off, length, ros1):
         sec = (h0[sel] >> np.uint64(32)).astype(np.uint32)
         sec = sec.astype(np.float64) if ros1 else sec.view(np.int32).astype(np.float64)
         nsec = (h1[sel] & np.uint64(0xFFFFFFFF)).astype(np.float64)
-        t[sel] = sec + nsec * 1e-9
+        t[sel] = _stamp(sec, nsec)
         cols = np.concatenate([start + 8 * _GYRO_OFF + 8 * np.arange(3),
                                start + 8 * _ACCEL_OFF + 8 * np.arange(3)])
         data[sel] = words[off[sel][:, None] + cols].view('<f8')
     return ok, t, data
 
 
+def frame_id_of(raw, ros1):
+    """
+    Return the ``header.frame_id`` of one serialized Imu ('' if its bytes hold none).
+
+    Both layouts put the string's uint32 length at byte 12 and its bytes from byte 16 (CDR
+    counts and stores a trailing NUL; its byte order is the encapsulation header's).
+    """
+    if len(raw) < 16:
+        return ''
+    order = 'little' if ros1 or raw[1] == 1 else 'big'
+    size = int.from_bytes(raw[12:16], order)
+    text = bytes(raw[16:16 + size])
+    if len(text) != size:
+        return ''
+    return (text if ros1 else text.split(b'\0', 1)[0]).decode('utf-8', 'replace')
+
+
 class Collector:
     """Accumulate serialized Imu messages of one connection in file order, decode in bulk."""
 
-    def __init__(self, ros1, deserialize, force_generic=False):
+    def __init__(self, ros1, deserialize, force_generic=False, capacity=0):
+        """
+        Collect one topic; ``capacity`` bounds the messages to expect (0: unknown).
+
+        With a capacity (the scanners pass their file's size over the smallest Imu message),
+        decoded values go straight into arrays of that length, reserved but not touched (the
+        operating system gives pages on first write), and :meth:`result` returns views of
+        them: no concatenation, so reading holds one copy of the samples instead of two.
+        """
         self.ros1 = ros1
         self.deserialize = deserialize
         self.force_generic = force_generic  # reference path: every message deserialized
@@ -225,75 +259,140 @@ class Collector:
         self.single_blob = []
         self.count = 0
         self.undecodable = 0  # messages the deserializer rejected (dropped, with a warning)
+        self._first = None  # (log_time, order, bytes) of the earliest message seen
+        self._fill = 0
+        self._t = np.empty(int(capacity)) if capacity else None
+        self._data = np.empty((int(capacity), 6)) if capacity else None
+
+    def add_part(self, order, log_time, t, data, raw):
+        """
+        Add decoded messages: file order numbers, receive times (ns), stamps (s), values.
+
+        ``raw(i)`` returns the bytes of message i; only the earliest message's are kept, for
+        :attr:`frame_id`.
+        """
+        k = len(order)
+        if self._t is not None and self._fill + k <= self._t.shape[0]:
+            a, self._fill = self._fill, self._fill + k
+            self._t[a:self._fill] = t
+            self._data[a:self._fill] = data
+            t, data = self._t[a:self._fill], self._data[a:self._fill]
+        else:
+            self._t = self._data = None  # capacity exceeded: concatenate parts in result()
+        self.parts.append((order, log_time, t, data))
+        self.undecodable += int(np.count_nonzero(np.isnan(t)))
+        if len(order):
+            i = int(np.argmin(log_time))  # the first of equal times: lowest order in a part
+            key = (int(log_time[i]), int(order[i]))
+            if self._first is None or key < self._first[:2]:
+                self._first = (*key, raw(i))
+
+    @property
+    def frame_id(self):
+        """Return the ``header.frame_id`` of the earliest message ('' if none was added)."""
+        return '' if self._first is None else frame_id_of(self._first[2], self.ros1)
+
+    def _decode(self, rows, blob_of):
+        """Bulk-decode equal-length rows; the generic deserializer takes what bulk cannot."""
+        ok, t, data = decode_rows(rows, self.ros1)
+        if self.force_generic:
+            ok[:] = False
+        for i in np.nonzero(~ok)[0]:
+            t[i], data[i] = self.generic(blob_of(i))
+        return t, data
 
     def add_rows(self, log_time, rows):
         """Add k messages given as a (k, L) uint8 array with their receive times (ns)."""
         k = rows.shape[0]
         order = np.arange(self.count, self.count + k)
         self.count += k
-        ok, t, data = decode_rows(rows, self.ros1)
-        if self.force_generic:
-            ok[:] = False
-        if not ok.all():
-            for i in np.nonzero(~ok)[0]:
-                t[i], data[i] = self.generic(rows[i].tobytes())
-        self.parts.append((order, np.asarray(log_time, dtype=np.int64), t, data))
+
+        def blob_of(i):
+            return rows[i].tobytes()
+        t, data = self._decode(rows, blob_of)
+        self.add_part(order, np.asarray(log_time, dtype=np.int64), t, data, blob_of)
+
+    def add_blobs(self, log_times, blobs):
+        """Add messages given as bytes with their receive times (ns)."""
+        order = np.arange(self.count, self.count + len(blobs))
+        self.count += len(blobs)
+        self._add_grouped(order, log_times, blobs)
+
+    def _add_grouped(self, order, log_times, blobs):
+        """Decode messages (bytes) grouped by length, keeping their order numbers."""
+        if not blobs:
+            return
+        lens = np.fromiter(map(len, blobs), dtype=np.int64, count=len(blobs))
+        order = np.asarray(order, dtype=np.int64)
+        times = np.asarray(log_times, dtype=np.int64)
+        for length in np.unique(lens):
+            idx = np.nonzero(lens == length)[0]
+            joined = (b''.join(blobs) if idx.size == len(blobs)
+                      else b''.join([blobs[i] for i in idx]))
+            rows = np.frombuffer(joined, dtype=np.uint8).reshape(idx.size, int(length))
+
+            def blob_of(j, idx=idx):
+                return blobs[idx[j]]
+            t, data = self._decode(rows, blob_of)
+            self.add_part(order[idx], times[idx], t, data, blob_of)
 
     def add_one(self, log_time, blob):
-        """Add one message (bytes) with its receive time (ns)."""
+        """Add one message (bytes) with its receive time (ns); decoded in bulk later."""
         self.single_order.append(self.count)
         self.single_time.append(log_time)
         self.single_blob.append(blob)
         self.count += 1
 
     def generic(self, blob):
-        """Deserialize one message; NaN stamp (dropped in :meth:`result`) if it is garbage."""
+        """Deserialize one message; NaN stamp (dropped and counted) if it is garbage."""
         try:
-            return imu_to_row(self.deserialize(blob))
+            msg = self.deserialize(blob)
+            t, row = imu_to_row(msg)
         except Exception:  # any deserializer failure means this one message is unusable
-            self.undecodable += 1
             return np.nan, np.full(6, np.nan)
+        return (t if msg.header.stamp.nanosec < 1e9 else np.nan), row
 
     def warnings(self):
         """Warning lines about this collector's messages."""
         if self.undecodable:
-            return [f'{self.undecodable} message(s) could not be decoded and were skipped']
+            return [f'{self.undecodable} damaged message(s) could not be decoded (bad layout '
+                    'or a nanosecond field of 1e9 or more) and were skipped']
         return []
 
     def _flush_singles(self):
-        if not self.single_blob:
-            return
-        lens = np.fromiter((len(b) for b in self.single_blob), dtype=np.int64,
-                           count=len(self.single_blob))
-        order = np.asarray(self.single_order, dtype=np.int64)
-        times = np.asarray(self.single_time, dtype=np.int64)
-        blobs = self.single_blob
-        for length in np.unique(lens):
-            idx = np.nonzero(lens == length)[0]
-            joined = b''.join([blobs[i] for i in idx])
-            rows = np.frombuffer(joined, dtype=np.uint8).reshape(idx.size, int(length))
-            ok, t, data = decode_rows(rows, self.ros1)
-            if self.force_generic:
-                ok[:] = False
-            for j in np.nonzero(~ok)[0]:
-                t[j], data[j] = self.generic(blobs[idx[j]])
-            self.parts.append((order[idx], times[idx], t, data))
+        order, times, blobs = self.single_order, self.single_time, self.single_blob
         self.single_order, self.single_time, self.single_blob = [], [], []
+        self._add_grouped(order, times, blobs)
 
     def result(self):
         """Return (t, data) sorted by receive time, ties in file order (as rosbags yields)."""
         self._flush_singles()
         if not self.parts:
             return np.zeros(0), np.zeros((0, 6))
-        order = np.concatenate([p[0] for p in self.parts])
-        log_time = np.concatenate([p[1] for p in self.parts])
-        t = np.concatenate([p[2] for p in self.parts])
-        data = np.concatenate([p[3] for p in self.parts])
-        if order.shape[0] > 1 and np.all(np.diff(order) > 0) and np.all(np.diff(log_time) >= 0):
-            return self._drop_undecodable(t, data)  # already in order (usual): no sort needed
-        idx = np.lexsort((order, log_time))
-        t, data = t[idx], data[idx]
+        if self._t is not None:  # every part went into the reserved arrays, in turn
+            t, data = self._t[:self._fill], self._data[:self._fill]
+        else:
+            t = np.concatenate([p[2] for p in self.parts])
+            data = np.concatenate([p[3] for p in self.parts])
+        if not self._in_order():
+            order = np.concatenate([p[0] for p in self.parts])
+            log_time = np.concatenate([p[1] for p in self.parts])
+            idx = np.lexsort((order, log_time))
+            t, data = t[idx], data[idx]
         return self._drop_undecodable(t, data)
+
+    def _in_order(self):
+        """Return True if the parts are already in (receive time, file order) order (usual)."""
+        last = None
+        for order, log_time, *_ in self.parts:
+            if order.size == 0:
+                continue
+            if not (np.all(order[1:] > order[:-1]) and np.all(log_time[1:] >= log_time[:-1])):
+                return False
+            if last is not None and not (order[0] > last[0] and log_time[0] >= last[1]):
+                return False
+            last = order[-1], log_time[-1]
+        return True
 
     def _drop_undecodable(self, t, data):
         if not self.undecodable:
@@ -305,6 +404,25 @@ class Collector:
 def map_file(f):
     """Memory-map a whole file read-only."""
     return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+
+
+def release(mm, start, stop):
+    """
+    Drop the pages of bytes [start, stop) of a read-only map from this process (not the file).
+
+    The scanners read a map front to back: releasing what they have passed keeps the
+    process's resident memory at the window in use instead of the whole file (which the
+    kernel's page cache keeps anyway).  Harmless if touched again: the page comes back.
+    """
+    page = mmap.PAGESIZE
+    lo = -(-int(start) // page) * page  # whole pages inside the range only
+    hi = int(stop) // page * page
+    if hi > lo:
+        mm.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
+
+
+#: Fewest bytes of a serialized Imu (empty frame_id): a bound for :class:`Collector`'s capacity.
+MIN_IMU_BYTES = 16 + _TAIL
 
 
 def deserialize(blob, ros1=False):

@@ -15,7 +15,7 @@ import struct
 
 import numpy as np
 
-from .imu_cdr import Collector, deserialize, IMU_TYPES, map_file, one_line
+from .imu_cdr import Collector, deserialize, IMU_TYPES, map_file, MIN_IMU_BYTES, one_line, release
 from ..errors import InputError
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
@@ -48,6 +48,11 @@ def decompress_chunk(compression, data, size):
 
 
 _MCAP_OPS = frozenset(range(0x01, 0x11))  # record opcodes of MCAP v0 (0x80-0xFF: private)
+
+
+#: Bytes of an MCAP Message record before its data: opcode, length, channel id, sequence,
+#: log time and publish time.
+_MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
 
 
 class McapScan:
@@ -88,6 +93,7 @@ class McapScan:
             if f.read(8) != MCAP_MAGIC:
                 raise InputError(self.path, 'not an MCAP file (bad magic bytes)')
             mm = map_file(f)
+        self._mm, self._size = mm, size
         try:
             buf = memoryview(mm)
             try:
@@ -259,7 +265,12 @@ class McapScan:
         # Keyed by topic: several channels of one topic merge in receive-time order.
         topic = self.channels[cid][0]
         if topic not in self.collectors:
-            self.collectors[topic] = Collector(False, deserialize, self.force_generic)
+            # the summary's count of the topic's messages, else a bound from the file size
+            indexed = sum(n for counts in self.chunk_counts.values() for c, n in counts.items()
+                          if self.channels.get(c, ('',))[0] == topic)
+            self.collectors[topic] = Collector(
+                False, deserialize, self.force_generic,
+                capacity=indexed or self._size // (MIN_IMU_BYTES + _MESSAGE_HEADER))
         return self.collectors[topic]
 
     def _truncated(self, pos, end, where):
@@ -300,6 +311,7 @@ class McapScan:
         except (struct.error, ValueError, IndexError, KeyError) as err:
             self.warnings.append(f'malformed record in the chunk at byte {pos} '
                                  f'({one_line(err)}): rest of that chunk skipped')
+        release(self._mm, pos, rec_end)
 
     def _partial_chunk(self, buf, pos, end):
         """Read the complete records of an uncompressed chunk cut off by the end of the file."""

@@ -13,13 +13,25 @@ import struct
 
 import numpy as np
 
-from .imu_cdr import choose_topic, Collector, deserialize, IMU_TYPES, map_file, one_line
+from .imu_cdr import (
+    choose_topic,
+    Collector,
+    deserialize,
+    IMU_TYPES,
+    map_file,
+    MIN_IMU_BYTES,
+    one_line,
+    release,
+)
 from .mcap_scan import lz4_decompress
 from ..errors import InputError
 
 ROS1_MAGIC = b'#ROSBAG V2.0\n'
 
 _ROS1_IMU_MD5 = '6a62c6daae103f4ff57a132d6f95cec2'
+#: Fewest bytes of a message record before its data: header length, the op (4 + 'op=' + 1),
+#: conn (4 + 'conn=' + 4) and time (4 + 'time=' + 8) fields, data length.
+_MESSAGE_HEADER = 4 + 8 + 13 + 17 + 4
 
 
 def _ros1_fields(buf, pos, end):
@@ -62,6 +74,7 @@ class Ros1Scan:
             if f.read(len(ROS1_MAGIC)) != ROS1_MAGIC:
                 raise InputError(self.path, 'not a ROS 1 bag (bad magic line)')
             mm = map_file(f)
+        self._mm, self._size = mm, size
         buf = memoryview(mm)
         try:
             self._read_index(buf, size)
@@ -204,8 +217,9 @@ class Ros1Scan:
         # Keyed by topic: several connections of one topic merge in receive-time order.
         topic = self.conns[cid][0]
         if topic not in self.collectors:
-            self.collectors[topic] = Collector(True, partial(deserialize, ros1=True),
-                                               self.force_generic)
+            self.collectors[topic] = Collector(
+                True, partial(deserialize, ros1=True), self.force_generic,
+                capacity=self._size // (MIN_IMU_BYTES + _MESSAGE_HEADER))
         return self.collectors[topic]
 
     def _connection(self, buf, fields, start, end):
@@ -254,6 +268,7 @@ class Ros1Scan:
                                  f'({one_line(err)}): rest of that chunk skipped')
         if len(self.warnings) > n_warnings:  # the chunk walk stopped early: say what it cost
             self.warnings[-1] += self._lost(pos, self._wanted_count() - before)
+        release(self._mm, start, end)
 
     def _wanted_count(self):
         return sum(n for c, n in self.counts.items() if self._wanted(c))
@@ -289,7 +304,7 @@ def read_ros1_scan(where, p, topic, force_generic=False):
         raise InputError(where, f'damaged ROS 1 bag, no Imu data readable ({scan.warnings[0]})')
     chosen = choose_topic(where, topics, topic)
     if chosen not in scan.collectors:
-        return chosen, np.zeros(0), np.zeros((0, 6)), scan.warnings
+        return chosen, np.zeros(0), np.zeros((0, 6)), scan.warnings, ''
     coll = scan.collectors[chosen]
     t, d = coll.result()
-    return chosen, t, d, scan.warnings + coll.warnings()
+    return chosen, t, d, scan.warnings + coll.warnings(), coll.frame_id

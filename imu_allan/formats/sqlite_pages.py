@@ -14,12 +14,15 @@ import struct
 
 import numpy as np
 
-from .imu_cdr import decode_at, map_file
+from .imu_cdr import decode_at, map_file, release
 from ..errors import InputError
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
 
 _SERIAL_SIZE = np.array([0, 1, 2, 3, 4, 6, 8, 8, 0, 0, -1, -1], dtype=np.int64)
+#: Serial types that hold an integer (1-6 sized, 8 and 9 the constants 0 and 1), as a lookup
+#: table (np.isin hashes its arguments on every call: a table lookup is several times faster).
+_INTEGER_SERIAL = np.isin(np.arange(256), [1, 2, 3, 4, 5, 6, 8, 9])
 _PAGE_BATCH = 512  # leaf pages decoded per numpy batch (bounds the index arrays' memory)
 
 
@@ -159,6 +162,11 @@ class SqlitePages:
                 self.lost_pages += int((~present).sum())
                 pages = pages[present]
             hdr = (pages - 1) * self.page_size + np.where(pages == 1, 100, 0)
+            if pages.size > 1 and u8[hdr[0]] == 0x0D:
+                # B-trees are balanced: a level that starts with a leaf holds only leaves.
+                # Their types are checked as each batch is read (:meth:`_batch`); checking them
+                # here would bring the whole file into memory at once.
+                return pages.tolist()
             kind = u8[hdr] if pages.size else np.zeros(0, dtype=np.uint8)
             known = (kind == 0x0D) | (kind == 0x05)
             if not known.all():
@@ -298,9 +306,12 @@ class SqlitePages:
             every = np.arange(1, self.npages + 1, dtype=np.int64)
             hdr = (every - 1) * self.page_size + np.where(every == 1, 100, 0)
             leaves = every[self.u8[hdr] == 0x0D]
+            release(self.mm, 0, self.size)  # one byte of every page read: let them go
         wanted = np.asarray(sorted(topic_ids), dtype=np.int64)
         for b0 in range(0, leaves.shape[0], _PAGE_BATCH):
-            self._batch(leaves[b0:b0 + _PAGE_BATCH], wanted, coll)
+            pages = leaves[b0:b0 + _PAGE_BATCH]
+            self._batch(pages, wanted, coll)
+            release(self.mm, (pages.min() - 1) * self.page_size, pages.max() * self.page_size)
 
     def _batch(self, pages, wanted, coll):
         ps = self.page_size
@@ -335,9 +346,9 @@ class SqlitePages:
         rowid, n2 = _varints(u8, cell + n1)
         rec = cell + n1 + n2
         hs, s0, s1, s2, s3, fits = _record_headers(u8, rec)
-        ints = np.array([1, 2, 3, 4, 5, 6, 8, 9])
-        fast = (inside & fits & (s0 == 0) & np.isin(s1, ints)
-                & np.isin(s2, ints) & (s3 >= 12) & (s3 % 2 == 0) & (p <= self.usable - 35))
+        fast = (inside & fits & (s0 == 0) & _INTEGER_SERIAL[np.clip(s1, 0, 255)]
+                & _INTEGER_SERIAL[np.clip(s2, 0, 255)] & (s3 >= 12) & (s3 % 2 == 0)
+                & (p <= self.usable - 35))
         v1 = rec + hs
         v2 = v1 + _SERIAL_SIZE[np.where(fast, s1, 0)]
         v3 = v2 + _SERIAL_SIZE[np.where(fast, s2, 0)]
@@ -348,20 +359,22 @@ class SqlitePages:
             for i in np.nonzero(~fast)[0].tolist():
                 self._slow_cell(int(cell[i]) + shift, int(cbase[i]) + shift, wanted, coll)
         topic = _be_ints(u8, v1, np.where(fast, s1, 8))
-        keep = fast & np.isin(topic, wanted)
+        keep = fast & (topic == wanted[0] if wanted.size == 1 else np.isin(topic, wanted))
         if not keep.any():
             return
         stamp = _be_ints(u8, v2[keep], s2[keep])
         off, length, order = v3[keep], blob_len[keep], order[keep]
-        for ln in np.unique(length):
+        for ln in (length[:1] if length.min() == length.max() else np.unique(length)):
             sel = length == ln
             ok, t, data = decode_at(u8, off[sel], int(ln), ros1=coll.ros1)
             if coll.force_generic:
                 ok[:] = False
+
+            def blob_of(i, at=off[sel] + shift, ln=int(ln)):
+                return bytes(self.mm[int(at[i]):int(at[i]) + ln])
             for i in np.nonzero(~ok)[0].tolist():
-                o = int(off[sel][i]) + shift
-                t[i], data[i] = coll.generic(bytes(self.mm[o:o + int(ln)]))
-            coll.parts.append((order[sel], stamp[sel], t, data))
+                t[i], data[i] = coll.generic(blob_of(i))
+            coll.add_part(order[sel], stamp[sel], t, data, blob_of)
 
     def _slow_cell(self, cell, page_base, wanted, coll):
         if not page_base <= cell < page_base + self.page_size - 4:
@@ -376,5 +389,5 @@ class SqlitePages:
         if len(vals) == 4 and vals[1] in wanted.tolist() and isinstance(vals[3], bytes):
             stamp, blob = int(vals[2]), vals[3]
             t, row = coll.generic(blob)
-            coll.parts.append((np.array([order]), np.array([stamp]), np.array([t]),
-                               row.reshape(1, 6)))
+            coll.add_part(np.array([order]), np.array([stamp]), np.array([t]),
+                          row.reshape(1, 6), lambda _: blob)

@@ -172,6 +172,8 @@ def test_mixed_frame_id_lengths_fast_equals_generic(tmp_path, storage):
     gen = read_bag(path, topic='/imu/mixed', fast=False)
     assert fast.n == gen.n == 140
     assert _same(fast, gen)
+    # the earliest message's frame id, from the bulk decoder's bytes as from the deserializer
+    assert fast.frame_id == gen.frame_id == 'a'
     assert np.all(np.diff(fast.t) >= 0)  # receive-time order = stamp order here
 
 
@@ -185,6 +187,7 @@ def test_write_read_round_trip(tmp_path, storage):
     for fast in (True, False):
         r = read_bag(path, fast=fast)
         assert r.n == 2000
+        assert r.frame_id == 'gx3_25'
         assert np.array_equal(r.data, s.data)
         assert np.max(np.abs(r.t - s.t)) < 1e-6  # ns stamps; float64 at 1.7e9 s is 2.4e-7
     with pytest.raises(InputError, match='already exists'):

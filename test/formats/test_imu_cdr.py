@@ -1,8 +1,8 @@
 """The one Imu message -> numpy adapter, with rclpy and rosbags messages, and the bulk codecs."""
 
 from imu_allan.formats.imu_adapter import imu_to_row, imus_to_arrays
+from imu_allan.formats.imu_cdr import Collector, deserialize, encode_imu, frame_id_of
 from imu_allan.formats.imu_cdr import decode_rows as _decode_rows
-from imu_allan.formats.imu_cdr import encode_imu
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
@@ -143,3 +143,50 @@ def test_covariance_diagonals_patched_in_bytes_as_rclpy_reads_them():
         assert list(got.orientation_covariance) == list(m.orientation_covariance)
         assert (got.header.frame_id, got.header.stamp.nanosec, got.angular_velocity.x) == \
             (m.header.frame_id, m.header.stamp.nanosec, m.angular_velocity.x)
+
+
+def _encoded(n, frame_id, seed):
+    rng = np.random.default_rng(seed)
+    t = 1.7e9 + np.sort(rng.uniform(0.0, 100.0, n))
+    rows, stamps = encode_imu(t, rng.normal(size=(n, 6)), frame_id)
+    return rows, np.asarray(stamps, dtype=np.int64)
+
+
+@pytest.mark.parametrize('capacity', [0, 50, 10_000])
+def test_collector_capacity_and_order(capacity):
+    """
+    Reserved arrays, exceeded or not, give what concatenation gives, in receive-time order.
+
+    Parts arrive out of time order (the second batch is earlier), one message has a
+    nanosecond field of 1e9 (damaged: dropped and counted), and the earliest message names
+    the frame id; a capacity of 50 is exceeded by the 120 messages, 10 000 is not.
+    """
+    rows_a, times_a = _encoded(80, 'late', 1)
+    rows_b, times_b = _encoded(40, 'early', 2)
+    times_b -= 10**12  # 1000 s earlier
+    rows_b = rows_b.copy()
+    rows_b[7, 8:12] = np.frombuffer(np.uint32(1_000_000_000).tobytes(), np.uint8)
+    got = Collector(False, deserialize, capacity=capacity)
+    got.add_rows(times_a, rows_a)
+    got.add_rows(times_b, rows_b)
+    t, data = got.result()
+    keep = np.ones(40, bool)
+    keep[7] = False
+    _, t_b, d_b = _decode_rows(rows_b, ros1=False)
+    _, t_a, d_a = _decode_rows(rows_a, ros1=False)
+    assert np.array_equal(t, np.concatenate([t_b[keep], t_a]))
+    assert np.array_equal(data, np.concatenate([d_b[keep], d_a]))
+    assert got.undecodable == 1 and 'nanosecond' in got.warnings()[0]
+    assert got.frame_id == 'early'
+    generic = Collector(False, deserialize, force_generic=True)
+    generic.add_rows(times_b, rows_b)
+    assert generic.undecodable == 1 and np.array_equal(generic.result()[0], t_b[keep])
+
+
+def test_frame_id_of_both_layouts():
+    """The frame id from a message's bytes, CDR (with its NUL) and ROS 1, and '' when cut."""
+    for ros1 in (False, True):
+        rows, _ = encode_imu(np.array([1.7e9]), np.zeros((1, 6)), 'imu_link', ros1=ros1)
+        raw = rows[0].tobytes()
+        assert frame_id_of(raw, ros1) == 'imu_link'
+        assert frame_id_of(raw[:20], ros1) == ''
