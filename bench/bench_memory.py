@@ -1,12 +1,13 @@
 """
-Benchmark: peak memory of reading a long recording (CSV and MCAP) against its decoded size.
+Benchmark: peak memory of reading a long recording, and of ``analyze``, against its size.
 
-Writes HOURS of 100 Hz six-axis samples as a contract CSV and as an MCAP rosbag2 into a
-temporary folder, then reads each in a fresh process (``read_samples``, what ``analyze`` does
-first) and prints the peak resident set size (``VmHWM``), the decoded arrays' size (t and
-data, float64) and the peak above the interpreter's own baseline (numpy and the readers
-imported, nothing read) divided by the decoded size. Goal: at most 1.5x.
-Usage: ``python bench/bench_memory.py [HOURS]`` (default 2; the issue's case is 10).
+Writes HOURS of 100 Hz six-axis samples as a contract CSV, MCAP and sqlite3 rosbag2 and a
+ROS 1 bag into a temporary folder, then reads each in a fresh process (``read_samples``, what
+``analyze`` does first) and runs the whole ``analyze --json`` on the CSV and the MCAP bag in
+another.  Printed: the peak resident set size (``VmHWM``), the decoded arrays' size (t and
+data, float64) and the peak above the process's own baseline (the modules imported, nothing
+read) divided by the decoded size.  Goal: at most 1.5x.
+Usage: ``python bench/bench_memory.py [HOURS]`` (default 10).
 """
 
 from pathlib import Path
@@ -14,6 +15,7 @@ import subprocess
 import sys
 import tempfile
 
+from benchlib import goal, header
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
@@ -32,6 +34,28 @@ print(base, hwm(), s.t.nbytes + s.data.nbytes)
 """
 
 
+# The whole ``analyze --json`` in a fresh process: peak above the same process with the
+# analysis modules (numpy, scipy, numba's kernel) imported.
+_ANALYZE = """
+import contextlib, io, sys
+from imu_allan.cli import analyze
+import imu_allan.core.allan_kernel, imu_allan.core.analysis, imu_allan.formats.bag_reader
+def hwm():
+    line = [x for x in open('/proc/self/status') if x.startswith('VmHWM')][0]
+    return int(line.split()[1]) * 1024
+base = hwm()
+with contextlib.redirect_stdout(io.StringIO()):
+    code = analyze.main([sys.argv[1], '--json'])
+print(base, hwm(), code)
+"""
+
+
+def _analyze_peak(path):
+    out = subprocess.run([sys.executable, '-c', _ANALYZE, str(path)], capture_output=True,
+                         text=True, check=True).stdout.split()
+    return [int(x) for x in out]
+
+
 def _peak(path):
     out = subprocess.run([sys.executable, '-c', _CHILD, str(path)], capture_output=True,
                          text=True, check=True).stdout.split()
@@ -40,23 +64,37 @@ def _peak(path):
 
 def main():
     """Write the recordings, read each in its own process, print one line per format."""
-    hours = float(sys.argv[1]) if len(sys.argv) > 1 else 2.0
+    hours = float(sys.argv[1]) if len(sys.argv) > 1 else 10.0
     n = int(hours * 3600 * 100)
     rng = np.random.default_rng(0)
     samples = Samples(t=1.7e9 + np.arange(n) / 100.0, data=rng.normal(0.0, 1e-3, (n, 6)))
+    header('bench_memory')
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / 'rec.csv'
         write_csv(csv, samples)
-        bag = write_imu_bag(Path(tmp) / 'bag', samples, storage='mcap')
+        inputs = [('CSV', csv)]
+        for storage in ('mcap', 'sqlite3', 'ros1'):
+            out = Path(tmp) / ('rec.bag' if storage == 'ros1' else storage)
+            inputs.append((storage, write_imu_bag(out, samples, storage=storage)))
         del samples
-        for name, path in (('CSV', csv), ('MCAP', bag)):
+        for name, path in inputs:
             base, peak, decoded = _peak(path)
             size = sum(p.stat().st_size for p in ([path] if path.is_file()
                                                   else path.iterdir()))
-            print(f'{name:5} {hours:g} h: file {size / 1e6:7.1f} MB, decoded {decoded / 1e6:6.1f}'
-                  f' MB, peak RSS {peak / 1e6:7.1f} MB (baseline {base / 1e6:5.1f} MB): '
-                  f'{(peak - base) / decoded:.2f}x decoded')
-
+            ratio = (peak - base) / decoded
+            print(f'{name:7} {hours:g} h: file {size / 1e6:7.1f} MB, decoded '
+                  f'{decoded / 1e6:6.1f} MB, peak RSS {peak / 1e6:7.1f} MB (baseline '
+                  f'{base / 1e6:5.1f} MB): {ratio:.2f}x decoded')
+            goal(f'memory: reading {hours:g} h of {name}: {ratio:.2f}x the decoded size (goal '
+                 '<= 1.5x)', ratio <= 1.5)
+            if name in ('CSV', 'mcap'):
+                base, peak, code = _analyze_peak(path)
+                ratio = (peak - base) / decoded
+                print(f'{name:7} {hours:g} h: analyze --json (exit {code}): peak RSS '
+                      f'{peak / 1e6:7.1f} MB (baseline {base / 1e6:5.1f} MB): {ratio:.2f}x '
+                      'decoded')
+                goal(f'memory: analyze on {hours:g} h of {name}: {ratio:.2f}x the decoded size '
+                     '(goal <= 1.5x)', ratio <= 1.5)
 
 if __name__ == '__main__':
     main()

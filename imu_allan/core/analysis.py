@@ -66,6 +66,9 @@ class Analysis:
     integrity: str = ''
 
 
+_VALIDATE_BLOCK = 1 << 16  # rows checked at a time
+
+
 def _validate(samples):
     """Refuse records the estimator cannot use, naming the first offending sample."""
     where = samples.source or 'input'
@@ -74,9 +77,15 @@ def _validate(samples):
     if samples.n < 2:
         raise InputError(where, 'only one sample; need a record to compute an Allan deviation')
     limits = np.asarray(physical_limits(samples.axes))
-    with np.errstate(invalid='ignore'):
-        bad = ~(np.abs(samples.data) <= limits)  # NaN compares False: caught too
-    if bad.any():
+    bad = None
+    for start in range(0, samples.n, _VALIDATE_BLOCK):  # in blocks: no record-sized temporary
+        with np.errstate(invalid='ignore'):
+            block = ~(np.abs(samples.data[start:start + _VALIDATE_BLOCK]) <= limits)  # NaN too
+        if block.any():  # the whole record once more, to count and name them
+            with np.errstate(invalid='ignore'):
+                bad = ~(np.abs(samples.data) <= limits)
+            break
+    if bad is not None:
         i, j = np.argwhere(bad)[0]
         value = samples.data[i, j]
         unit = sample_unit(samples.axes[j])
@@ -142,10 +151,9 @@ def analyze_samples(samples, options=None):
     if timing.jitter > 0.05:
         warnings.append(f'time-stamp jitter is {100 * timing.jitter:.1f} % of the sample '
                         f'interval; the device timer or a driver with even stamps helps')
-    data = samples.data
-    outliers_data, outliers = replace_outliers(data, samples.axes)
+    data, outliers = replace_outliers(samples.data, samples.axes,
+                                      replace=options.replace_outliers)
     if options.replace_outliers:
-        data = outliers_data
         outliers.replaced = bool(outliers.total)
         if outliers.total:
             warnings.append(f'{outliers.total} outlier(s) replaced (Tukey F=3): '

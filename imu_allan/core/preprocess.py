@@ -40,9 +40,14 @@ def tukey_fences(values, f=TUKEY_F):
     return q1 - f * iqr, q3 + f * iqr
 
 
-def replace_outliers(data, axes, f=TUKEY_F):
-    """Return a copy of ``data`` (n, A) with Tukey outliers replaced by the inlier mean."""
-    data = np.array(data, dtype=float, copy=True)
+def replace_outliers(data, axes, f=TUKEY_F, replace=True):
+    """
+    Find Tukey outliers in ``data`` (n, A); return (data, :class:`OutlierReport`).
+
+    With ``replace`` the data returned is a copy with the outliers replaced by the inlier
+    mean; without, ``data`` itself (only counted: no copy of a long record).
+    """
+    data = np.array(data, dtype=float, copy=replace)
     report = OutlierReport()
     for j, axis in enumerate(axes):
         col = data[:, j]
@@ -51,7 +56,7 @@ def replace_outliers(data, axes, f=TUKEY_F):
         report.fences[axis] = (float(lo), float(hi))
         report.counts[axis] = int(bad.sum())
         report.indices[axis] = np.flatnonzero(bad)
-        if bad.any() and not bad.all():
+        if replace and bad.any() and not bad.all():
             col[bad] = col[~bad].mean()
     return data, report
 

@@ -93,7 +93,7 @@ class McapScan:
             if f.read(8) != MCAP_MAGIC:
                 raise InputError(self.path, 'not an MCAP file (bad magic bytes)')
             mm = map_file(f)
-        self._mm, self._size = mm, size
+        self._mm, self._size, self._released = mm, size, 0
         try:
             buf = memoryview(mm)
             try:
@@ -311,7 +311,9 @@ class McapScan:
         except (struct.error, ValueError, IndexError, KeyError) as err:
             self.warnings.append(f'malformed record in the chunk at byte {pos} '
                                  f'({one_line(err)}): rest of that chunk skipped')
-        release(self._mm, pos, rec_end)
+        # everything before this chunk's end is passed (the message indexes between chunks too)
+        release(self._mm, self._released, rec_end)
+        self._released = rec_end
 
     def _partial_chunk(self, buf, pos, end):
         """Read the complete records of an uncompressed chunk cut off by the end of the file."""
