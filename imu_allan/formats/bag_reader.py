@@ -37,7 +37,16 @@ import struct
 import numpy as np
 
 from .imu_adapter import imu_to_row
-from .imu_cdr import choose_topic, Collector, deserialize, IMU_TYPES, MIN_IMU_BYTES, one_line
+from .imu_cdr import (
+    choose_topic,
+    Collector,
+    damaged_warning,
+    deserialize,
+    IMU_TYPES,
+    MIN_IMU_BYTES,
+    one_line,
+    valid_stamp,
+)
 from .mcap_scan import MCAP_MAGIC, McapScan
 from .ros1_scan import read_ros1_scan, ROS1_MAGIC, Ros1Scan
 from .samples import Samples
@@ -272,6 +281,9 @@ def _read_generic(where, p, topic):
                 except Exception:  # one garbled message: skip it, as the fast path does
                     bad += 1
                     continue
+                if not valid_stamp(msg):
+                    bad += 1
+                    continue
                 if not stamps:
                     frame_id = str(msg.header.frame_id)
                 stamps.append(s)
@@ -286,7 +298,7 @@ def _read_generic(where, p, topic):
                 raise InputError(where, f'cannot read messages: {one_line(err)}') from None
             warnings.append(f'read stopped after {len(stamps)} messages: {one_line(err)}')
         if bad:
-            warnings.append(f'{bad} message(s) could not be decoded and were skipped')
+            warnings.append(damaged_warning(bad))
     finally:
         if reader is not None:
             reader.close()

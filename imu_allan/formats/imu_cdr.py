@@ -238,6 +238,17 @@ def frame_id_of(raw, ros1):
     return (text if ros1 else text.split(b'\0', 1)[0]).decode('utf-8', 'replace')
 
 
+def valid_stamp(msg):
+    """Return True if a deserialized message's stamp is a time (nanosec below 1e9)."""
+    return msg.header.stamp.nanosec < 1_000_000_000
+
+
+def damaged_warning(count):
+    """Return the reader's warning about ``count`` dropped messages (one wording for all)."""
+    return (f'{count} damaged message(s) could not be decoded (bad layout or a nanosecond '
+            'field of 1e9 or more) and were skipped')
+
+
 class Collector:
     """Accumulate serialized Imu messages of one connection in file order, decode in bulk."""
 
@@ -350,14 +361,11 @@ class Collector:
             t, row = imu_to_row(msg)
         except Exception:  # any deserializer failure means this one message is unusable
             return np.nan, np.full(6, np.nan)
-        return (t if msg.header.stamp.nanosec < 1e9 else np.nan), row
+        return (t if valid_stamp(msg) else np.nan), row
 
     def warnings(self):
         """Warning lines about this collector's messages."""
-        if self.undecodable:
-            return [f'{self.undecodable} damaged message(s) could not be decoded (bad layout '
-                    'or a nanosecond field of 1e9 or more) and were skipped']
-        return []
+        return [damaged_warning(self.undecodable)] if self.undecodable else []
 
     def _flush_singles(self):
         order, times, blobs = self.single_order, self.single_time, self.single_blob

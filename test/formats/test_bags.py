@@ -178,6 +178,39 @@ def test_mixed_frame_id_lengths_fast_equals_generic(tmp_path, storage):
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
+def test_impossible_nanoseconds_dropped_and_counted(tmp_path, storage):
+    """
+    A stamp whose nanosecond field is 1e9 or more is damage: dropped, counted, named.
+
+    Three of 120 messages at seeded positions; the fast and the generic path drop the same
+    ones and keep every other sample unchanged.
+    """
+    from imu_allan.formats.imu_cdr import encode_imu
+    s = _samples(120)
+    ros1 = storage == 'ros1'
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)
+    rows, stamps = encode_imu(s.t, s.data, 'imu_link', ros1=ros1)
+    bad = np.random.default_rng(11).choice(120, 3, replace=False)
+    msgs = []
+    for i, (ns, r) in enumerate(zip(stamps, rows)):
+        msg = (ts.deserialize_ros1 if ros1 else ts.deserialize_cdr)(r.tobytes(),
+                                                                   'sensor_msgs/msg/Imu')
+        if i in bad:
+            msg.header.stamp.nanosec = 1_000_000_000 + 7 * i
+        msgs.append((int(ns), msg))
+    path = tmp_path / ('n.bag' if ros1 else 'n')
+    write_imu_bag(path, _samples(10), topic='/imu/other', storage=storage,
+                  extra_topics={'/imu/n': ('sensor_msgs/msg/Imu', msgs)})
+    keep = np.setdiff1d(np.arange(120), bad)
+    for fast in (True, False):
+        r = read_bag(path, topic='/imu/n', fast=fast)
+        assert r.n == 117, fast
+        assert np.array_equal(r.data, s.data[keep]), fast
+        assert any('3 damaged message(s)' in w and 'nanosecond' in w for w in r.warnings), \
+            (fast, r.warnings)
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
 def test_write_read_round_trip(tmp_path, storage):
     """Samples -> bag -> samples: values bit-identical, stamps to the nanosecond."""
     s = _samples(2000, rate=400.0, t0=1_700_000_123.0)
