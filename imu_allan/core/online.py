@@ -58,7 +58,7 @@ class OnlineAllan:
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
         self._rejected_recent = np.zeros(len(self.axes), np.int64)  # since take_rejected()
-        self._break_next = False  # the last sample of the previous batch was left out
+        self._last_good = np.full(len(self.axes), np.nan)  # per axis, stands in for bad values
         self._setup = (gate, gate_options, gap_factor, estimator_options)
         self.rate_source = 'configured' if rate_hz else 'measured'
         self.rate_hz = self.estimator = self.monitor = self.gate = None
@@ -81,13 +81,15 @@ class OnlineAllan:
             gyro_columns = [i for i, a in enumerate(self.axes) if is_gyro(a)]
             self.gate = StationarityGate(rate_hz, len(self.axes), gyro_columns,
                                          **(gate_options or {}))
-            self._gate_breaks = _TagDelay(self.gate.w)
+            # Per-sample tags that travel with the samples through the gate's delay: the
+            # stamp-gap break, then the per-axis rejection flags.
+            self._gate_tags = _TagDelay(self.gate.w, 1 + len(self.axes))
 
     def memory_bytes(self):
         """Bytes held in numpy buffers by the estimator and the gate (fixed)."""
         if self.estimator is None:
             return 0
-        extra = self.gate.memory_bytes() + self._gate_breaks.memory_bytes() if self.gate else 0
+        extra = self.gate.memory_bytes() + self._gate_tags.memory_bytes() if self.gate else 0
         return self.estimator.memory_bytes() + extra
 
     @property
@@ -114,40 +116,53 @@ class OnlineAllan:
         data, brk = data[keep], brk[keep]
         if data.shape[0] == 0:
             return
-        data, brk = self._reject_nonphysical(data, brk)
-        if data.shape[0] == 0:
-            return
+        data, bad = self._reject_nonphysical(data)
         if self.gate is None:
-            self.estimator.update(data, None, brk)
+            self.estimator.update(data, None if bad is None else ~bad, brk)
             return
+        tags = np.zeros((data.shape[0], 1 + len(self.axes)), bool)
+        tags[:, 0] = brk
+        if bad is not None:
+            tags[:, 1:] = bad
         out, still = self.gate.update(data)
-        brk_out = self._gate_breaks.push(brk, out.shape[0])
+        tags = self._gate_tags.push(tags, out.shape[0])
         if out.shape[0]:
-            self.estimator.update(out, still, brk_out)
+            bad_out = tags[:, 1:]
+            use = still[:, None] & ~bad_out if bad_out.any() else still
+            self.estimator.update(out, use, tags[:, 0])
 
-    def _reject_nonphysical(self, data, brk):
+    def _reject_nonphysical(self, data):
         """
-        Leave out samples with a NaN, inf or non-physical value (``units.PHYSICAL_LIMIT``).
+        Find NaN, inf and non-physical values (``units.PHYSICAL_LIMIT``), per axis.
 
-        Counted per axis (:attr:`rejected_total`, :meth:`take_rejected`).  The estimator keeps
-        the axes in step, so such a sample is left out of every axis, as a stamp gap is: the
-        phase restarts after it and the samples around it still count.
+        Returns ``(data, bad)``: ``bad`` (n, A) bool, or None when every value is good.  A bad
+        value is left out of its own axis only (:class:`StreamingAllan` per-axis masks: that
+        axis's phase restarts after it, as at a stamp gap; the other axes keep the sample).
+        In the returned data it is replaced by the last good value of its axis, which the
+        motion gate sees instead (a spike or NaN is not motion) and the estimator never
+        reads.  Counted per axis (:attr:`rejected_total`, :meth:`take_rejected`).
         """
         with np.errstate(invalid='ignore'):
             bad = ~(np.abs(data) <= self._limits)  # NaN compares False: caught too
-        follows = np.empty(data.shape[0], bool)
-        follows[0] = self._break_next
         if not bad.any():
-            self._break_next = False
-            return data, brk | follows if follows[0] else brk
+            self._last_good[:] = data[-1]
+            return data, None
         counts = bad.sum(axis=0)
         self.rejected_total += counts
         self._rejected_recent += counts
-        drop = bad.any(axis=1)
-        follows[1:] = drop[:-1]
-        self._break_next = bool(drop[-1])
-        keep = ~drop
-        return data[keep], (brk | follows)[keep]
+        n, n_axes = data.shape
+        # Index of the newest good value at or before each sample, per axis (-1: none yet).
+        idx = np.where(bad, -1, np.arange(n)[:, None])
+        np.maximum.accumulate(idx, axis=0, out=idx)
+        carry = self._last_good.copy()
+        unknown = np.isnan(carry)
+        if unknown.any():  # no good value yet on an axis: its first good one in this batch
+            first = np.argmax(~bad, axis=0)
+            seen = (~bad).any(axis=0)
+            carry[unknown] = np.where(seen, data[first, np.arange(n_axes)], 0.0)[unknown]
+        filled = np.where(idx >= 0, data[np.maximum(idx, 0), np.arange(n_axes)], carry)
+        self._last_good[:] = filled[-1]
+        return filled, bad
 
     def take_rejected(self):
         """Per-axis counts of samples rejected since the last call ({axis: n}, non-zero only)."""
@@ -261,7 +276,7 @@ class StagedEstimate:
         self.result = AllanResult(first.tau, first.m, stack('avar'), stack('adev'),
                                   stack('ci_low'), stack('ci_high'), stack('edf'),
                                   stack('alpha'), tuple(self.pipeline.axes), first.rate_hz,
-                                  first.n_samples)
+                                  max(p.n_samples for p in parts))
         if self._fits:
             fits = {a: self._fits[a] for a in self.pipeline.axes if a in self._fits}
             self.fitted = FittedModel(fits, first.rate_hz, self.result)
@@ -270,22 +285,22 @@ class StagedEstimate:
 class _TagDelay:
     """Delays per-sample flags by the gate's latency (the gate returns samples in order)."""
 
-    def __init__(self, window):
+    def __init__(self, window, width=1):
         # The gate holds at most two windows; a ring of that size suffices.
-        self._buf = np.zeros(2 * window + 1, bool)
+        self._buf = np.zeros((2 * window + 1, width), bool)
         self._n = 0
 
     def memory_bytes(self):
         return self._buf.nbytes
 
     def push(self, flags, n_out):
-        """Append ``flags``; pop the flags of the ``n_out`` oldest samples."""
-        total = self._n + flags.size
+        """Append ``flags`` (n, width); pop the flags of the ``n_out`` oldest samples."""
+        total = self._n + flags.shape[0]
         merged = np.concatenate((self._buf[:self._n], flags))
         out = merged[:n_out]
         rest = merged[n_out:total]
-        self._buf[:rest.size] = rest
-        self._n = rest.size
+        self._buf[:rest.shape[0]] = rest
+        self._n = rest.shape[0]
         return out
 
 

@@ -90,23 +90,28 @@ class _State:
     """Everything :class:`StreamingAllan` mutates (copied for previews)."""
 
     def __init__(self, levels, n_factors, n_axes, n_buckets):
-        self.hist = [np.zeros((cap, n_axes)) for _, _, _, cap in levels]
-        self.fill = [0] * len(levels)
+        # Phase histories axis-major (A, capacity): each axis's sums are then reduced along
+        # its own contiguous row, so they do not depend on which other axes were processed
+        # with it (a column reduction over (n, A) rounds differently for different A).
+        self.hist = [np.zeros((n_axes, cap)) for _, _, _, cap in levels]
         self.acc = np.zeros((n_factors, n_axes))
-        self.cnt = np.zeros(n_factors, dtype=np.int64)
+        self.cnt = np.zeros((n_factors, n_axes), dtype=np.int64)
         self.wacc = np.zeros((n_buckets, n_factors, n_axes))
-        self.wcnt = np.zeros((n_buckets, n_factors), dtype=np.int64)
+        self.wcnt = np.zeros((n_buckets, n_factors, n_axes), dtype=np.int64)
         self.bucket = 0          # global index of the newest bucket
-        self.phase = np.zeros(n_axes)  # phase at the newest point of the segment (rebased)
-        self.seg = -1            # phase index within the current segment; -1: no segment
+        # Phase index within each axis's current segment (-1: no segment).  The stored phase
+        # history of a level holds min(seg // stride + 1, capacity) points of that axis.
+        self.seg = np.full(n_axes, -1, dtype=np.int64)
         self.offset = np.zeros(n_axes)  # constant removed from the samples (AVAR-invariant)
-        self.has_offset = False
+        self.has_offset = np.zeros(n_axes, bool)
         self.n_offered = 0       # samples given to the estimator (used or not)
-        self.n_used = 0          # samples that entered the estimate
-        self.n_segments = 0
+        self.n_used = 0          # samples that entered the estimate on at least one axis
+        self.n_used_axes = np.zeros(n_axes, dtype=np.int64)  # per axis
+        self.n_segments = np.zeros(n_axes, dtype=np.int64)   # per axis
 
     def arrays(self):
-        return self.hist + [self.acc, self.cnt, self.wacc, self.wcnt, self.phase, self.offset]
+        return self.hist + [self.acc, self.cnt, self.wacc, self.wcnt, self.seg, self.offset,
+                            self.has_offset, self.n_used_axes, self.n_segments]
 
 
 class StreamingAllan:
@@ -168,16 +173,21 @@ class StreamingAllan:
         self._st = _State(self._levels, self.ms.size, n_axes, n_buckets)
         self.frame = int(frame)
         self._pend = np.zeros((self.frame, n_axes))
-        self._pend_use = np.zeros(self.frame, bool)
-        self._pend_brk = np.zeros(self.frame, bool)
+        self._pend_use = np.zeros((self.frame, n_axes), bool)
+        self._pend_brk = np.zeros((self.frame, n_axes), bool)
         self._pend_n = 0
 
     # -- bookkeeping -------------------------------------------------------------------------
 
     @property
     def n_used(self):
-        """Return the samples in the estimate (committed frames plus the unfinished one)."""
-        return self._st.n_used + int(self._pend_use[:self._pend_n].sum())
+        """Return the samples in the estimate on at least one axis (unfinished frame included)."""
+        return self._st.n_used + int(self._pend_use[:self._pend_n].any(axis=1).sum())
+
+    @property
+    def n_used_axes(self):
+        """Return the samples in the estimate per axis, int array (A,)."""
+        return self._st.n_used_axes + self._pend_use[:self._pend_n].sum(axis=0)
 
     @property
     def n_offered(self):
@@ -198,27 +208,31 @@ class StreamingAllan:
         Parameters
         ----------
         block : array_like
-            Shape (n, A) (or (n,) for one axis), SI units.
+            Shape (n, A) (or (n,) for one axis), SI units.  Values left out by ``use`` are
+            never read (they may be NaN).
         use : array_like of bool, optional
-            False for samples to leave out (motion); a left-out run ends the segment.
+            Shape (n,) (whole samples) or (n, A) (per axis): False for values to leave out
+            (motion, a rejected value); a left-out run ends that axis's segment.
         break_before : array_like of bool, optional
-            True where the phase must restart before the sample (a stamp gap).
+            Shape (n,) or (n, A): True where the phase must restart before the sample (a
+            stamp gap).
 
         """
         block = np.asarray(block, dtype=float)
         if block.ndim == 1:
             block = block[:, None]
-        n = block.shape[0]
-        if block.shape[1] != len(self.axes):
-            raise ValueError(f'expected {len(self.axes)} columns, got {block.shape[1]}')
-        use = np.ones(n, bool) if use is None else np.asarray(use, bool)
-        brk = np.zeros(n, bool) if break_before is None else np.asarray(break_before, bool)
+        n, n_axes = block.shape[0], len(self.axes)
+        if block.shape[1] != n_axes:
+            raise ValueError(f'expected {n_axes} columns, got {block.shape[1]}')
+        use = np.ones((n, 1), bool) if use is None else _as_mask(use, n, n_axes, 'use')
+        brk = (np.zeros((n, 1), bool) if break_before is None
+               else _as_mask(break_before, n, n_axes, 'break_before'))
         i = 0
         while i < n:
             take = min(self.frame - self._pend_n, n - i)
             j = self._pend_n
             self._pend[j:j + take] = block[i:i + take]
-            self._pend_use[j:j + take] = use[i:i + take]
+            self._pend_use[j:j + take] = use[i:i + take]  # (take, 1) broadcasts to every axis
             self._pend_brk[j:j + take] = brk[i:i + take]
             self._pend_n += take
             i += take
@@ -237,85 +251,117 @@ class StreamingAllan:
             st.wcnt[b % n_b] = 0
         st.bucket = target
 
+    @staticmethod
+    def _groups(st, use, brk):
+        """
+        Split the axes into groups that can be processed together in this frame.
+
+        Axes share a group when their masks over the frame and their segment position are
+        equal (then their phase histories are in step).  Returns a list of column selectors:
+        ``[slice(None)]`` in the common case (every axis in step: the fast path).
+        """
+        if ((use == use[:, :1]).all() and (brk == brk[:, :1]).all()
+                and (st.seg == st.seg[0]).all()):
+            return [slice(None)]
+        groups = {}
+        for a in range(use.shape[1]):
+            key = (int(st.seg[a]), use[:, a].tobytes(), brk[:, a].tobytes())
+            groups.setdefault(key, []).append(a)
+        return [np.array(cols) for cols in groups.values()]
+
     def _process(self, st, data, use, brk):
+        """Add one frame: ``data`` (n, A), ``use`` and ``brk`` (n, A) bool."""
         n = data.shape[0]
         if n == 0:
             return
         g0 = st.n_offered
-        if not st.has_offset and use.any():
-            # Removing a constant leaves AVAR unchanged and keeps the phase small.
-            st.offset[:] = data[use].mean(axis=0)
-            st.has_offset = True
-        stops = ~use | brk
-        if self._bucket_len is not None:
-            pos = np.arange(n)
-            stops = stops | ((g0 + pos) % self._bucket_len == 0)
-        stop_idx = np.flatnonzero(stops)
-        i = 0
-        while i < n:
-            if brk[i] or not use[i]:
-                st.seg = -1
-            if not use[i]:
-                nxt = np.flatnonzero(use[i:])
-                if nxt.size == 0:
-                    break
-                i += int(nxt[0])
-                continue
-            later = stop_idx[np.searchsorted(stop_idx, i, side='right'):]
-            j = int(later[0]) if later.size else n
+        for a in np.flatnonzero(~st.has_offset & use.any(axis=0)):
+            # Removing a constant leaves AVAR unchanged and keeps the phase small.  Per column,
+            # so an axis's offset does not depend on what the other axes left out.
+            st.offset[a] = data[use[:, a], a].mean()
+            st.has_offset[a] = True
+        # Pieces of the frame within one window bucket (the whole frame without a window).
+        if self._bucket_len is None:
+            cuts = [0, n]
+        else:
+            first = -g0 % self._bucket_len
+            cuts = sorted({0, n, *range(first, n, self._bucket_len)})
+        groups = self._groups(st, use, brk)
+        # Each group's masks are those of its first axis: where its runs stop.
+        firsts = [0 if isinstance(cols, slice) else int(cols[0]) for cols in groups]
+        stops = [np.flatnonzero(~use[:, c] | brk[:, c]) for c in firsts]
+        for p0, p1 in zip(cuts[:-1], cuts[1:]):
             if self._bucket_len is not None:
-                self._advance_bucket(st, (g0 + i) // self._bucket_len)
-            self._feed_run(st, data[i:j])
-            i = j
+                self._advance_bucket(st, (g0 + p0) // self._bucket_len)
+            for cols, c0, stop_idx in zip(groups, firsts, stops):
+                col_use, col_brk = use[:, c0], brk[:, c0]
+                i = p0
+                while i < p1:
+                    if col_brk[i] or not col_use[i]:
+                        st.seg[cols] = -1
+                    if not col_use[i]:
+                        nxt = np.flatnonzero(col_use[i:p1])
+                        if nxt.size == 0:
+                            break
+                        i += int(nxt[0])
+                        continue
+                    later = stop_idx[np.searchsorted(stop_idx, i, side='right'):]
+                    j = min(int(later[0]), p1) if later.size else p1
+                    self._feed_run(st, data[i:j, cols], cols)
+                    i = j
         st.n_offered += n
-        st.n_used += int(use.sum())
+        st.n_used += int(use.any(axis=1).sum())
+        st.n_used_axes += use.sum(axis=0)
         if self._bucket_len is not None:
             self._advance_bucket(st, (st.n_offered - 1) // self._bucket_len)
 
-    def _feed_run(self, st, samples):
-        """Add a run of consecutive used samples to the current segment (or a new one)."""
-        if st.seg < 0:
-            st.seg = 0
-            st.phase[:] = 0.0
-            st.n_segments += 1
+    def _feed_run(self, st, samples, cols):
+        """
+        Add a run of consecutive used samples of the axes ``cols`` to their current segment.
+
+        ``cols`` is ``slice(None)`` (every axis) or an index array of axes that are in step.
+        """
+        c0 = 0 if isinstance(cols, slice) else cols[0]
+        seg = int(st.seg[c0])
+        if seg < 0:
+            seg = 0
+            st.n_segments[cols] += 1
             for li in range(len(self._levels)):
-                st.hist[li][0] = 0.0  # x_0 = 0: phase index 0 is a multiple of every stride
-                st.fill[li] = 1
+                st.hist[li][cols, 0] = 0.0  # x_0 = 0: phase index 0 is a multiple of any stride
         r = samples.shape[0]
-        phase = st.phase + np.cumsum(samples - st.offset, axis=0)  # indices seg+1 .. seg+r
-        seg = st.seg
+        phase = np.cumsum(samples - st.offset[cols], axis=0)  # indices seg+1 .. seg+r
         slot = st.bucket % st.wcnt.shape[0]
         windowed = self._bucket_len is not None
         for li, (s, fidx, qs, cap) in enumerate(self._levels):
+            h = min(seg // s + 1, cap)  # stored phase points of this level
             first = (seg // s + 1) * s
             if first > seg + r:
                 continue
             new = phase[first - seg - 1:r:s]
-            h = st.fill[li]
-            x = np.concatenate((st.hist[li][:h], new))
-            length = x.shape[0]
+            length = h + new.shape[0]
+            x = np.empty((new.shape[1], length))  # C order: rows reduced along themselves
+            x[:, :h] = st.hist[li][cols, :h]
+            x[:, h:] = new.T
             for f, q in zip(fidx, qs):
                 k0 = max(0, h - 2 * q)
                 k1 = length - 2 * q
                 if k1 <= k0:
                     continue
-                d = x[k0 + 2 * q:k1 + 2 * q] - 2.0 * x[k0 + q:k1 + q] + x[k0:k1]
-                ss = np.einsum('ij,ij->j', d, d)
-                st.acc[f] += ss
-                st.cnt[f] += k1 - k0
+                d = x[:, k0 + 2 * q:k1 + 2 * q] - 2.0 * x[:, k0 + q:k1 + q] + x[:, k0:k1]
+                ss = (d * d).sum(axis=1)
+                st.acc[f, cols] += ss
+                st.cnt[f, cols] += k1 - k0
                 if windowed:
-                    st.wacc[slot, f] += ss
-                    st.wcnt[slot, f] += k1 - k0
+                    st.wacc[slot, f, cols] += ss
+                    st.wcnt[slot, f, cols] += k1 - k0
             keep = min(length, cap)
-            st.hist[li][:keep] = x[length - keep:]
-            st.fill[li] = keep
+            st.hist[li][cols, :keep] = x[:, length - keep:]
         # Rebase: second differences ignore a constant, so shift every stored phase by the
         # newest one; the phase then never grows with run time (no loss of float precision).
-        shift = phase[-1].copy()
-        for li in range(len(self._levels)):
-            st.hist[li][:st.fill[li]] -= shift
-        st.phase[:] = 0.0
-        st.seg = seg + r
+        shift = phase[-1][:, None]
+        for li, (s, _, _, cap) in enumerate(self._levels):
+            st.hist[li][cols, :min((seg + r) // s + 1, cap)] -= shift
+        st.seg[cols] = seg + r
 
     # -- output ------------------------------------------------------------------------------
 
@@ -330,9 +376,11 @@ class StreamingAllan:
 
     def sums(self, window=False):
         """
-        Raw running sums: ``(m, stride, sum_sq (F, A), count (F,))`` in sample units.
+        Raw running sums: ``(m, stride, sum_sq (F, A), count (F, A))`` in sample units.
 
-        ``sum_sq[f] / (2 m^2 count[f])`` is the Allan variance in the samples' unit squared.
+        ``sum_sq[f, a] / (2 m^2 count[f, a])`` is the Allan variance of axis ``a`` in the
+        samples' unit squared; the counts differ between axes when values were left out on
+        some axes only.
         """
         st = self._current_state()
         if window:
@@ -343,21 +391,25 @@ class StreamingAllan:
 
     def snapshot(self, window=False, min_clusters=None):
         """
-        Return the reportable factors now: ``(m, avar (T, A), n_eff (T,))``, or None.
+        Return the reportable factors now: ``(m, avar (T, A), n_eff (T, A))``, or None.
 
-        Only factors whose data span ``min_clusters`` x m samples are included.  ``n_eff`` is
-        the span each factor's terms cover (count x stride + 2m - 1 samples), used as the
-        record length for the EDF.  AVAR in the samples' unit squared.
+        A factor is reportable on an axis once that axis's terms span ``min_clusters`` x m
+        samples; the factors reportable on at least one axis are returned, with NaN AVAR (and
+        ``n_eff`` 0) on the axes where it is not.  ``n_eff`` is the span each factor's terms
+        cover on each axis (count x stride + 2m - 1 samples), used as the record length for
+        the EDF.  AVAR in the samples' unit squared.
         """
         ms, strides, acc, cnt = self.sums(window)
         min_clusters = self.min_clusters if min_clusters is None else int(min_clusters)
-        n_eff = cnt * strides + 2 * ms - 1
-        sel = (cnt > 0) & (n_eff >= min_clusters * ms)
+        n_eff = cnt * strides[:, None] + 2 * ms[:, None] - 1
+        ok = (cnt > 0) & (n_eff >= min_clusters * ms[:, None])
+        sel = ok.any(axis=1)
         if not sel.any():
             return None
-        m = ms[sel]
-        avar = acc[sel] / (2.0 * (m * m * cnt[sel]).astype(float))[:, None]
-        return m, avar, n_eff[sel]
+        m, ok, cnt = ms[sel], ok[sel], cnt[sel]
+        avar = np.full(ok.shape, np.nan)
+        avar[ok] = acc[sel][ok] / (2.0 * (m[:, None] * m[:, None] * cnt)[ok].astype(float))
+        return m, avar, np.where(ok, n_eff[sel], 0)
 
     def result_from(self, snapshot, columns=None):
         """Build an AllanResult (EDF, intervals) of a :meth:`snapshot`, optionally some columns."""
@@ -366,13 +418,25 @@ class StreamingAllan:
         m, avar, n_eff = snapshot
         columns = range(len(self.axes)) if columns is None else columns
         columns = list(columns)
-        return AllanResult.from_avar(m, avar[:, columns], n_eff[:, None], self.rate_hz,
+        return AllanResult.from_avar(m, avar[:, columns], n_eff[:, columns], self.rate_hz,
                                      [self.axes[j] for j in columns])
 
     def result(self, window=False, min_clusters=None):
         """
         Allan deviation of everything seen (or of the sliding window) as an AllanResult.
 
-        None when no factor has enough data yet (see :meth:`snapshot`).
+        None when no factor has enough data yet (see :meth:`snapshot`); NaN on an axis at
+        the averaging times that axis has too little data for.
         """
         return self.result_from(self.snapshot(window, min_clusters))
+
+
+def _as_mask(mask, n, n_axes, name):
+    """Return a bool mask as (n, 1) (whole samples) or (n, A) (per axis)."""
+    mask = np.asarray(mask, bool)
+    if mask.ndim == 1:
+        mask = mask[:, None]
+    if mask.shape[0] != n or mask.shape[1] not in (1, n_axes):
+        raise ValueError(f'{name} must have shape ({n},) or ({n}, {n_axes}), '
+                         f'got {mask.shape}')
+    return mask
