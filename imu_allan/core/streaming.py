@@ -44,6 +44,7 @@ windowed result pools the newest ``window_buckets`` buckets, i.e. the terms that
 last (1 - 1/buckets) W to W seconds.
 """
 
+import bisect
 import copy
 import math
 
@@ -90,10 +91,7 @@ class _State:
     """Everything :class:`StreamingAllan` mutates (copied for previews)."""
 
     def __init__(self, levels, n_factors, n_axes, n_buckets):
-        # Phase histories axis-major (A, capacity): each axis's sums are then reduced along
-        # its own contiguous row, so they do not depend on which other axes were processed
-        # with it (a column reduction over (n, A) rounds differently for different A).
-        self.hist = [np.zeros((n_axes, cap)) for _, _, _, cap in levels]
+        self.hist = [np.zeros((cap, n_axes)) for _, _, _, cap in levels]
         self.acc = np.zeros((n_factors, n_axes))
         self.cnt = np.zeros((n_factors, n_axes), dtype=np.int64)
         self.wacc = np.zeros((n_buckets, n_factors, n_axes))
@@ -160,12 +158,14 @@ class StreamingAllan:
         self.ms, self.strides = factor_grid(self.rate_hz, max_tau, points_per_decade, taus,
                                             stride_base, exact)
         self.min_clusters = int(min_clusters)
-        # Levels: (stride, factor indices, m / stride, history capacity).
+        # Levels: (stride, index of its first factor, m / stride ascending, history capacity).
+        # The strides grow with m, so each level's factors are consecutive.
         self._levels = []
         for s in np.unique(self.strides):
             idx = np.flatnonzero(self.strides == s)
-            qs = self.ms[idx] // s
-            self._levels.append((int(s), idx, qs, int(2 * qs.max())))
+            assert np.all(np.diff(idx) == 1)
+            qs = [int(q) for q in self.ms[idx] // s]
+            self._levels.append((int(s), int(idx[0]), qs, 2 * max(qs)))
         self.window_s = float(window_s)
         n_buckets = int(window_buckets) if window_s > 0 else 1
         self._bucket_len = (max(1, int(math.ceil(window_s * rate_hz / n_buckets)))
@@ -224,16 +224,17 @@ class StreamingAllan:
         n, n_axes = block.shape[0], len(self.axes)
         if block.shape[1] != n_axes:
             raise ValueError(f'expected {n_axes} columns, got {block.shape[1]}')
-        use = np.ones((n, 1), bool) if use is None else _as_mask(use, n, n_axes, 'use')
-        brk = (np.zeros((n, 1), bool) if break_before is None
-               else _as_mask(break_before, n, n_axes, 'break_before'))
+        # None stays a scalar and a 1-D mask a column: both broadcast to every axis below.
+        use = True if use is None else _as_mask(use, n, n_axes, 'use')
+        brk = False if break_before is None else _as_mask(break_before, n, n_axes,
+                                                          'break_before')
         i = 0
         while i < n:
             take = min(self.frame - self._pend_n, n - i)
             j = self._pend_n
             self._pend[j:j + take] = block[i:i + take]
-            self._pend_use[j:j + take] = use[i:i + take]  # (take, 1) broadcasts to every axis
-            self._pend_brk[j:j + take] = brk[i:i + take]
+            self._pend_use[j:j + take] = use if use is True else use[i:i + take]
+            self._pend_brk[j:j + take] = brk if brk is False else brk[i:i + take]
             self._pend_n += take
             i += take
             if self._pend_n == self.frame:
@@ -287,6 +288,10 @@ class StreamingAllan:
             first = -g0 % self._bucket_len
             cuts = sorted({0, n, *range(first, n, self._bucket_len)})
         groups = self._groups(st, use, brk)
+        if len(groups) > 1:
+            # Runs are computed on every column (see _feed_run): left-out values (NaN, inf,
+            # 1e300 ...) become 0 so the columns not being stored stay finite.
+            data = np.where(use, data, 0.0)
         # Each group's masks are those of its first axis: where its runs stop.
         firsts = [0 if isinstance(cols, slice) else int(cols[0]) for cols in groups]
         stops = [np.flatnonzero(~use[:, c] | brk[:, c]) for c in firsts]
@@ -307,7 +312,7 @@ class StreamingAllan:
                         continue
                     later = stop_idx[np.searchsorted(stop_idx, i, side='right'):]
                     j = min(int(later[0]), p1) if later.size else p1
-                    self._feed_run(st, data[i:j, cols], cols)
+                    self._feed_run(st, data[i:j], cols)
                     i = j
         st.n_offered += n
         st.n_used += int(use.any(axis=1).sum())
@@ -319,7 +324,12 @@ class StreamingAllan:
         """
         Add a run of consecutive used samples of the axes ``cols`` to their current segment.
 
-        ``cols`` is ``slice(None)`` (every axis) or an index array of axes that are in step.
+        ``samples`` has every axis (r, A); ``cols`` is ``slice(None)`` (every axis) or an index
+        array of axes that are in step.  The arithmetic always runs on all A columns (those
+        not in ``cols`` carry meaningless but finite values and are not stored): a column's
+        sums are then rounded exactly as when every axis is in step, so an axis's numbers never
+        depend on what the other axes left out (numpy's reductions over (n, A) round
+        differently for different A).
         """
         c0 = 0 if isinstance(cols, slice) else cols[0]
         seg = int(st.seg[c0])
@@ -327,40 +337,44 @@ class StreamingAllan:
             seg = 0
             st.n_segments[cols] += 1
             for li in range(len(self._levels)):
-                st.hist[li][cols, 0] = 0.0  # x_0 = 0: phase index 0 is a multiple of any stride
+                st.hist[li][0, cols] = 0.0  # x_0 = 0: phase index 0 is a multiple of any stride
         r = samples.shape[0]
-        phase = np.cumsum(samples - st.offset[cols], axis=0)  # indices seg+1 .. seg+r
+        phase = np.cumsum(samples - st.offset, axis=0)  # indices seg+1 .. seg+r
         slot = st.bucket % st.wcnt.shape[0]
         windowed = self._bucket_len is not None
-        for li, (s, fidx, qs, cap) in enumerate(self._levels):
+        for li, (s, f0, qs, cap) in enumerate(self._levels):
             h = min(seg // s + 1, cap)  # stored phase points of this level
             first = (seg // s + 1) * s
             if first > seg + r:
                 continue
-            new = phase[first - seg - 1:r:s]
-            length = h + new.shape[0]
-            x = np.empty((new.shape[1], length))  # C order: rows reduced along themselves
-            x[:, :h] = st.hist[li][cols, :h]
-            x[:, h:] = new.T
-            for f, q in zip(fidx, qs):
-                k0 = max(0, h - 2 * q)
-                k1 = length - 2 * q
-                if k1 <= k0:
-                    continue
-                d = x[:, k0 + 2 * q:k1 + 2 * q] - 2.0 * x[:, k0 + q:k1 + q] + x[:, k0:k1]
-                ss = (d * d).sum(axis=1)
-                st.acc[f, cols] += ss
-                st.cnt[f, cols] += k1 - k0
+            x = np.concatenate((st.hist[li][:h], phase[first - seg - 1:r:s]))
+            length = x.shape[0]
+            # Factors with new terms: 2q < length, a prefix of the level's (q ascending).
+            nv = bisect.bisect_right(qs, (length - 1) // 2)
+            if nv:
+                ss = np.empty((nv, x.shape[1]))
+                kk = np.empty((nv, 1), np.int64)
+                for i in range(nv):
+                    q = qs[i]
+                    k0 = max(0, h - 2 * q)
+                    k1 = length - 2 * q
+                    d = x[k0 + 2 * q:k1 + 2 * q] - 2.0 * x[k0 + q:k1 + q] + x[k0:k1]
+                    np.einsum('ij,ij->j', d, d, out=ss[i])
+                    kk[i] = k1 - k0
+                fs = slice(f0, f0 + nv)
+                ss = ss[:, cols]
+                st.acc[fs, cols] += ss
+                st.cnt[fs, cols] += kk
                 if windowed:
-                    st.wacc[slot, f, cols] += ss
-                    st.wcnt[slot, f, cols] += k1 - k0
+                    st.wacc[slot][fs, cols] += ss
+                    st.wcnt[slot][fs, cols] += kk
             keep = min(length, cap)
-            st.hist[li][cols, :keep] = x[:, length - keep:]
+            st.hist[li][:keep, cols] = x[length - keep:, cols]
         # Rebase: second differences ignore a constant, so shift every stored phase by the
         # newest one; the phase then never grows with run time (no loss of float precision).
-        shift = phase[-1][:, None]
+        shift = phase[-1, cols]
         for li, (s, _, _, cap) in enumerate(self._levels):
-            st.hist[li][cols, :min((seg + r) // s + 1, cap)] -= shift
+            st.hist[li][:min((seg + r) // s + 1, cap), cols] -= shift
         st.seg[cols] = seg + r
 
     # -- output ------------------------------------------------------------------------------
