@@ -58,7 +58,7 @@ class OnlineAllan:
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
         self._rejected_recent = np.zeros(len(self.axes), np.int64)  # since take_rejected()
-        self._last_good = np.full(len(self.axes), np.nan)  # per axis, stands in for bad values
+        self._tail = None  # the last gate window of samples the gate saw (stand-ins)
         self._setup = (gate, gate_options, gap_factor, estimator_options)
         self.rate_source = 'configured' if rate_hz else 'measured'
         self.rate_hz = self.estimator = self.monitor = self.gate = None
@@ -84,6 +84,7 @@ class OnlineAllan:
             # Per-sample tags that travel with the samples through the gate's delay: the
             # stamp-gap break, then the per-axis rejection flags.
             self._gate_tags = _TagDelay(self.gate.w, 1 + len(self.axes))
+            self._tail = np.full((self.gate.w, len(self.axes)), np.nan)  # NaN: no history
 
     def memory_bytes(self):
         """Bytes held in numpy buffers by the estimator and the gate (fixed)."""
@@ -116,10 +117,11 @@ class OnlineAllan:
         data, brk = data[keep], brk[keep]
         if data.shape[0] == 0:
             return
-        data, bad = self._reject_nonphysical(data)
+        bad = self._reject_nonphysical(data)
         if self.gate is None:
             self.estimator.update(data, None if bad is None else ~bad, brk)
             return
+        data = self._stand_in(data, bad)
         tags = np.zeros((data.shape[0], 1 + len(self.axes)), bool)
         tags[:, 0] = brk
         if bad is not None:
@@ -135,34 +137,49 @@ class OnlineAllan:
         """
         Find NaN, inf and non-physical values (``units.PHYSICAL_LIMIT``), per axis.
 
-        Returns ``(data, bad)``: ``bad`` (n, A) bool, or None when every value is good.  A bad
-        value is left out of its own axis only (:class:`StreamingAllan` per-axis masks: that
-        axis's phase restarts after it, as at a stamp gap; the other axes keep the sample).
-        In the returned data it is replaced by the last good value of its axis, which the
-        motion gate sees instead (a spike or NaN is not motion) and the estimator never
-        reads.  Counted per axis (:attr:`rejected_total`, :meth:`take_rejected`).
+        Returns ``bad`` (n, A) bool, or None when every value is good.  A bad value is left
+        out of its own axis only (:class:`StreamingAllan` per-axis masks: that axis's phase
+        restarts after it, as at a stamp gap; the other axes keep the sample).  Counted per
+        axis (:attr:`rejected_total`, :meth:`take_rejected`).
         """
         with np.errstate(invalid='ignore'):
             bad = ~(np.abs(data) <= self._limits)  # NaN compares False: caught too
         if not bad.any():
-            self._last_good[:] = data[-1]
-            return data, None
+            return None
         counts = bad.sum(axis=0)
         self.rejected_total += counts
         self._rejected_recent += counts
-        n, n_axes = data.shape
-        # Index of the newest good value at or before each sample, per axis (-1: none yet).
-        idx = np.where(bad, -1, np.arange(n)[:, None])
-        np.maximum.accumulate(idx, axis=0, out=idx)
-        carry = self._last_good.copy()
-        unknown = np.isnan(carry)
-        if unknown.any():  # no good value yet on an axis: its first good one in this batch
-            first = np.argmax(~bad, axis=0)
-            seen = (~bad).any(axis=0)
-            carry[unknown] = np.where(seen, data[first, np.arange(n_axes)], 0.0)[unknown]
-        filled = np.where(idx >= 0, data[np.maximum(idx, 0), np.arange(n_axes)], carry)
-        self._last_good[:] = filled[-1]
-        return filled, bad
+        return bad
+
+    def _stand_in(self, data, bad):
+        """
+        Return the samples for the motion gate: each bad value replaced by a stand-in.
+
+        The stand-in is the same axis's value one gate window earlier (itself a stand-in if
+        that was bad), so the gate sees real noise at the right level and mean, never a spike
+        or a NaN (not motion), even through a long run of bad values.  Bad values with no
+        history yet (the very start of the stream) take the axis's first good value in the
+        batch, or 0.  The estimator never reads these values (its per-axis mask leaves them
+        out).  Only the newest window is kept (fixed memory).
+        """
+        w = self._tail.shape[0]
+        if bad is None:
+            self._tail = np.concatenate((self._tail, data))[-w:]
+            return data
+        x = np.concatenate((self._tail, data))
+        missing = np.concatenate((np.isnan(self._tail), bad))
+        for start in range(w, x.shape[0], w):  # each layer depends only on the one before
+            block, hole = x[start:start + w], missing[start:start + w]
+            if hole.any():
+                block[hole] = x[start - w:start - w + block.shape[0]][hole]
+                hole &= missing[start - w:start - w + block.shape[0]]
+        if missing[w:].any():  # no history on an axis yet
+            good = ~bad
+            first = np.where(good.any(axis=0), data[np.argmax(good, axis=0),
+                                                    np.arange(data.shape[1])], 0.0)
+            x[w:] = np.where(missing[w:], first, x[w:])
+        self._tail = x[-w:].copy()
+        return x[w:]
 
     def take_rejected(self):
         """Per-axis counts of samples rejected since the last call ({axis: n}, non-zero only)."""
@@ -190,6 +207,8 @@ class OnlineAllan:
                                rate_tolerance, self.excluded_share, name=name,
                                rejected=self.take_rejected())
         health.values.update({'rate_source': self.rate_source, 'tau0_s': 1.0 / self.rate_hz})
+        health.values.update({f'rejected_total.{a}': int(n)
+                              for a, n in zip(self.axes, self.rejected_total) if n})
         if self.finder is not None:
             health.values['samples_dropped_before_rate'] = self.finder.n_dropped
         return health

@@ -1,5 +1,6 @@
 """The bounded-memory online Allan estimator against the batch overlapping estimator."""
 
+from core.segment_cases import pooled_batch, split_segments
 from imu_allan.core.allan import allan_deviation
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.online import online_allan, OnlineAllan
@@ -202,37 +203,6 @@ def test_factor_grid_rounding():
     assert np.all((strides == 1) | (ms // strides > 128))
 
 
-def _pooled_batch(segments, ms):
-    """
-    The batch estimator applied to each segment (1-D) and pooled: ``(avar (F,), count (F,))``.
-
-    Pooling weighs each segment's AVAR by its number of terms K = L - 2m + 1 (L samples).
-    """
-    total, count = np.zeros(len(ms)), np.zeros(len(ms), np.int64)
-    for seg in segments:
-        fits = [f for f, m in enumerate(ms) if 2 * m <= seg.size]
-        if not fits:
-            continue
-        res = allan_deviation(seg, RATE, taus=np.asarray(ms)[fits] / RATE)
-        np.testing.assert_array_equal(res.m, np.asarray(ms)[fits])
-        k = seg.size - 2 * res.m + 1
-        total[fits] += res.avar[:, 0] * 2.0 * res.m * res.m * k
-        count[fits] += k
-    with np.errstate(invalid='ignore'):
-        return total / (2.0 * np.asarray(ms, float) ** 2 * count), count
-
-
-def _split(column, left_out, brk):
-    """Segments of ``column``: runs between left-out samples, also cut before ``brk``."""
-    segments, start = [], 0
-    for i in range(column.size + 1):
-        if i == column.size or left_out[i] or brk[i]:
-            if i > start:
-                segments.append(column[start:i])
-            start = i + 1 if i < column.size and left_out[i] else i
-    return segments
-
-
 @pytest.fixture(scope='module')
 def per_axis_case(record):
     """
@@ -284,8 +254,8 @@ def test_per_axis_left_out_values(per_axis_case):
         np.testing.assert_array_equal(getattr(res, name)[:, intact],
                                       getattr(res_ref, name)[:, intact])
     for a in (0, 4):
-        segments = _split(clean[:, a], ~use2[:, a], brk)
-        pooled, count = _pooled_batch(segments, ms)
+        segments = split_segments(clean[:, a], ~use2[:, a], brk)
+        pooled, count = pooled_batch(segments, ms, RATE)
         np.testing.assert_array_equal(cnt[:, a], count)
         np.testing.assert_allclose(acc[:, a] / (2.0 * ms * ms * cnt[:, a]), pooled, rtol=1e-10)
         # Reported where this axis's own terms span min_clusters x m samples, NaN elsewhere.
@@ -299,7 +269,7 @@ def test_per_axis_left_out_values(per_axis_case):
     assert est.n_used_axes[0] < est.n_used_axes[1] == 11500
     # Segments: 3 for the intact axes; gyro_x one more per bad value not adjacent to a cut.
     assert est._st.n_segments[1] == 3
-    assert est._st.n_segments[0] == len(_split(clean[:, 0], ~use2[:, 0], brk))
+    assert est._st.n_segments[0] == len(split_segments(clean[:, 0], ~use2[:, 0], brk))
 
 
 def test_per_axis_masks_any_chunking_identical(per_axis_case):
@@ -337,7 +307,7 @@ def test_per_axis_window_and_strides_match_clean_axes(per_axis_case):
     # gyro_x's strided sums: the stride-s terms of each of its own segments, pooled.
     for f in np.flatnonzero(strides > 1):
         total, count = 0.0, 0
-        for seg in _split(clean[:, 0], ~use2[:, 0], brk):
+        for seg in split_segments(clean[:, 0], ~use2[:, 0], brk):
             s, c = _reference_sums(_phase(seg[:, None]), ms[f], strides[f])
             total, count = total + s[0], count + c
         assert cnt[f, 0] == count
