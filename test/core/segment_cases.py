@@ -22,7 +22,7 @@ def split_segments(column, left_out, brk=None):
 
 def pooled_batch(segments, ms, rate_hz):
     """
-    The batch estimator applied to each segment (1-D) and pooled: ``(avar (F,), count (F,))``.
+    Apply the batch estimator to each segment (1-D) and pool: ``(avar (F,), count (F,))``.
 
     Pooling weighs each segment's AVAR by its number of terms K = L - 2m + 1 (L samples);
     NaN where no segment is long enough for a factor.

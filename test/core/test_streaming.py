@@ -295,7 +295,8 @@ def test_per_axis_masks_any_chunking_identical(per_axis_case):
 def test_per_axis_window_and_strides_match_clean_axes(per_axis_case):
     """Strided factors and the window: the intact axes still equal the clean run exactly."""
     dirty, clean, use2, use, brk = per_axis_case
-    kw = dict(max_tau=20.0, stride_base=16, window_s=30.0, window_buckets=7, frame=700)
+    kw = {'max_tau': 20.0, 'stride_base': 16, 'window_s': 30.0, 'window_buckets': 7,
+          'frame': 700}
     est, ref = StreamingAllan(RATE, **kw), StreamingAllan(RATE, **kw)
     _feed_chunked(est, dirty, 9, use=use2, brk=brk)
     _feed_chunked(ref, clean, 10, use=use, brk=brk)

@@ -30,7 +30,7 @@ TERMS = 'white_noise,bias_instability'  # fixed: automatic selection is slow und
 
 
 def _offline(t, data):
-    """The node's pipeline with the node's defaults, offline, on the same samples."""
+    """Run the node's pipeline with the node's defaults offline on the same samples."""
     params = dict(_DEFAULTS, terms=TERMS)
     pipe = OnlineAllan(axes=AXES, **pipeline_options(params))
     pipe.feed(t, data)
