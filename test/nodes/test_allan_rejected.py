@@ -38,7 +38,7 @@ def _offline(t, data):
 
 
 def test_allan_node_rejects_bad_values_per_axis(ros_context):
-    """NaN every 50th gyro_x, 1e300 in accel_y: coefficients kept, WARN with the counts."""
+    """Publish NaN every 50th gyro_x, 1e300 in accel_y: coefficients kept, WARN with counts."""
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
