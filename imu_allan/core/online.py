@@ -58,7 +58,10 @@ class OnlineAllan:
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
         self._rejected_recent = np.zeros(len(self.axes), np.int64)  # since take_rejected()
-        self._tail = None  # the last gate window of samples the gate saw (stand-ins)
+        # Rejected values in flight through the gate: (stream indices of the samples, their
+        # per-axis flags); the gate returns samples in order, counted by _n_gated.
+        self._bad_in_gate = []
+        self._n_gated = [0, 0]  # samples into and out of the gate
         self._setup = (gate, gate_options, gap_factor, estimator_options)
         self.rate_source = 'configured' if rate_hz else 'measured'
         self.rate_hz = self.estimator = self.monitor = self.gate = None
@@ -83,14 +86,13 @@ class OnlineAllan:
                                          **(gate_options or {}))
             # Per-sample tags that travel with the samples through the gate's delay: the
             # stamp-gap break, then the per-axis rejection flags.
-            self._gate_tags = _TagDelay(self.gate.w, 1 + len(self.axes))
-            self._tail = np.full((self.gate.w, len(self.axes)), np.nan)  # NaN: no history
+            self._gate_breaks = _TagDelay(self.gate.w)
 
     def memory_bytes(self):
         """Bytes held in numpy buffers by the estimator and the gate (fixed)."""
         if self.estimator is None:
             return 0
-        extra = self.gate.memory_bytes() + self._gate_tags.memory_bytes() if self.gate else 0
+        extra = self.gate.memory_bytes() + self._gate_breaks.memory_bytes() if self.gate else 0
         return self.estimator.memory_bytes() + extra
 
     @property
@@ -121,17 +123,27 @@ class OnlineAllan:
         if self.gate is None:
             self.estimator.update(data, None if bad is None else ~bad, brk)
             return
-        data = self._stand_in(data, bad)
-        tags = np.zeros((data.shape[0], 1 + len(self.axes)), bool)
-        tags[:, 0] = brk
+        n_in, n_out = self._n_gated
         if bad is not None:
-            tags[:, 1:] = bad
+            data = self._stand_in(data, bad)
+            rows = np.flatnonzero(bad.any(axis=1))
+            self._bad_in_gate.append((n_in + rows, bad[rows]))
         out, still = self.gate.update(data)
-        tags = self._gate_tags.push(tags, out.shape[0])
-        if out.shape[0]:
-            bad_out = tags[:, 1:]
-            use = still[:, None] & ~bad_out if bad_out.any() else still
-            self.estimator.update(out, use, tags[:, 0])
+        brk_out = self._gate_breaks.push(brk, out.shape[0])
+        self._n_gated = [n_in + data.shape[0], n_out + out.shape[0]]
+        if not out.shape[0]:
+            return
+        use = still
+        if self._bad_in_gate:  # per-axis use: the gate's decision and not rejected
+            use = np.repeat(still[:, None], len(self.axes), axis=1)
+            left = []
+            for index, flags in self._bad_in_gate:
+                here = index < n_out + out.shape[0]
+                use[index[here] - n_out] &= ~flags[here]
+                if not here.all():
+                    left.append((index[~here], flags[~here]))
+            self._bad_in_gate = left
+        self.estimator.update(out, use, brk_out)
 
     def _reject_nonphysical(self, data):
         """
@@ -160,14 +172,13 @@ class OnlineAllan:
         or a NaN (not motion), even through a long run of bad values.  Bad values with no
         history yet (the very start of the stream) take the axis's first good value in the
         batch, or 0.  The estimator never reads these values (its per-axis mask leaves them
-        out).  Only the newest window is kept (fixed memory).
+        out).  The history is what the gate holds (:meth:`StationarityGate.recent`): nothing
+        is kept or copied while every value is good.
         """
-        w = self._tail.shape[0]
-        if bad is None:
-            self._tail = np.concatenate((self._tail, data))[-w:]
-            return data
-        x = np.concatenate((self._tail, data))
-        missing = np.concatenate((np.isnan(self._tail), bad))
+        w = self.gate.w
+        tail = self.gate.recent(w)
+        x = np.concatenate((tail, data))
+        missing = np.concatenate((np.isnan(tail), bad))
         for start in range(w, x.shape[0], w):  # each layer depends only on the one before
             block, hole = x[start:start + w], missing[start:start + w]
             if hole.any():
@@ -178,7 +189,6 @@ class OnlineAllan:
             first = np.where(good.any(axis=0), data[np.argmax(good, axis=0),
                                                     np.arange(data.shape[1])], 0.0)
             x[w:] = np.where(missing[w:], first, x[w:])
-        self._tail = x[-w:].copy()
         return x[w:]
 
     def take_rejected(self):
@@ -304,22 +314,22 @@ class StagedEstimate:
 class _TagDelay:
     """Delays per-sample flags by the gate's latency (the gate returns samples in order)."""
 
-    def __init__(self, window, width=1):
+    def __init__(self, window):
         # The gate holds at most two windows; a ring of that size suffices.
-        self._buf = np.zeros((2 * window + 1, width), bool)
+        self._buf = np.zeros(2 * window + 1, bool)
         self._n = 0
 
     def memory_bytes(self):
         return self._buf.nbytes
 
     def push(self, flags, n_out):
-        """Append ``flags`` (n, width); pop the flags of the ``n_out`` oldest samples."""
-        total = self._n + flags.shape[0]
+        """Append ``flags``; pop the flags of the ``n_out`` oldest samples."""
+        total = self._n + flags.size
         merged = np.concatenate((self._buf[:self._n], flags))
         out = merged[:n_out]
         rest = merged[n_out:total]
-        self._buf[:rest.shape[0]] = rest
-        self._n = rest.shape[0]
+        self._buf[:rest.size] = rest
+        self._n = rest.size
         return out
 
 
