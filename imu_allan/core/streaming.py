@@ -176,6 +176,7 @@ class StreamingAllan:
         self._pend_use = np.zeros((self.frame, n_axes), bool)
         self._pend_brk = np.zeros((self.frame, n_axes), bool)
         self._pend_n = 0
+        self._pend_mixed = False  # a per-axis mask went into the unfinished frame
 
     # -- bookkeeping -------------------------------------------------------------------------
 
@@ -235,11 +236,15 @@ class StreamingAllan:
             self._pend[j:j + take] = block[i:i + take]
             self._pend_use[j:j + take] = use if use is True else use[i:i + take]
             self._pend_brk[j:j + take] = brk if brk is False else brk[i:i + take]
+            self._pend_mixed |= (use is not True and use.shape[1] > 1) or (
+                brk is not False and brk.shape[1] > 1)
             self._pend_n += take
             i += take
             if self._pend_n == self.frame:
-                self._process(self._st, self._pend, self._pend_use, self._pend_brk)
+                self._process(self._st, self._pend, self._pend_use, self._pend_brk,
+                              self._pend_mixed)
                 self._pend_n = 0
+                self._pend_mixed = False
 
     # -- processing --------------------------------------------------------------------------
 
@@ -253,7 +258,7 @@ class StreamingAllan:
         st.bucket = target
 
     @staticmethod
-    def _groups(st, use, brk):
+    def _groups(st, use, brk, mixed):
         """
         Split the axes into groups that can be processed together in this frame.
 
@@ -261,8 +266,8 @@ class StreamingAllan:
         equal (then their phase histories are in step).  Returns a list of column selectors:
         ``[slice(None)]`` in the common case (every axis in step: the fast path).
         """
-        if ((use == use[:, :1]).all() and (brk == brk[:, :1]).all()
-                and (st.seg == st.seg[0]).all()):
+        in_step = (st.seg == st.seg[0]).all()
+        if in_step and (not mixed or ((use == use[:, :1]).all() and (brk == brk[:, :1]).all())):
             return [slice(None)]
         groups = {}
         for a in range(use.shape[1]):
@@ -270,13 +275,18 @@ class StreamingAllan:
             groups.setdefault(key, []).append(a)
         return [np.array(cols) for cols in groups.values()]
 
-    def _process(self, st, data, use, brk):
-        """Add one frame: ``data`` (n, A), ``use`` and ``brk`` (n, A) bool."""
+    def _process(self, st, data, use, brk, mixed=True):
+        """
+        Add one frame: ``data`` (n, A), ``use`` and ``brk`` (n, A) bool.
+
+        ``mixed`` False: every column of ``use`` and ``brk`` is known to be the same.
+        """
         n = data.shape[0]
         if n == 0:
             return
         g0 = st.n_offered
-        for a in np.flatnonzero(~st.has_offset & use.any(axis=0)):
+        for a in ([] if st.has_offset.all() else
+                  np.flatnonzero(~st.has_offset & use.any(axis=0))):
             # Removing a constant leaves AVAR unchanged and keeps the phase small.  Per column,
             # so an axis's offset does not depend on what the other axes left out.
             st.offset[a] = data[use[:, a], a].mean()
@@ -287,7 +297,7 @@ class StreamingAllan:
         else:
             first = -g0 % self._bucket_len
             cuts = sorted({0, n, *range(first, n, self._bucket_len)})
-        groups = self._groups(st, use, brk)
+        groups = self._groups(st, use, brk, mixed)
         if len(groups) > 1:
             # Runs are computed on every column (see _feed_run): left-out values (NaN, inf,
             # 1e300 ...) become 0 so the columns not being stored stay finite.
@@ -315,8 +325,13 @@ class StreamingAllan:
                     self._feed_run(st, data[i:j], cols)
                     i = j
         st.n_offered += n
-        st.n_used += int(use.any(axis=1).sum())
-        st.n_used_axes += use.sum(axis=0)
+        if mixed:
+            st.n_used += int(use.any(axis=1).sum())
+            st.n_used_axes += use.sum(axis=0)
+        else:
+            used = int(np.count_nonzero(use[:, 0]))
+            st.n_used += used
+            st.n_used_axes += used
         if self._bucket_len is not None:
             self._advance_bucket(st, (st.n_offered - 1) // self._bucket_len)
 
@@ -385,7 +400,8 @@ class StreamingAllan:
             return self._st
         st = copy.deepcopy(self._st)
         n = self._pend_n
-        self._process(st, self._pend[:n], self._pend_use[:n], self._pend_brk[:n])
+        self._process(st, self._pend[:n], self._pend_use[:n], self._pend_brk[:n],
+                      self._pend_mixed)
         return st
 
     def sums(self, window=False):
