@@ -16,7 +16,7 @@ the cumulative sum loses nothing) and running sums of the squared second differe
 
 * factors m <= ``stride_base`` (default 256) are tracked at stride 1: every term of the batch
   estimator is formed, so the result equals :func:`imu_allan.core.allan.allan_deviation` on
-  the same samples (to float rounding, about 1e-13 relative; ``test_online_streaming.py``
+  the same samples (to float rounding, about 1e-13 relative; ``test/core/test_streaming.py``
   proves it for any chunking);
 * a larger factor m is rounded to a multiple of its level's stride s = 2^ceil(log2(m / base)),
   so m / s is between base / 2 and base, and only the terms with k a multiple of s are formed:
@@ -36,7 +36,13 @@ the allan node and ``online_allan`` (the offline path of ``analyze``) publish eq
 
 Gaps: excluded samples (motion) or a stamp gap end the current *segment*: the phase restarts
 and no second difference spans the gap.  The result then equals the sum of the per-segment
-overlapping sums (the batch estimator applied to each segment, pooled).
+overlapping sums (the batch estimator applied to each segment, pooled).  Masks may be given
+per axis (a value rejected on one axis): each axis then has its own segments, term counts and
+reportable averaging times (NaN on an axis that has too little data at one).  The axes are
+processed together wherever their segments are in step; a run of some axes only is still
+computed on every column (the others' results are discarded), because numpy rounds a
+column's sum differently for different numbers of columns: so an axis's numbers are
+bit-identical whatever the other axes left out.
 
 Sliding window: with ``window_s`` > 0 the sums are also kept in ``window_buckets`` buckets of
 equal length (in stream samples); a term is booked to the bucket of its newest sample, and the
