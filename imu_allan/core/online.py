@@ -58,7 +58,10 @@ class OnlineAllan:
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
         self._rejected_recent = np.zeros(len(self.axes), np.int64)  # since take_rejected()
-        self._break_next = False  # the last sample of the previous batch was left out
+        # Rejected values in flight through the gate: (stream indices of the samples, their
+        # per-axis flags); the gate returns samples in order, counted by _n_gated.
+        self._bad_in_gate = []
+        self._n_gated = [0, 0]  # samples into and out of the gate
         self._setup = (gate, gate_options, gap_factor, estimator_options)
         self.rate_source = 'configured' if rate_hz else 'measured'
         self.rate_hz = self.estimator = self.monitor = self.gate = None
@@ -81,6 +84,8 @@ class OnlineAllan:
             gyro_columns = [i for i, a in enumerate(self.axes) if is_gyro(a)]
             self.gate = StationarityGate(rate_hz, len(self.axes), gyro_columns,
                                          **(gate_options or {}))
+            # Per-sample tags that travel with the samples through the gate's delay: the
+            # stamp-gap break, then the per-axis rejection flags.
             self._gate_breaks = _TagDelay(self.gate.w)
 
     def memory_bytes(self):
@@ -114,40 +119,77 @@ class OnlineAllan:
         data, brk = data[keep], brk[keep]
         if data.shape[0] == 0:
             return
-        data, brk = self._reject_nonphysical(data, brk)
-        if data.shape[0] == 0:
-            return
+        bad = self._reject_nonphysical(data)
         if self.gate is None:
-            self.estimator.update(data, None, brk)
+            self.estimator.update(data, None if bad is None else ~bad, brk)
             return
+        n_in, n_out = self._n_gated
+        if bad is not None:
+            data = self._stand_in(data, bad)
+            rows = np.flatnonzero(bad.any(axis=1))
+            self._bad_in_gate.append((n_in + rows, bad[rows]))
         out, still = self.gate.update(data)
         brk_out = self._gate_breaks.push(brk, out.shape[0])
-        if out.shape[0]:
-            self.estimator.update(out, still, brk_out)
+        self._n_gated = [n_in + data.shape[0], n_out + out.shape[0]]
+        if not out.shape[0]:
+            return
+        use = still
+        if self._bad_in_gate:  # per-axis use: the gate's decision and not rejected
+            use = np.repeat(still[:, None], len(self.axes), axis=1)
+            left = []
+            for index, flags in self._bad_in_gate:
+                here = index < n_out + out.shape[0]
+                use[index[here] - n_out] &= ~flags[here]
+                if not here.all():
+                    left.append((index[~here], flags[~here]))
+            self._bad_in_gate = left
+        self.estimator.update(out, use, brk_out)
 
-    def _reject_nonphysical(self, data, brk):
+    def _reject_nonphysical(self, data):
         """
-        Leave out samples with a NaN, inf or non-physical value (``units.PHYSICAL_LIMIT``).
+        Find NaN, inf and non-physical values (``units.PHYSICAL_LIMIT``), per axis.
 
-        Counted per axis (:attr:`rejected_total`, :meth:`take_rejected`).  The estimator keeps
-        the axes in step, so such a sample is left out of every axis, as a stamp gap is: the
-        phase restarts after it and the samples around it still count.
+        Returns ``bad`` (n, A) bool, or None when every value is good.  A bad value is left
+        out of its own axis only (:class:`StreamingAllan` per-axis masks: that axis's phase
+        restarts after it, as at a stamp gap; the other axes keep the sample).  Counted per
+        axis (:attr:`rejected_total`, :meth:`take_rejected`).
         """
         with np.errstate(invalid='ignore'):
             bad = ~(np.abs(data) <= self._limits)  # NaN compares False: caught too
-        follows = np.empty(data.shape[0], bool)
-        follows[0] = self._break_next
         if not bad.any():
-            self._break_next = False
-            return data, brk | follows if follows[0] else brk
+            return None
         counts = bad.sum(axis=0)
         self.rejected_total += counts
         self._rejected_recent += counts
-        drop = bad.any(axis=1)
-        follows[1:] = drop[:-1]
-        self._break_next = bool(drop[-1])
-        keep = ~drop
-        return data[keep], (brk | follows)[keep]
+        return bad
+
+    def _stand_in(self, data, bad):
+        """
+        Return the samples for the motion gate: each bad value replaced by a stand-in.
+
+        The stand-in is the same axis's value one gate window earlier (itself a stand-in if
+        that was bad), so the gate sees real noise at the right level and mean, never a spike
+        or a NaN (not motion), even through a long run of bad values.  Bad values with no
+        history yet (the very start of the stream) take the axis's first good value in the
+        batch, or 0.  The estimator never reads these values (its per-axis mask leaves them
+        out).  The history is what the gate holds (:meth:`StationarityGate.recent`): nothing
+        is kept or copied while every value is good.
+        """
+        w = self.gate.w
+        tail = self.gate.recent(w)
+        x = np.concatenate((tail, data))
+        missing = np.concatenate((np.isnan(tail), bad))
+        for start in range(w, x.shape[0], w):  # each layer depends only on the one before
+            block, hole = x[start:start + w], missing[start:start + w]
+            if hole.any():
+                block[hole] = x[start - w:start - w + block.shape[0]][hole]
+                hole &= missing[start - w:start - w + block.shape[0]]
+        if missing[w:].any():  # no history on an axis yet
+            good = ~bad
+            first = np.where(good.any(axis=0), data[np.argmax(good, axis=0),
+                                                    np.arange(data.shape[1])], 0.0)
+            x[w:] = np.where(missing[w:], first, x[w:])
+        return x[w:]
 
     def take_rejected(self):
         """Per-axis counts of samples rejected since the last call ({axis: n}, non-zero only)."""
@@ -175,6 +217,8 @@ class OnlineAllan:
                                rate_tolerance, self.excluded_share, name=name,
                                rejected=self.take_rejected())
         health.values.update({'rate_source': self.rate_source, 'tau0_s': 1.0 / self.rate_hz})
+        health.values.update({f'rejected_total.{a}': int(n)
+                              for a, n in zip(self.axes, self.rejected_total) if n})
         if self.finder is not None:
             health.values['samples_dropped_before_rate'] = self.finder.n_dropped
         return health
@@ -261,7 +305,7 @@ class StagedEstimate:
         self.result = AllanResult(first.tau, first.m, stack('avar'), stack('adev'),
                                   stack('ci_low'), stack('ci_high'), stack('edf'),
                                   stack('alpha'), tuple(self.pipeline.axes), first.rate_hz,
-                                  first.n_samples)
+                                  max(p.n_samples for p in parts))
         if self._fits:
             fits = {a: self._fits[a] for a in self.pipeline.axes if a in self._fits}
             self.fitted = FittedModel(fits, first.rate_hz, self.result)

@@ -116,6 +116,22 @@ class StationarityGate:
         """Return the samples received but not yet decided (at most two windows)."""
         return self._part_n + (self.w if self._held_raw is not None else 0)
 
+    def recent(self, k):
+        """
+        Return the last ``k`` samples fed (k <= w), (k, n_axes), NaN rows where none yet.
+
+        They are still held (the window awaiting its decision and the partial one).
+        """
+        if self._held_raw is not None:
+            have = np.concatenate((self._held, self._part[:self._part_n]))
+        else:
+            have = self._part[:self._part_n]
+        out = np.full((k, self.n_axes), np.nan)
+        take = min(k, have.shape[0])
+        if take:
+            out[k - take:] = have[have.shape[0] - take:]
+        return out
+
     def _floor(self):
         # The quantile is refreshed every _FLOOR_EVERY windows (counted from the start, so
         # still independent of chunking): it moves slowly and costs most of the gate's time.

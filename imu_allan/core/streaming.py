@@ -16,7 +16,7 @@ the cumulative sum loses nothing) and running sums of the squared second differe
 
 * factors m <= ``stride_base`` (default 256) are tracked at stride 1: every term of the batch
   estimator is formed, so the result equals :func:`imu_allan.core.allan.allan_deviation` on
-  the same samples (to float rounding, about 1e-13 relative; ``test_online_streaming.py``
+  the same samples (to float rounding, about 1e-13 relative; ``test/core/test_streaming.py``
   proves it for any chunking);
 * a larger factor m is rounded to a multiple of its level's stride s = 2^ceil(log2(m / base)),
   so m / s is between base / 2 and base, and only the terms with k a multiple of s are formed:
@@ -36,7 +36,13 @@ the allan node and ``online_allan`` (the offline path of ``analyze``) publish eq
 
 Gaps: excluded samples (motion) or a stamp gap end the current *segment*: the phase restarts
 and no second difference spans the gap.  The result then equals the sum of the per-segment
-overlapping sums (the batch estimator applied to each segment, pooled).
+overlapping sums (the batch estimator applied to each segment, pooled).  Masks may be given
+per axis (a value rejected on one axis): each axis then has its own segments, term counts and
+reportable averaging times (NaN on an axis that has too little data at one).  The axes are
+processed together wherever their segments are in step; a run of some axes only is still
+computed on every column (the others' results are discarded), because numpy rounds a
+column's sum differently for different numbers of columns: so an axis's numbers are
+bit-identical whatever the other axes left out.
 
 Sliding window: with ``window_s`` > 0 the sums are also kept in ``window_buckets`` buckets of
 equal length (in stream samples); a term is booked to the bucket of its newest sample, and the
@@ -44,6 +50,7 @@ windowed result pools the newest ``window_buckets`` buckets, i.e. the terms that
 last (1 - 1/buckets) W to W seconds.
 """
 
+import bisect
 import copy
 import math
 
@@ -91,22 +98,24 @@ class _State:
 
     def __init__(self, levels, n_factors, n_axes, n_buckets):
         self.hist = [np.zeros((cap, n_axes)) for _, _, _, cap in levels]
-        self.fill = [0] * len(levels)
         self.acc = np.zeros((n_factors, n_axes))
-        self.cnt = np.zeros(n_factors, dtype=np.int64)
+        self.cnt = np.zeros((n_factors, n_axes), dtype=np.int64)
         self.wacc = np.zeros((n_buckets, n_factors, n_axes))
-        self.wcnt = np.zeros((n_buckets, n_factors), dtype=np.int64)
+        self.wcnt = np.zeros((n_buckets, n_factors, n_axes), dtype=np.int64)
         self.bucket = 0          # global index of the newest bucket
-        self.phase = np.zeros(n_axes)  # phase at the newest point of the segment (rebased)
-        self.seg = -1            # phase index within the current segment; -1: no segment
+        # Phase index within each axis's current segment (-1: no segment).  The stored phase
+        # history of a level holds min(seg // stride + 1, capacity) points of that axis.
+        self.seg = np.full(n_axes, -1, dtype=np.int64)
         self.offset = np.zeros(n_axes)  # constant removed from the samples (AVAR-invariant)
-        self.has_offset = False
+        self.has_offset = np.zeros(n_axes, bool)
         self.n_offered = 0       # samples given to the estimator (used or not)
-        self.n_used = 0          # samples that entered the estimate
-        self.n_segments = 0
+        self.n_used = 0          # samples that entered the estimate on at least one axis
+        self.n_used_axes = np.zeros(n_axes, dtype=np.int64)  # per axis
+        self.n_segments = np.zeros(n_axes, dtype=np.int64)   # per axis
 
     def arrays(self):
-        return self.hist + [self.acc, self.cnt, self.wacc, self.wcnt, self.phase, self.offset]
+        return self.hist + [self.acc, self.cnt, self.wacc, self.wcnt, self.seg, self.offset,
+                            self.has_offset, self.n_used_axes, self.n_segments]
 
 
 class StreamingAllan:
@@ -155,12 +164,14 @@ class StreamingAllan:
         self.ms, self.strides = factor_grid(self.rate_hz, max_tau, points_per_decade, taus,
                                             stride_base, exact)
         self.min_clusters = int(min_clusters)
-        # Levels: (stride, factor indices, m / stride, history capacity).
+        # Levels: (stride, index of its first factor, m / stride ascending, history capacity).
+        # The strides grow with m, so each level's factors are consecutive.
         self._levels = []
         for s in np.unique(self.strides):
             idx = np.flatnonzero(self.strides == s)
-            qs = self.ms[idx] // s
-            self._levels.append((int(s), idx, qs, int(2 * qs.max())))
+            assert np.all(np.diff(idx) == 1)
+            qs = [int(q) for q in self.ms[idx] // s]
+            self._levels.append((int(s), int(idx[0]), qs, 2 * max(qs)))
         self.window_s = float(window_s)
         n_buckets = int(window_buckets) if window_s > 0 else 1
         self._bucket_len = (max(1, int(math.ceil(window_s * rate_hz / n_buckets)))
@@ -168,16 +179,22 @@ class StreamingAllan:
         self._st = _State(self._levels, self.ms.size, n_axes, n_buckets)
         self.frame = int(frame)
         self._pend = np.zeros((self.frame, n_axes))
-        self._pend_use = np.zeros(self.frame, bool)
-        self._pend_brk = np.zeros(self.frame, bool)
+        self._pend_use = np.zeros((self.frame, n_axes), bool)
+        self._pend_brk = np.zeros((self.frame, n_axes), bool)
         self._pend_n = 0
+        self._pend_mixed = False  # a per-axis mask went into the unfinished frame
 
     # -- bookkeeping -------------------------------------------------------------------------
 
     @property
     def n_used(self):
-        """Return the samples in the estimate (committed frames plus the unfinished one)."""
-        return self._st.n_used + int(self._pend_use[:self._pend_n].sum())
+        """Return the samples in the estimate on at least one axis (unfinished frame included)."""
+        return self._st.n_used + int(self._pend_use[:self._pend_n].any(axis=1).sum())
+
+    @property
+    def n_used_axes(self):
+        """Return the samples in the estimate per axis, int array (A,)."""
+        return self._st.n_used_axes + self._pend_use[:self._pend_n].sum(axis=0)
 
     @property
     def n_offered(self):
@@ -198,33 +215,42 @@ class StreamingAllan:
         Parameters
         ----------
         block : array_like
-            Shape (n, A) (or (n,) for one axis), SI units.
+            Shape (n, A) (or (n,) for one axis), SI units.  Values left out by ``use`` are
+            never read (they may be NaN).
         use : array_like of bool, optional
-            False for samples to leave out (motion); a left-out run ends the segment.
+            Shape (n,) (whole samples) or (n, A) (per axis): False for values to leave out
+            (motion, a rejected value); a left-out run ends that axis's segment.
         break_before : array_like of bool, optional
-            True where the phase must restart before the sample (a stamp gap).
+            Shape (n,) or (n, A): True where the phase must restart before the sample (a
+            stamp gap).
 
         """
         block = np.asarray(block, dtype=float)
         if block.ndim == 1:
             block = block[:, None]
-        n = block.shape[0]
-        if block.shape[1] != len(self.axes):
-            raise ValueError(f'expected {len(self.axes)} columns, got {block.shape[1]}')
-        use = np.ones(n, bool) if use is None else np.asarray(use, bool)
-        brk = np.zeros(n, bool) if break_before is None else np.asarray(break_before, bool)
+        n, n_axes = block.shape[0], len(self.axes)
+        if block.shape[1] != n_axes:
+            raise ValueError(f'expected {n_axes} columns, got {block.shape[1]}')
+        # None stays a scalar and a 1-D mask a column: both broadcast to every axis below.
+        use = True if use is None else _as_mask(use, n, n_axes, 'use')
+        brk = False if break_before is None else _as_mask(break_before, n, n_axes,
+                                                          'break_before')
         i = 0
         while i < n:
             take = min(self.frame - self._pend_n, n - i)
             j = self._pend_n
             self._pend[j:j + take] = block[i:i + take]
-            self._pend_use[j:j + take] = use[i:i + take]
-            self._pend_brk[j:j + take] = brk[i:i + take]
+            self._pend_use[j:j + take] = use if use is True else use[i:i + take]
+            self._pend_brk[j:j + take] = brk if brk is False else brk[i:i + take]
+            self._pend_mixed |= (use is not True and use.shape[1] > 1) or (
+                brk is not False and brk.shape[1] > 1)
             self._pend_n += take
             i += take
             if self._pend_n == self.frame:
-                self._process(self._st, self._pend, self._pend_use, self._pend_brk)
+                self._process(self._st, self._pend, self._pend_use, self._pend_brk,
+                              self._pend_mixed)
                 self._pend_n = 0
+                self._pend_mixed = False
 
     # -- processing --------------------------------------------------------------------------
 
@@ -237,85 +263,140 @@ class StreamingAllan:
             st.wcnt[b % n_b] = 0
         st.bucket = target
 
-    def _process(self, st, data, use, brk):
+    @staticmethod
+    def _groups(st, use, brk, mixed):
+        """
+        Split the axes into groups that can be processed together in this frame.
+
+        Axes share a group when their masks over the frame and their segment position are
+        equal (then their phase histories are in step).  Returns a list of column selectors:
+        ``[slice(None)]`` in the common case (every axis in step: the fast path).
+        """
+        in_step = (st.seg == st.seg[0]).all()
+        if in_step and (not mixed or ((use == use[:, :1]).all() and (brk == brk[:, :1]).all())):
+            return [slice(None)]
+        groups = {}
+        for a in range(use.shape[1]):
+            key = (int(st.seg[a]), use[:, a].tobytes(), brk[:, a].tobytes())
+            groups.setdefault(key, []).append(a)
+        return [np.array(cols) for cols in groups.values()]
+
+    def _process(self, st, data, use, brk, mixed=True):
+        """
+        Add one frame: ``data`` (n, A), ``use`` and ``brk`` (n, A) bool.
+
+        ``mixed`` False: every column of ``use`` and ``brk`` is known to be the same.
+        """
         n = data.shape[0]
         if n == 0:
             return
         g0 = st.n_offered
-        if not st.has_offset and use.any():
-            # Removing a constant leaves AVAR unchanged and keeps the phase small.
-            st.offset[:] = data[use].mean(axis=0)
-            st.has_offset = True
-        stops = ~use | brk
-        if self._bucket_len is not None:
-            pos = np.arange(n)
-            stops = stops | ((g0 + pos) % self._bucket_len == 0)
-        stop_idx = np.flatnonzero(stops)
-        i = 0
-        while i < n:
-            if brk[i] or not use[i]:
-                st.seg = -1
-            if not use[i]:
-                nxt = np.flatnonzero(use[i:])
-                if nxt.size == 0:
-                    break
-                i += int(nxt[0])
-                continue
-            later = stop_idx[np.searchsorted(stop_idx, i, side='right'):]
-            j = int(later[0]) if later.size else n
+        for a in ([] if st.has_offset.all() else
+                  np.flatnonzero(~st.has_offset & use.any(axis=0))):
+            # Removing a constant leaves AVAR unchanged and keeps the phase small.  Per column,
+            # so an axis's offset does not depend on what the other axes left out.
+            st.offset[a] = data[use[:, a], a].mean()
+            st.has_offset[a] = True
+        # Pieces of the frame within one window bucket (the whole frame without a window).
+        if self._bucket_len is None:
+            cuts = [0, n]
+        else:
+            first = -g0 % self._bucket_len
+            cuts = sorted({0, n, *range(first, n, self._bucket_len)})
+        groups = self._groups(st, use, brk, mixed)
+        if len(groups) > 1:
+            # Runs are computed on every column (see _feed_run): left-out values (NaN, inf,
+            # 1e300 ...) become 0 so the columns not being stored stay finite.
+            data = np.where(use, data, 0.0)
+        # Each group's masks are those of its first axis: where its runs stop.
+        firsts = [0 if isinstance(cols, slice) else int(cols[0]) for cols in groups]
+        stops = [np.flatnonzero(~use[:, c] | brk[:, c]) for c in firsts]
+        for p0, p1 in zip(cuts[:-1], cuts[1:]):
             if self._bucket_len is not None:
-                self._advance_bucket(st, (g0 + i) // self._bucket_len)
-            self._feed_run(st, data[i:j])
-            i = j
+                self._advance_bucket(st, (g0 + p0) // self._bucket_len)
+            for cols, c0, stop_idx in zip(groups, firsts, stops):
+                col_use, col_brk = use[:, c0], brk[:, c0]
+                i = p0
+                while i < p1:
+                    if col_brk[i] or not col_use[i]:
+                        st.seg[cols] = -1
+                    if not col_use[i]:
+                        nxt = np.flatnonzero(col_use[i:p1])
+                        if nxt.size == 0:
+                            break
+                        i += int(nxt[0])
+                        continue
+                    later = stop_idx[np.searchsorted(stop_idx, i, side='right'):]
+                    j = min(int(later[0]), p1) if later.size else p1
+                    self._feed_run(st, data[i:j], cols)
+                    i = j
         st.n_offered += n
-        st.n_used += int(use.sum())
+        if mixed:
+            st.n_used += int(use.any(axis=1).sum())
+            st.n_used_axes += use.sum(axis=0)
+        else:
+            used = int(np.count_nonzero(use[:, 0]))
+            st.n_used += used
+            st.n_used_axes += used
         if self._bucket_len is not None:
             self._advance_bucket(st, (st.n_offered - 1) // self._bucket_len)
 
-    def _feed_run(self, st, samples):
-        """Add a run of consecutive used samples to the current segment (or a new one)."""
-        if st.seg < 0:
-            st.seg = 0
-            st.phase[:] = 0.0
-            st.n_segments += 1
+    def _feed_run(self, st, samples, cols):
+        """
+        Add a run of consecutive used samples of the axes ``cols`` to their current segment.
+
+        ``samples`` has every axis (r, A); ``cols`` is ``slice(None)`` (every axis) or an index
+        array of axes that are in step.  The arithmetic always runs on all A columns (those
+        not in ``cols`` carry meaningless but finite values and are not stored): a column's
+        sums are then rounded exactly as when every axis is in step, so an axis's numbers never
+        depend on what the other axes left out (numpy's reductions over (n, A) round
+        differently for different A).
+        """
+        c0 = 0 if isinstance(cols, slice) else cols[0]
+        seg = int(st.seg[c0])
+        if seg < 0:
+            seg = 0
+            st.n_segments[cols] += 1
             for li in range(len(self._levels)):
-                st.hist[li][0] = 0.0  # x_0 = 0: phase index 0 is a multiple of every stride
-                st.fill[li] = 1
+                st.hist[li][0, cols] = 0.0  # x_0 = 0: phase index 0 is a multiple of any stride
         r = samples.shape[0]
-        phase = st.phase + np.cumsum(samples - st.offset, axis=0)  # indices seg+1 .. seg+r
-        seg = st.seg
+        phase = np.cumsum(samples - st.offset, axis=0)  # indices seg+1 .. seg+r
         slot = st.bucket % st.wcnt.shape[0]
         windowed = self._bucket_len is not None
-        for li, (s, fidx, qs, cap) in enumerate(self._levels):
+        for li, (s, f0, qs, cap) in enumerate(self._levels):
+            h = min(seg // s + 1, cap)  # stored phase points of this level
             first = (seg // s + 1) * s
             if first > seg + r:
                 continue
-            new = phase[first - seg - 1:r:s]
-            h = st.fill[li]
-            x = np.concatenate((st.hist[li][:h], new))
+            x = np.concatenate((st.hist[li][:h], phase[first - seg - 1:r:s]))
             length = x.shape[0]
-            for f, q in zip(fidx, qs):
-                k0 = max(0, h - 2 * q)
-                k1 = length - 2 * q
-                if k1 <= k0:
-                    continue
-                d = x[k0 + 2 * q:k1 + 2 * q] - 2.0 * x[k0 + q:k1 + q] + x[k0:k1]
-                ss = np.einsum('ij,ij->j', d, d)
-                st.acc[f] += ss
-                st.cnt[f] += k1 - k0
+            # Factors with new terms: 2q < length, a prefix of the level's (q ascending).
+            nv = bisect.bisect_right(qs, (length - 1) // 2)
+            if nv:
+                ss = np.empty((nv, x.shape[1]))
+                kk = np.empty((nv, 1), np.int64)
+                for i in range(nv):
+                    q = qs[i]
+                    k0 = max(0, h - 2 * q)
+                    k1 = length - 2 * q
+                    d = x[k0 + 2 * q:k1 + 2 * q] - 2.0 * x[k0 + q:k1 + q] + x[k0:k1]
+                    np.einsum('ij,ij->j', d, d, out=ss[i])
+                    kk[i] = k1 - k0
+                fs = slice(f0, f0 + nv)
+                ss = ss[:, cols]
+                st.acc[fs, cols] += ss
+                st.cnt[fs, cols] += kk
                 if windowed:
-                    st.wacc[slot, f] += ss
-                    st.wcnt[slot, f] += k1 - k0
+                    st.wacc[slot][fs, cols] += ss
+                    st.wcnt[slot][fs, cols] += kk
             keep = min(length, cap)
-            st.hist[li][:keep] = x[length - keep:]
-            st.fill[li] = keep
+            st.hist[li][:keep, cols] = x[length - keep:, cols]
         # Rebase: second differences ignore a constant, so shift every stored phase by the
         # newest one; the phase then never grows with run time (no loss of float precision).
-        shift = phase[-1].copy()
-        for li in range(len(self._levels)):
-            st.hist[li][:st.fill[li]] -= shift
-        st.phase[:] = 0.0
-        st.seg = seg + r
+        shift = phase[-1, cols]
+        for li, (s, _, _, cap) in enumerate(self._levels):
+            st.hist[li][:min((seg + r) // s + 1, cap), cols] -= shift
+        st.seg[cols] = seg + r
 
     # -- output ------------------------------------------------------------------------------
 
@@ -325,14 +406,17 @@ class StreamingAllan:
             return self._st
         st = copy.deepcopy(self._st)
         n = self._pend_n
-        self._process(st, self._pend[:n], self._pend_use[:n], self._pend_brk[:n])
+        self._process(st, self._pend[:n], self._pend_use[:n], self._pend_brk[:n],
+                      self._pend_mixed)
         return st
 
     def sums(self, window=False):
         """
-        Raw running sums: ``(m, stride, sum_sq (F, A), count (F,))`` in sample units.
+        Raw running sums: ``(m, stride, sum_sq (F, A), count (F, A))`` in sample units.
 
-        ``sum_sq[f] / (2 m^2 count[f])`` is the Allan variance in the samples' unit squared.
+        ``sum_sq[f, a] / (2 m^2 count[f, a])`` is the Allan variance of axis ``a`` in the
+        samples' unit squared; the counts differ between axes when values were left out on
+        some axes only.
         """
         st = self._current_state()
         if window:
@@ -343,21 +427,25 @@ class StreamingAllan:
 
     def snapshot(self, window=False, min_clusters=None):
         """
-        Return the reportable factors now: ``(m, avar (T, A), n_eff (T,))``, or None.
+        Return the reportable factors now: ``(m, avar (T, A), n_eff (T, A))``, or None.
 
-        Only factors whose data span ``min_clusters`` x m samples are included.  ``n_eff`` is
-        the span each factor's terms cover (count x stride + 2m - 1 samples), used as the
-        record length for the EDF.  AVAR in the samples' unit squared.
+        A factor is reportable on an axis once that axis's terms span ``min_clusters`` x m
+        samples; the factors reportable on at least one axis are returned, with NaN AVAR (and
+        ``n_eff`` 0) on the axes where it is not.  ``n_eff`` is the span each factor's terms
+        cover on each axis (count x stride + 2m - 1 samples), used as the record length for
+        the EDF.  AVAR in the samples' unit squared.
         """
         ms, strides, acc, cnt = self.sums(window)
         min_clusters = self.min_clusters if min_clusters is None else int(min_clusters)
-        n_eff = cnt * strides + 2 * ms - 1
-        sel = (cnt > 0) & (n_eff >= min_clusters * ms)
+        n_eff = cnt * strides[:, None] + 2 * ms[:, None] - 1
+        ok = (cnt > 0) & (n_eff >= min_clusters * ms[:, None])
+        sel = ok.any(axis=1)
         if not sel.any():
             return None
-        m = ms[sel]
-        avar = acc[sel] / (2.0 * (m * m * cnt[sel]).astype(float))[:, None]
-        return m, avar, n_eff[sel]
+        m, ok, cnt = ms[sel], ok[sel], cnt[sel]
+        avar = np.full(ok.shape, np.nan)
+        avar[ok] = acc[sel][ok] / (2.0 * (m[:, None] * m[:, None] * cnt)[ok].astype(float))
+        return m, avar, np.where(ok, n_eff[sel], 0)
 
     def result_from(self, snapshot, columns=None):
         """Build an AllanResult (EDF, intervals) of a :meth:`snapshot`, optionally some columns."""
@@ -366,13 +454,25 @@ class StreamingAllan:
         m, avar, n_eff = snapshot
         columns = range(len(self.axes)) if columns is None else columns
         columns = list(columns)
-        return AllanResult.from_avar(m, avar[:, columns], n_eff[:, None], self.rate_hz,
+        return AllanResult.from_avar(m, avar[:, columns], n_eff[:, columns], self.rate_hz,
                                      [self.axes[j] for j in columns])
 
     def result(self, window=False, min_clusters=None):
         """
         Allan deviation of everything seen (or of the sliding window) as an AllanResult.
 
-        None when no factor has enough data yet (see :meth:`snapshot`).
+        None when no factor has enough data yet (see :meth:`snapshot`); NaN on an axis at
+        the averaging times that axis has too little data for.
         """
         return self.result_from(self.snapshot(window, min_clusters))
+
+
+def _as_mask(mask, n, n_axes, name):
+    """Return a bool mask as (n, 1) (whole samples) or (n, A) (per axis)."""
+    mask = np.asarray(mask, bool)
+    if mask.ndim == 1:
+        mask = mask[:, None]
+    if mask.shape[0] != n or mask.shape[1] not in (1, n_axes):
+        raise ValueError(f'{name} must have shape ({n},) or ({n}, {n_axes}), '
+                         f'got {mask.shape}')
+    return mask

@@ -357,7 +357,7 @@ class AllanNode(Node):
         stream = p.stream_health(silence, self.params['timeout_s'],
                                  self.params['rate_tolerance'], name=prefix + 'IMU stream')
         stream.values.update({
-            'samples_used': p.estimator.n_used if p.estimator else 0,
+            'samples_used': p.estimator.n_used if p.estimator else 0,  # on at least one axis
             'samples_offered': p.estimator.n_offered if p.estimator else 0,
             'averaging_times': 0 if result is None else int(result.tau.size),
             'longest_tau_s': math.nan if result is None else float(result.tau[-1]),
@@ -368,6 +368,9 @@ class AllanNode(Node):
             **self.last_cycle,
             **self._plot.stats(),
         })
+        if p.estimator is not None:  # per axis where values were rejected (NaN, inf, ...)
+            stream.values.update({f'samples_used.{a}': int(n) for a, n, r in zip(
+                p.axes, p.estimator.n_used_axes, p.rejected_total) if r})
         records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
         records.append(self._advice_status)
         if self.model is not None:  # the discrepancy check: gap and effect per axis

@@ -99,3 +99,17 @@ def test_gated_estimate_matches_still_truth(moving_record):
     adev = np.sqrt(gated.avar[1, 0]) * np.sqrt(0.1)
     assert adev == pytest.approx(n_gyro, rel=0.03)
     assert np.sqrt(raw.avar[1, 0]) * np.sqrt(0.1) > 3 * n_gyro
+
+
+def test_recent_returns_the_last_samples_fed():
+    """recent(k): the last k samples fed, in order, NaN rows before there are k of them."""
+    gate = StationarityGate(100.0, n_axes=2, gyro_columns=(0,), window_s=0.1)  # w = 10
+    data = np.arange(70.0).reshape(35, 2)
+    gate.update(data[:7])
+    got = gate.recent(10)
+    assert np.isnan(got[:3]).all()
+    np.testing.assert_array_equal(got[3:], data[:7])
+    for i in range(7, 35, 6):  # across window boundaries, in odd-sized pieces
+        gate.update(data[i:i + 6])
+        n = min(i + 6, 35)
+        np.testing.assert_array_equal(gate.recent(10), data[n - 10:n])
