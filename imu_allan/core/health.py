@@ -204,7 +204,7 @@ class StampMonitor:
         if n == 0:
             return np.zeros(0, bool), np.zeros(0, bool)
         last = -math.inf if self.last_t is None else self.last_t
-        running = np.maximum.accumulate(np.concatenate(([last], t)))
+        running = np.fmax.accumulate(np.concatenate(([last], t)))  # NaN does not poison it
         keep = t > running[:-1]
         kept_t = t[keep]
         break_before = np.zeros(n, bool)

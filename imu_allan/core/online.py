@@ -57,6 +57,7 @@ class OnlineAllan:
         self.terms = terms
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
+        self.bad_stamps = 0  # samples whose stamp is no time (left out before everything)
         self._rejected_recent = np.zeros(len(self.axes), np.int64)  # since take_rejected()
         # Rejected values in flight through the gate: (stream indices of the samples, their
         # per-axis flags); the gate returns samples in order, counted by _n_gated.
@@ -105,6 +106,12 @@ class OnlineAllan:
         data = np.asarray(data, dtype=float)
         if data.ndim == 1:
             data = data[:, None]
+        if t is not None:
+            t = np.asarray(t, dtype=float)
+            stamped = np.isfinite(t)  # a damaged stamp (nanosec >= 1e9 decodes as NaN)
+            if not stamped.all():
+                self.bad_stamps += int((~stamped).sum())
+                t, data = t[stamped], data[stamped]
         if self.estimator is None:
             if t is None:
                 raise ValueError('a measured rate (rate_hz 0) needs the time stamps')
@@ -216,7 +223,8 @@ class OnlineAllan:
         health = stream_health(self.monitor, self.monitor.take_recent(), silence_s, timeout_s,
                                rate_tolerance, self.excluded_share, name=name,
                                rejected=self.take_rejected())
-        health.values.update({'rate_source': self.rate_source, 'tau0_s': 1.0 / self.rate_hz})
+        health.values.update({'rate_source': self.rate_source, 'tau0_s': 1.0 / self.rate_hz,
+                              'bad_stamps': self.bad_stamps})
         health.values.update({f'rejected_total.{a}': int(n)
                               for a, n in zip(self.axes, self.rejected_total) if n})
         if self.finder is not None:

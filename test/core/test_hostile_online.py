@@ -170,3 +170,25 @@ def test_stream_health_warns_with_the_counts():
     assert calm.level == hm.OK, calm.message
     assert calm.values['rejected_total.accel_x'] == 1  # the totals stay in the values
     assert set(AXES) >= {k.split('.')[1] for k in rec.values if k.startswith('rejected')}
+
+
+def test_damaged_stamps_left_out_and_counted():
+    """
+    NaN stamps (a nanosecond field of 1e9 or more decodes so) leave out their samples only.
+
+    Before this rule one NaN stamp poisoned the stream monitor's running maximum, and every
+    later sample was dropped as out of order.  The samples around them still count: the
+    result equals the record without those samples, and the count is in the stream status.
+    """
+    t, data = _record(4)
+    bad = np.random.default_rng(5).choice(np.arange(100, N), 7, replace=False)
+    t_bad = t.copy()
+    t_bad[bad] = np.nan
+    keep = np.isfinite(t_bad)
+    pipe, result = _strict(t_bad, data)
+    assert pipe.bad_stamps == 7
+    assert pipe.monitor.n_kept == N - 7
+    ref = OnlineAllan(RATE, max_tau=20.0)
+    ref.feed(t[keep], data[keep])
+    assert np.allclose(result.avar, ref.result().avar, rtol=1e-12, atol=0.0)
+    assert pipe.stream_health(0.0).values['bad_stamps'] == 7
