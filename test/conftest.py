@@ -80,3 +80,51 @@ def spin_until(executor, predicate, timeout):
         if predicate():
             return True
     return False
+
+
+class NodeRun:
+    """
+    A built node in its own process and a client node spinning here (a context manager).
+
+    ``with NodeRun(cmd, context, 'client') as run:`` gives ``run.node`` and ``run.executor``;
+    on leaving, the client is shut down, the node stopped (``stop_signal``, then killed after
+    10 s) and ``run.output`` holds its stdout and stderr.  ``shutdown_context`` also shuts the
+    rclpy context down (for tests that made their own).
+    """
+
+    def __init__(self, cmd, context, client, domain=None, stop_signal=None,
+                 shutdown_context=False):
+        """Keep the command and the rclpy context; nothing starts before ``with``."""
+        self.cmd, self.context, self.client = cmd, context, client
+        self.domain, self.stop_signal = domain, stop_signal
+        self.shutdown_context = shutdown_context
+        self.output = ''
+
+    def __enter__(self):
+        """Start the node process and the client node with its executor."""
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        self.proc = subprocess.Popen(self.cmd, env=ros_env(self.domain), stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True)
+        self.node = rclpy.create_node(self.client, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        return self
+
+    def __exit__(self, *exc):
+        """Stop the client, then the node; keep its output."""
+        import rclpy
+        self.executor.shutdown()
+        self.node.destroy_node()
+        if self.shutdown_context:
+            rclpy.try_shutdown(context=self.context)
+        if self.stop_signal is None:
+            self.proc.terminate()
+        else:
+            self.proc.send_signal(self.stop_signal)
+        try:
+            self.output, _ = self.proc.communicate(timeout=10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.output, _ = self.proc.communicate()
+        return False

@@ -116,7 +116,7 @@ class Problem:
         for _ in range(iterations):
             low = self.whiten(model, design)
             g, y = low[:, :-1], low[:, -1]
-            scale = np.linalg.norm(g, axis=0)
+            scale = np.sqrt(np.einsum('ij,ij->j', g, g))
             scale[scale == 0] = 1.0
             coef = nnls(g / scale, y, maxiter=50 * shapes.shape[1])[0] / scale
             # keep weights finite where the model vanishes (e.g. a term pinned at zero)

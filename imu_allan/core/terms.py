@@ -58,11 +58,19 @@ def _sampled_flicker(m):
     AVAR = 4 int_0^{fs/2} S(f) sin^4(pi f m dt) / (m^2 sin^2(pi f dt)) df; with u = pi f dt
     that is (2/pi) int_0^{pi/2} sin^4(m u) / (m^2 u sin^2 u) du, a function of m alone.  At
     m = 1, 2, 3 it is 40, 11 and 6 % above the continuous formula, which would bias a fit.
+
+    Integrated by 16-point Gauss-Legendre between consecutive zeros of sin(m u) (the integrand
+    is smooth there): converged to 1e-15 (48 points agree), where the trapezoid rule on 128
+    points per period it replaced was 1.75e-5 low and twelve times slower.
     """
-    u = np.linspace(0.0, math.pi / 2.0, 128 * m + 1025)[1:]
+    edges = np.unique(np.minimum(np.arange(m // 2 + 2) * (math.pi / m), math.pi / 2.0))
+    half = 0.5 * np.diff(edges)[:, None]
+    u = half * _GL16[0] + (edges[:-1, None] + half)
     f = np.sin(m * u) ** 4 / (m * m * u * np.sin(u) ** 2)
-    integral = np.sum((f[1:] + f[:-1]) * 0.5 * np.diff(u)) + 0.5 * f[0] * u[0]
-    return 2.0 / math.pi * integral
+    return 2.0 / math.pi * float(np.sum(f * half * _GL16[1]))
+
+
+_GL16 = np.polynomial.legendre.leggauss(16)  # nodes on [-1, 1] and weights
 
 
 def sampled_flicker_shape(tau, rate_hz):

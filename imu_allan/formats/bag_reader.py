@@ -148,7 +148,7 @@ def bag_topics(path):
     except InputError:
         scan = None
         if kind == 'mcap' or (kind == 'dir' and _dir_storage(p)[0] == 'mcap'):
-            scan = McapScan(str(_mcap_files(p, kind)[0]), collect=False)
+            scan = McapScan(str(_storage_files(p, kind, 'mcap')[0]), collect=False)
             names = scan.channels
         elif kind == 'ros1':
             scan = Ros1Scan(p, collect=False)
@@ -250,15 +250,16 @@ def _read_generic(where, p, topic):
     except InputError:
         # rosbags cannot open damaged files (no MCAP footer, no ROS 1 index, malformed SQLite):
         # read what is left with the direct readers, deserializing message by message.
-        if _mcap_files(p, kind):
-            return _read_mcap_files(where, _mcap_files(p, kind), topic, force_generic=True)
+        mcap = _storage_files(p, kind, 'mcap')
+        if mcap:
+            return _read_mcap_files(where, mcap, topic, force_generic=True)
         if kind == 'ros1':
             # rosbags needs the index at the end: read the chunks of a cut bag one by one.
             res = read_ros1_scan(where, p, topic, force_generic=True)
             if res is None:
                 raise
             return res
-        files = _sqlite_files(p, kind)
+        files = _storage_files(p, kind, 'sqlite3')
         if not files:
             raise
         return _read_sqlite_files(where, files, topic, force_generic=True)
@@ -289,11 +290,12 @@ def _read_generic(where, p, topic):
                 stamps.append(s)
                 rows.append(row)
         except Exception as err:
-            if _mcap_files(p, kind):
+            mcap = _storage_files(p, kind, 'mcap')
+            if mcap:
                 # A corrupt chunk stops rosbags; the scanner skips just that chunk.
                 reader.close()
                 reader = None
-                return _read_mcap_files(where, _mcap_files(p, kind), topic, force_generic=True)
+                return _read_mcap_files(where, mcap, topic, force_generic=True)
             if not stamps:
                 raise InputError(where, f'cannot read messages: {one_line(err)}') from None
             warnings.append(f'read stopped after {len(stamps)} messages: {one_line(err)}')
@@ -307,24 +309,13 @@ def _read_generic(where, p, topic):
     return chosen, t, data, warnings, frame_id
 
 
-def _mcap_files(p, kind):
-    """Return the MCAP storage files of a bag, or [] if it is not an uncompressed MCAP bag."""
-    if kind == 'mcap':
+def _storage_files(p, kind, storage):
+    """Return the uncompressed ``storage`` ('mcap', 'sqlite3') files of a bag, or []."""
+    if kind == storage:
         return [p]
     if kind == 'dir':
-        storage, files, compressed = _dir_storage(p)[:3]
-        if storage == 'mcap' and not compressed:
-            return files
-    return []
-
-
-def _sqlite_files(p, kind):
-    """Return the sqlite3 storage files of a bag, or [] if it is not sqlite3."""
-    if kind == 'sqlite3':
-        return [p]
-    if kind == 'dir':
-        storage, files, compressed = _dir_storage(p)[:3]
-        if storage == 'sqlite3' and not compressed:
+        found, files, compressed = _dir_storage(p)[:3]
+        if found == storage and not compressed:
             return files
     return []
 

@@ -8,10 +8,9 @@ The node runs as a subprocess on the test process's own ROS_DOMAIN_ID with RELIA
 
 import math
 import signal
-import subprocess
 import time
 
-from conftest import executable, ros_env, spin_until
+from conftest import executable, NodeRun, spin_until
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 import numpy as np
@@ -47,19 +46,20 @@ def status_values(array, suffix):
     return None
 
 
-class AllanFeed:
+class AllanFeed(NodeRun):
     """Start the node, publish ``n`` samples to it, watch its diagnostics; use with ``with``."""
 
     def __init__(self, context, domain, n=6000, seed=3, params=()):
         """``params``: extra ``name:=value`` node parameters."""
-        self.context, self.domain, self.n = context, domain, n
         # Two fixed terms: automatic selection would take seconds per cycle on a loaded machine.
         cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=0.5',
                '-p', 'queue_depth:=20000', '-p', 'terms:=white_noise,bias_instability',
                '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
         for param in params:
             cmd += ['-p', param]
-        self.cmd = cmd
+        super().__init__(cmd, context, f'allan_feed_{id(self)}', domain,
+                         stop_signal=signal.SIGINT)
+        self.n = n
         data = simulate(MODEL, n, RATE, seed=seed)
         data[:, 5] += 9.80665
         self.msgs = imu_messages(data, 1_700_000_000.0 + np.arange(n) / RATE)
@@ -68,16 +68,9 @@ class AllanFeed:
     def __enter__(self):
         """Start the node and the client; wait until the node subscribes."""
         from diagnostic_msgs.msg import DiagnosticArray
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
         from sensor_msgs.msg import Imu
-        self.proc = subprocess.Popen(self.cmd, env=ros_env(self.domain),
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                     text=True)
-        self.node = rclpy.create_node(f'allan_feed_{id(self)}', context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
+        super().__enter__()
         self.node.create_subscription(DiagnosticArray, '/diagnostics',
                                       lambda m: self.diags.append((time.monotonic(), m)), 50)
         qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=20000,
@@ -86,17 +79,6 @@ class AllanFeed:
         assert self.spin_until(lambda: self.pub.get_subscription_count() > 0, 30), \
             'allan node did not subscribe'
         return self
-
-    def __exit__(self, *exc):
-        """Stop the node (SIGINT, then kill) and the client."""
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.proc.send_signal(signal.SIGINT)
-        try:
-            self.proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.communicate()
 
     def spin_until(self, predicate, timeout):
         """Spin the client until ``predicate()``; False after ``timeout`` s."""

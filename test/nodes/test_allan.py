@@ -11,7 +11,7 @@ import math
 import subprocess
 import time
 
-from conftest import DOMAIN, executable, ros_env, spin_until
+from conftest import DOMAIN, executable, NodeRun, ros_env, spin_until
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.simulate import simulate
@@ -52,7 +52,6 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray
@@ -73,12 +72,8 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
            '-p', f'budget_file:={loose}', '-p', 'queue_depth:=40000',
            '-p', 'targets:=bias_instability=0.05', '-p', 'advice_period:=2.0',
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
-    proc = subprocess.Popen(cmd, env=ros_env(DOMAIN), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
-    node = rclpy.create_node('allan_test_client', context=ros_context)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    try:
+    with NodeRun(cmd, ros_context, 'allan_test_client') as run:
+        node, executor = run.node, run.executor
         coeffs, diags = [], []
         node.create_subscription(Float64MultiArray, 'imu/allan_coeffs',
                                  lambda m: coeffs.append((time.monotonic(), m)), 10)
@@ -211,15 +206,7 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
         named = [values(s)['effect'] for s in missing]
         assert named.count('bias_instability') >= 5, named
         assert all(float(values(s)['gap']) > 2 for s in missing)
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        proc.terminate()
-        try:
-            out, _ = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, _ = proc.communicate()
+    out = run.output
     assert 'Traceback' not in out, out
 
 

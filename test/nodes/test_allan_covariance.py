@@ -8,10 +8,8 @@ sides (through the node's QoS override parameters), so a lost message is a failu
 """
 
 import math
-import os
-import subprocess
 
-from conftest import executable, ros_env, spin_until
+from conftest import executable, NodeRun, spin_until
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.core.units import IEEE_TERMS
@@ -20,20 +18,9 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
-DOMAIN = os.getpid() % 100 + 100
 RATE = 100.0
 N = 5000
 DRIVER_GYRO, DRIVER_ACCEL = 0.5, 0.25  # the driver's own diagonal variances (pass-through)
-
-
-@pytest.fixture(scope='module')
-def ros_context():
-    """Return an rclpy context on this process's own domain id."""
-    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 def test_covariance_topic_carries_live_per_sample_variances(ros_context):
@@ -45,7 +32,6 @@ def test_covariance_topic_carries_live_per_sample_variances(ros_context):
     per-sample variance robot_localization reads), with the last table reached; orientation
     (-1 = not provided), off-diagonals, stamps and samples are untouched.
     """
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray
@@ -74,12 +60,8 @@ def test_covariance_topic_carries_live_per_sample_variances(ros_context):
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable',
            '-p', 'qos_overrides./imu/data_cov.publisher.reliability:=reliable',
            '-p', 'qos_overrides./imu/data_cov.publisher.depth:=20000']
-    proc = subprocess.Popen(cmd, env=ros_env(DOMAIN), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
-    node = rclpy.create_node('covariance_test_client', context=ros_context)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    try:
+    with NodeRun(cmd, ros_context, 'covariance_test_client') as run:
+        node, executor = run.node, run.executor
         qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=20000,
                          reliability=QoSReliabilityPolicy.RELIABLE)
         received, tables = [], []
@@ -99,15 +81,7 @@ def test_covariance_topic_carries_live_per_sample_variances(ros_context):
         assert spin_until(executor, lambda: len(received) >= N, 60), \
             f'{len(received)} of {N} messages republished'
         spin_until(executor, lambda: False, 0.5)
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        proc.terminate()
-        try:
-            out, _ = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, _ = proc.communicate()
+    out = run.output
     assert 'Traceback' not in out, out
 
     # no message dropped, duplicated or reordered; samples and orientation untouched

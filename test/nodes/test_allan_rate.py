@@ -9,10 +9,9 @@ record) on exactly the same samples.  RELIABLE QoS so that no sample is lost on 
 
 import math
 import os
-import subprocess
 import time
 
-from conftest import executable, ros_env, spin_until
+from conftest import executable, NodeRun, spin_until
 from imu_allan.core.analysis import AnalysisOptions, analyze_samples
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
@@ -48,7 +47,6 @@ def _messages(t, data):
 def test_measured_rate_equals_analyze():
     """No rate_hz: diagnostics report the measured 400 Hz, coefficients equal analyze's."""
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray
@@ -62,15 +60,11 @@ def test_measured_rate_equals_analyze():
 
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=DOMAIN)
-    proc = subprocess.Popen(
-        [executable('allan'), '--ros-args', '-p', 'publish_period:=1.0',
-         '-p', 'queue_depth:=30000',
-         '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable'],
-        env=ros_env(DOMAIN), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    node = rclpy.create_node('allan_rate_test', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    try:
+    cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=1.0',
+           '-p', 'queue_depth:=30000',
+           '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
+    with NodeRun(cmd, context, 'allan_rate_test', DOMAIN, shutdown_context=True) as run:
+        node, executor = run.node, run.executor
         coeffs, diags = [], []
         node.create_subscription(Float64MultiArray, 'imu/allan_coeffs',
                                  lambda m: coeffs.append((time.monotonic(), m)), 10)
@@ -104,11 +98,6 @@ def test_measured_rate_equals_analyze():
         assert np.array_equal(np.isnan(table), np.isnan(expected))
         np.testing.assert_allclose(table, expected, rtol=1e-9, equal_nan=True)
         assert np.isfinite(table[:, 1, 0]).all(), 'white noise found on every axis'
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
-        proc.terminate()
-        out, _ = proc.communicate(timeout=10)
+    out = run.output
     assert 'Traceback' not in out, out
     assert 'sample rate 399.9' in out or 'sample rate 400' in out, out

@@ -9,10 +9,9 @@ RuntimeWarning, no traceback).  12,000 samples at 100 Hz, published about 20x fa
 real time with RELIABLE QoS so that every sample arrives.
 """
 
-import subprocess
 import time
 
-from conftest import DOMAIN, executable, ros_env, spin_until
+from conftest import executable, NodeRun, spin_until
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.simulate import simulate
 from imu_allan.core.units import AXES, IEEE_TERMS
@@ -40,7 +39,6 @@ def _offline(t, data):
 def test_allan_node_rejects_bad_values_per_axis(ros_context):
     """Publish NaN every 50th gyro_x, 1e300 in accel_y: coefficients kept, WARN with counts."""
     from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
     from sensor_msgs.msg import Imu
     from std_msgs.msg import Float64MultiArray
@@ -58,12 +56,8 @@ def test_allan_node_rejects_bad_values_per_axis(ros_context):
     cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=1.0',
            '-p', 'queue_depth:=20000', '-p', f'terms:={TERMS}',
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
-    proc = subprocess.Popen(cmd, env=ros_env(DOMAIN), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
-    node = rclpy.create_node('allan_rejected_client', context=ros_context)
-    executor = SingleThreadedExecutor(context=ros_context)
-    executor.add_node(node)
-    try:
+    with NodeRun(cmd, ros_context, 'allan_rejected_client') as run:
+        node, executor = run.node, run.executor
         coeffs, diags = [], []
         node.create_subscription(Float64MultiArray, 'imu/allan_coeffs',
                                  lambda m: coeffs.append((time.monotonic(), m)), 10)
@@ -126,14 +120,6 @@ def test_allan_node_rejects_bad_values_per_axis(ros_context):
         used = int(final['samples_used'])
         assert used == pipe.estimator.n_used and used > N - 100
         assert int(final['samples_used.gyro_x']) == pipe.estimator.n_used_axes[0] < used
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        proc.terminate()
-        try:
-            out, err = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, err = proc.communicate()
-    assert 'Traceback' not in out + err, out + err
-    assert 'RuntimeWarning' not in out + err and 'Warning:' not in out + err, out + err
+    out = run.output
+    assert 'Traceback' not in out, out
+    assert 'RuntimeWarning' not in out and 'Warning:' not in out, out

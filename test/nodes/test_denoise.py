@@ -1,10 +1,9 @@
 """The built ``denoise`` executable over real DDS: same numbers as the core, original stamps."""
 
 import math
-import os
 import subprocess
 
-from conftest import executable, ros_env, spin_until
+from conftest import DOMAIN, executable, NodeRun, ros_env, spin_until
 from imu_allan.core.allan import allan_deviation
 from imu_allan.core.health import RateFinder
 from imu_allan.core.model import thesis_gx3_25_model
@@ -16,12 +15,11 @@ import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
-DOMAIN = os.getpid() % 100 + 100
 RATE = 100.0
 N = 6000
 
 
-def test_denoise_node_stream():
+def test_denoise_node_stream(ros_context):
     """
     60 s of thesis-model data through the node equal the offline BlockDenoiser.
 
@@ -29,7 +27,6 @@ def test_denoise_node_stream():
     originals in order, the latency bound holds, and the short-tau ADEV drops (sym8 level 4
     removes the band above fs/32: at tau0 the white-noise ADEV falls by far more than 4x).
     """
-    from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
     from sensor_msgs.msg import Imu
 
@@ -48,19 +45,12 @@ def test_denoise_node_stream():
         msgs.append(msg)
     t_in, data_in = imus_to_arrays(msgs)
 
-    os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
-    context = rclpy.Context()
-    rclpy.init(context=context)
     cmd = [executable('denoise'), '--ros-args', '-p', 'queue_depth:=20000',
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable',
            '-p', 'qos_overrides./imu/data_denoised.publisher.reliability:=reliable',
            '-p', 'qos_overrides./imu/data_denoised.publisher.depth:=20000']
-    proc = subprocess.Popen(cmd, env=ros_env(DOMAIN), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
-    node = rclpy.create_node('denoise_test_client', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    try:
+    with NodeRun(cmd, ros_context, 'denoise_test_client') as run:
+        node, executor = run.node, run.executor
         received = []
         qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=20000,
                          reliability=QoSReliabilityPolicy.RELIABLE)
@@ -80,16 +70,7 @@ def test_denoise_node_stream():
         assert spin_until(executor, lambda: len(received) >= expected.shape[0], 60), \
             f'{len(received)} of {expected.shape[0]} denoised messages'
         spin_until(executor, lambda: False, 0.5)  # nothing more may come
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
-        proc.terminate()
-        try:
-            out, _ = proc.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out, _ = proc.communicate()
+    out = run.output
     assert 'Traceback' not in out, out
     assert len(received) == expected.shape[0]
     assert expected.shape[0] >= N - reference.latency_samples
