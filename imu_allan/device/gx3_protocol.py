@@ -17,6 +17,7 @@ gauss, Euler angles in rad, timer in ticks.  Conversion to SI happens in the con
 """
 
 from dataclasses import dataclass
+import functools
 import math
 import struct
 
@@ -416,6 +417,28 @@ def record_dtype(code, little_endian=False):
                      ('timer', '>u4'), ('checksum', '>u2')])
 
 
+@functools.lru_cache(maxsize=None)
+def record_fields_dtype(code):
+    """
+    Structured dtype of one big-endian record with one field per value group.
+
+    Fields: ``code`` (u1), one ``>f4`` sub-array per entry of :data:`DATA_RECORDS` (device
+    units), ``timer`` (``>u4`` ticks), ``checksum``.  Built once per code.
+    """
+    fields = [('code', 'u1')] + [(name, '>f4', (k,)) for name, k in DATA_RECORDS[code]]
+    return np.dtype(fields + [('timer', '>u4'), ('checksum', '>u2')])
+
+
+def record_array(code, data):
+    """
+    View concatenated records of one code (``bytes``, checksums verified) as a structured array.
+
+    No copy: ``out['gyro']`` is an ``(n, 3)`` big-endian float32 view (device units) and
+    ``out['timer']`` the u32 ticks; assigning them to float64/int64 arrays converts exactly.
+    """
+    return np.frombuffer(data, dtype=record_fields_dtype(code))
+
+
 def decode_records(code, packets, little_endian=False):
     """
     Decode many records of one code at once (checksums must already be verified).
@@ -529,6 +552,36 @@ class TimerUnwrapper:
             self.last_step = value - self.last
         self.last_raw, self.last = raw, value
         return value
+
+    def update_many(self, raw):
+        """
+        Unwrap a batch of raw u32 values at once; return ``(ticks, steps)`` or None.
+
+        ``ticks``: the int64 values :meth:`update` would give one by one; ``steps``: int64
+        differences from the previous value (0 for the first value ever).  Only for a batch
+        with no backward step (no rollover or reset: the usual case); for any other batch it
+        returns None and changes nothing, and the caller takes it value by value.
+        """
+        n = raw.shape[0]
+        if not n or (self.last_raw is not None and raw[0] < self.last_raw):
+            return None
+        steps = np.empty(n, dtype=np.int64)
+        steps[0] = 0 if self.last_raw is None else raw[0] - self.last_raw
+        np.subtract(raw[1:], raw[:-1], out=steps[1:])
+        if np.minimum.reduce(steps) < 0:
+            return None
+        ticks = raw + self.offset
+        # The last positive step, as update() leaves it (steps are never negative here, and
+        # the first value ever has step 0).
+        if steps[-1]:
+            self.last_step = int(steps[-1])
+        else:
+            positive = np.flatnonzero(steps)
+            if positive.shape[0]:
+                self.last_step = int(steps[positive[-1]])
+        self.event = None
+        self.last_raw, self.last = int(raw[-1]), int(ticks[-1])
+        return ticks, steps
 
 
 def matrix_to_quaternion(matrix):
