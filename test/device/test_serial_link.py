@@ -1,6 +1,8 @@
 """Time sync, back-off, rate validation, CDR packing and the simulator over a real pty."""
 
+from collections import deque
 import csv
+import math
 import signal
 import subprocess
 import sys
@@ -79,6 +81,65 @@ def test_time_sync_reanchors_on_discontinuities():
     sync.reset()
     again = sync.stamps(device[:5], arrival[:5] + 100.0)
     assert abs(again[0] * 1e-9 - (arrival[4] + 100.0)) < 0.05
+
+
+def stamps_one_by_one(sync, device, host):
+    """
+    The stamps of one batch by the module docstring's rule, one record at a time in floats.
+
+    A reference for :meth:`TimeSync.stamps`: T = the window minimum of host - device over the
+    batches so far, o moves towards T by at most max_slew per second of device time since the
+    last stamp, stamp = round((d + o) * 1e9) ns on a whole-second epoch.  Shares the
+    TimeSync's state (window, offset) so that it can run beside it batch after batch.  Also
+    returns whether the slew limit held back any record's offset.
+    """
+    if sync.epoch is None:
+        sync.epoch = math.floor(host[0])
+    if sync.last_device is not None and device[0] < sync.last_device:
+        sync.reset()
+        sync.jumps += 1
+    batch_min = min((h - sync.epoch) - d for d, h in zip(device, host))
+    minima = [m for m in sync.minima if m[1] < batch_min] + [(device[-1], batch_min)]
+    minima = [m for m in minima if not m[0] < device[-1] - sync.window]
+    sync.minima = deque(minima)
+    target = minima[0][1]
+    if sync.offset is None or abs(target - sync.offset) > sync.jump_threshold:
+        sync.jumps += sync.offset is not None
+        sync.offset, sync.last_device = target, device[0]
+    out, limited = [], False
+    for d in device:
+        allowed = sync.max_slew * max(d - sync.last_device, 0.0)
+        limited |= abs(target - sync.offset) > allowed
+        offset = sync.offset + min(max(target - sync.offset, -allowed), allowed)
+        out.append(round((d + offset) * 1e9) + sync.epoch * 10**9)
+    sync.offset, sync.last_device = offset, device[-1]
+    return out, limited
+
+
+def test_time_sync_batches_equal_the_rule_record_by_record():
+    """
+    TimeSync.stamps gives, to the nanosecond, the rule evaluated per record in plain floats.
+
+    Batches of 1..12 records with jitter (the offset slews element-wise), converged stretches
+    (the scalar shortcut), a host-clock step (a jump) and a device-time reset; fixed seed,
+    exact integer comparison.
+    """
+    device, _, arrival = simulate_arrivals(seconds=40, drift=2e-4, seed=4)
+    arrival[1000:] += 0.9                  # host clock step: a jump once the window forgets
+    device[3000:] -= 25.0                  # device time goes back at a batch start: a reset
+    rng = np.random.default_rng(5)
+    cuts = np.cumsum(rng.integers(1, 13, size=len(device)))
+    cuts = np.union1d(cuts[cuts < len(device)], [3000])
+    fast, ref = TimeSync(), TimeSync()
+    limited = []
+    for d, h in zip(np.split(device, cuts), np.split(arrival, cuts)):
+        expect, held_back = stamps_one_by_one(ref, d.tolist(), h.tolist())
+        got = fast.stamps(d, h)
+        assert got.dtype == np.int64 and got.tolist() == expect
+        assert (fast.offset, fast.last_device, fast.jumps) == (ref.offset, ref.last_device,
+                                                               ref.jumps)
+        limited.append(held_back)
+    assert fast.jumps == 2 and 10 <= sum(limited) <= len(limited) - 10
 
 
 def test_backoff():
