@@ -441,6 +441,19 @@ def _find_once(raw, pattern):
     return i
 
 
+def header_padding(raw):
+    """
+    Return the slice of the alignment padding after the header of a serialized message.
+
+    For a little-endian CDR message that starts with a ``std_msgs/Header`` followed by float64
+    fields (Imu, MagneticField): the bytes between the frame_id's NUL and the next 8-byte
+    boundary (counted from the end of the encapsulation header).  rclpy leaves them as they
+    were in memory, so two serializations of one message may differ there.
+    """
+    end = 16 + int.from_bytes(raw[12:16], 'little')
+    return slice(end, end + (-(end - 4)) % 8)
+
+
 class CdrPacker:
     """
     Serialize a batch of messages by patching a CDR template with numpy.
@@ -450,7 +463,8 @@ class CdrPacker:
     the sentinels locate those fields, which a structured dtype over the message bytes then
     names.  ``pack`` writes a whole batch at once, and each message is published as bytes
     (rclpy ``publish`` accepts serialized messages).  Values are the same float64 numbers that
-    would have been assigned to the message fields.
+    would have been assigned to the message fields.  For messages of a ``std_msgs/Header``
+    then float64 fields (:func:`header_padding`, zeroed here).
     """
 
     def __init__(self, msg, vectors):
@@ -468,7 +482,8 @@ class CdrPacker:
         if raw[:2] != b'\x00\x01':
             raise RuntimeError('expected little-endian CDR')
         self.size = len(raw)
-        self.template = np.frombuffer(raw, dtype=np.uint8)
+        self.template = np.frombuffer(raw, dtype=np.uint8).copy()
+        self.template[header_padding(raw)] = 0   # not heap bytes, and equal batches equal bytes
         self.stamp = _find_once(raw, struct.pack('<iI', *_SENTINEL_STAMP))
         self.offsets = {}
         names, formats, offsets = ['sec', 'nanosec'], ['<i4', '<u4'], [self.stamp, self.stamp + 4]
