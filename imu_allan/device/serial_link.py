@@ -305,8 +305,9 @@ class Gx3Session:
 
     ``on_batch(code, records, stamps)`` is called from the session thread with ``records``
     from :func:`~imu_allan.device.gx3_protocol.record_array` (a structured array: fields by
-    name, device units) and host-clock ``stamps`` (int64 nanoseconds).  ``clock()`` returns host seconds (the driver passes its
-    ROS clock).  ``log(level, text)`` reports events (level 'info', 'warn', 'error').
+    name, device units) and host-clock ``stamps`` (int64 nanoseconds).  ``clock()`` returns
+    host seconds (the driver passes its ROS clock).  ``log(level, text)`` reports events
+    (level 'info', 'warn', 'error').
     """
 
     def __init__(self, port, baud, mode, rate_hz, on_batch, clock=time.time, log=None,
@@ -527,9 +528,10 @@ class Gx3Session:
 
     def _unwrap_each(self, raw):
         """
-        Unwrap record by record (a batch with a rollover or timer reset); return ``(ticks, steps)``.
+        Unwrap record by record (a batch with a rollover or timer reset).
 
-        A reset re-anchors the time sync and its step is not a gap (its length is unknown).
+        Return ``(ticks, steps)`` as :meth:`TimerUnwrapper.update_many` does; a reset
+        re-anchors the time sync and its step is not a gap (its length is unknown).
         """
         u = self.unwrapper
         ticks = np.empty(len(raw), dtype=np.int64)

@@ -86,7 +86,7 @@ def test_time_sync_reanchors_on_discontinuities():
 
 def stamps_one_by_one(sync, device, host):
     """
-    The stamps of one batch by the module docstring's rule, one record at a time in floats.
+    Return the stamps of one batch by the module docstring's rule, record by record in floats.
 
     A reference for :meth:`TimeSync.stamps`: T = the window minimum of host - device over the
     batches so far, o moves towards T by at most max_slew per second of device time since the

@@ -48,7 +48,7 @@ def captured_stream(rng):
 
 @pytest.fixture(scope='module')
 def driver_node(ros_context):
-    """A DriverNode (10 Hz accel_rate_mag, as the capture) whose own session is stopped."""
+    """Yield a DriverNode (10 Hz accel_rate_mag, as the capture) with its session stopped."""
     from imu_allan.nodes.driver import DriverNode
     from rclpy.parameter import Parameter
     node = DriverNode(context=ros_context, parameter_overrides=[
