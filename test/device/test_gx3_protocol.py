@@ -230,7 +230,6 @@ def test_timer_unwrapper():
     assert out[4] == 2**32 + 20 and out[5] == 2**32 + 30
 
 
-
 def random_timer_batches(rng, n=3000):
     """
     Raw u32 timer values in random batches: even 62/63-tick steps, gaps, repeats, rollovers.
