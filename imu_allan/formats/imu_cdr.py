@@ -495,19 +495,29 @@ class CdrPacker:
             offsets.append(self.offsets[name][0])
         self.dtype = np.dtype({'names': names, 'formats': formats, 'offsets': offsets,
                                'itemsize': self.size})
+        self._buffers = {}   # batch size -> (bytes array, its field view)
 
     def pack(self, stamps_ns, **vectors):
         """
         Return ``(bytes of n messages back to back, message size)``.
 
         ``stamps_ns``: (n,) int64 header stamps in ns (split into sec and nanosec, nanosec in
-        [0, 1e9)); ``vectors``: name -> (n, k) values of any real dtype, stored as float64.
+        [0, 1e9)); ``vectors``: every vector named at construction -> (n, k) values of any
+        real dtype, stored as float64.
         """
+        if vectors.keys() != self.offsets.keys():
+            raise ValueError(f'pack needs exactly the vectors {sorted(self.offsets)}')
         stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
         n = stamps_ns.shape[0]
-        out = np.empty((n, self.size), dtype=np.uint8)
-        out[:] = self.template
-        fields = out.view(self.dtype)[:, 0]
+        # One buffer per batch size, kept: only the fields change, the rest stays the template.
+        cached = self._buffers.get(n)
+        if cached is None:
+            out = np.empty((n, self.size), dtype=np.uint8)
+            out[:] = self.template
+            cached = out, out.view(self.dtype)[:, 0]
+            if len(self._buffers) < 64:
+                self._buffers[n] = cached
+        out, fields = cached
         # Assignment casts like astype (seconds past 2038 would wrap; rclpy refuses them too).
         fields['sec'], fields['nanosec'] = np.divmod(stamps_ns, 1_000_000_000)
         for name, values in vectors.items():

@@ -119,6 +119,7 @@ class DriverNode(Node):
         self._set_covariances()
         self.add_on_set_parameters_callback(validate_on_set(self.cfg, PARAMETERS))
         self.add_post_set_parameters_callback(self._post_set)
+        self._clock_handle = self.get_clock().handle
         stall = max(cfg['stall_timeout'], 3.0 * self.decimation / p.BASE_RATE_HZ)
         try:
             self.session = Gx3Session(
@@ -179,7 +180,11 @@ class DriverNode(Node):
 
     # ------------------------------------------------------------ helpers
     def _now(self):
-        return self.get_clock().now().nanoseconds * 1e-9
+        # The node clock's reading (ROS time: simulated time if use_sim_time) in s, without
+        # building an rclpy Time (this runs once per read of the port).
+        handle = self._clock_handle
+        with handle:
+            return handle.get_now().nanoseconds * 1e-9
 
     def _log(self, level, text):
         # One call site per severity (rclpy refuses to change it at a call site).
