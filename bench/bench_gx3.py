@@ -211,7 +211,7 @@ def main():
                        and res['dropped_packets'] == 0
                        and res['sent'] >= 0.99 * args.rate_hz * res['seconds'])
     goal(f'driver at {args.rate_hz:g} Hz: {100 * res["cpu_share"]:.1f} % of one core, '
-         f'{lost} of {res["sent"]} messages dropped over {res["seconds"]:.0f} s '
+         f'{lost} of {res["sent"]} messages dropped ({causes}) over {res["seconds"]:.0f} s '
          f'(< 8 % of one core, nothing dropped)', nothing_dropped and res['cpu_share'] < 0.08)
     return 0
 

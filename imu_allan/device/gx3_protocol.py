@@ -557,30 +557,28 @@ class TimerUnwrapper:
         """
         Unwrap a batch of raw u32 values at once; return ``(ticks, steps)`` or None.
 
-        ``ticks``: the int64 values :meth:`update` would give one by one; ``steps``: int64
-        differences from the previous value (0 for the first value ever).  Only for a batch
-        with no backward step (no rollover or reset: the usual case); for any other batch it
-        returns None and changes nothing, and the caller takes it value by value.
+        ``ticks``: the int64 array :meth:`update` would give value by value; ``steps``: the
+        list of differences from the previous value (0 for the first value ever).  Only for a
+        batch with no backward step (no rollover or reset: the usual case); for any other
+        batch it returns None and changes nothing, and the caller takes it value by value.
+        The steps are taken in plain Python: a batch is a few records, where each numpy call
+        costs more than the whole loop.
         """
-        n = raw.shape[0]
-        if not n or (self.last_raw is not None and raw[0] < self.last_raw):
+        values = raw.tolist()
+        if not values:
             return None
-        steps = np.empty(n, dtype=np.int64)
-        steps[0] = 0 if self.last_raw is None else raw[0] - self.last_raw
-        np.subtract(raw[1:], raw[:-1], out=steps[1:])
-        if np.minimum.reduce(steps) < 0:
+        previous = values[0] if self.last_raw is None else self.last_raw
+        steps = [b - a for a, b in zip([previous] + values, values)]
+        if min(steps) < 0:
             return None
         ticks = raw + self.offset
-        # The last positive step, as update() leaves it (steps are never negative here, and
-        # the first value ever has step 0).
-        if steps[-1]:
-            self.last_step = int(steps[-1])
-        else:
-            positive = np.flatnonzero(steps)
-            if positive.shape[0]:
-                self.last_step = int(steps[positive[-1]])
+        # The last positive step, as update() leaves it (the first value ever has step 0).
+        for step in reversed(steps):
+            if step:
+                self.last_step = step
+                break
         self.event = None
-        self.last_raw, self.last = int(raw[-1]), int(ticks[-1])
+        self.last_raw, self.last = values[-1], values[-1] + self.offset
         return ticks, steps
 
 

@@ -43,7 +43,7 @@ import numpy as np
 
 from . import gx3_protocol as p
 from .gx3_stream import StreamParser
-from ..core.preprocess import count_gaps
+from ..core.preprocess import count_gaps, GAP_FACTOR
 
 
 class LinkError(Exception):
@@ -330,6 +330,8 @@ class Gx3Session:
         self.unwrapper = p.TimerUnwrapper()
         self.stats = SessionStats()
         self.expected_step = self.decimation * p.TICKS_PER_SECOND / p.BASE_RATE_HZ
+        # Only a batch with a step above this can hold a gap (count_gaps' rule).
+        self.gap_step = GAP_FACTOR * self.expected_step
         self.raw = open(record_raw, 'ab') if record_raw else None
         self.state = 'starting'
         self.last_error = ''
@@ -519,8 +521,8 @@ class Gx3Session:
         # The gap reference (the last record's ticks) is the unwrapper's last value.
         unwrapped = self.unwrapper.update_many(raw) if self.vectorized else None
         ticks, steps = unwrapped or self._unwrap_each(raw)
-        _, missing = count_gaps(steps, self.expected_step)
-        self.stats.dropped += missing
+        if steps and max(steps) > self.gap_step:
+            self.stats.dropped += count_gaps(steps, self.expected_step)[1]
         # Unwrapped ticks never decrease, so one TimeSync call stamps the whole batch.
         stamps = self.sync.stamps(p.ticks_to_seconds(ticks), host_times)
         self.stats.records += len(raw)
