@@ -532,8 +532,9 @@ class Gx3Session:
         """
         Unwrap record by record (a batch with a rollover or timer reset).
 
-        Return ``(ticks, steps)`` as :meth:`TimerUnwrapper.update_many` does; a reset
-        re-anchors the time sync and its step is not a gap (its length is unknown).
+        Return ``(ticks, steps)`` like :meth:`TimerUnwrapper.update_many`, the steps without
+        a reset's: its length is unknown, so it is no gap; a reset also re-anchors the time
+        sync.
         """
         u = self.unwrapper
         ticks = np.empty(len(raw), dtype=np.int64)
