@@ -98,6 +98,8 @@ def account(blobs, truth_path):
     got = [index.get(tuple(g)) for g in data[ok, :3].tolist()]
     unmatched = got.count(None) + int((~ok).sum())
     got = np.array([i for i in got if i is not None], dtype=np.int64)
+    if not got.size:
+        return {'sent': 0, 'received': 0, 'lost': {}, 'out_of_order': 0, 'unmatched': unmatched}
     first, last = int(got.min()), int(got.max())
     arrived = np.zeros(last - first + 1, dtype=bool)
     arrived[got - first] = True
