@@ -17,6 +17,7 @@ gauss, Euler angles in rad, timer in ticks.  Conversion to SI happens in the con
 """
 
 from dataclasses import dataclass
+import functools
 import math
 import struct
 
@@ -416,6 +417,28 @@ def record_dtype(code, little_endian=False):
                      ('timer', '>u4'), ('checksum', '>u2')])
 
 
+@functools.lru_cache(maxsize=None)
+def record_fields_dtype(code):
+    """
+    Structured dtype of one big-endian record with one field per value group.
+
+    Fields: ``code`` (u1), one ``>f4`` sub-array per entry of :data:`DATA_RECORDS` (device
+    units), ``timer`` (``>u4`` ticks), ``checksum``.  Built once per code.
+    """
+    fields = [('code', 'u1')] + [(name, '>f4', (k,)) for name, k in DATA_RECORDS[code]]
+    return np.dtype(fields + [('timer', '>u4'), ('checksum', '>u2')])
+
+
+def record_array(code, data):
+    """
+    View concatenated records of one code (``bytes``, checksums verified) as a structured array.
+
+    No copy: ``out['gyro']`` is an ``(n, 3)`` big-endian float32 view (device units) and
+    ``out['timer']`` the u32 ticks; assigning them to float64/int64 arrays converts exactly.
+    """
+    return np.frombuffer(data, dtype=record_fields_dtype(code))
+
+
 def decode_records(code, packets, little_endian=False):
     """
     Decode many records of one code at once (checksums must already be verified).
@@ -529,6 +552,34 @@ class TimerUnwrapper:
             self.last_step = value - self.last
         self.last_raw, self.last = raw, value
         return value
+
+    def update_many(self, raw):
+        """
+        Unwrap a batch of raw u32 values at once; return ``(ticks, steps)`` or None.
+
+        ``ticks``: the int64 array :meth:`update` would give value by value; ``steps``: the
+        list of differences from the previous value (0 for the first value ever).  Only for a
+        batch with no backward step (no rollover or reset: the usual case); for any other
+        batch it returns None and changes nothing, and the caller takes it value by value.
+        The steps are taken in plain Python: a batch is a few records, where each numpy call
+        costs more than the whole loop.
+        """
+        values = raw.tolist()
+        if not values:
+            return None
+        previous = values[0] if self.last_raw is None else self.last_raw
+        steps = [b - a for a, b in zip([previous] + values, values)]
+        if min(steps) < 0:
+            return None
+        ticks = raw + self.offset
+        # The last positive step, as update() leaves it (the first value ever has step 0).
+        for step in reversed(steps):
+            if step:
+                self.last_step = step
+                break
+        self.event = None
+        self.last_raw, self.last = values[-1], values[-1] + self.offset
+        return ticks, steps
 
 
 def matrix_to_quaternion(matrix):

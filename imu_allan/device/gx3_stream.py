@@ -81,8 +81,10 @@ class StreamParser:
         buf += data
         lengths = self._lengths
         base = self._base
+        expect = self._expect - base    # where the next packet is due, relative to buf
         n = len(buf)
         i = 0
+        rejected = resyncs = 0
         out = []
         while i < n:
             length = lengths[buf[i]]
@@ -90,28 +92,31 @@ class StreamParser:
                 # Not a header byte: jump to the next one (or the end).
                 m = self._header_re.search(buf, i + 1)
                 j = m.start() if m else n
-                stats.rejected_bytes += j - i
+                rejected += j - i
                 i = j
                 continue
             end = i + length
             if end > n:
                 break           # wait for the rest of this candidate
             if (sum(buf[i:end - 2]) & 0xFFFF) == (buf[end - 2] << 8 | buf[end - 1]):
-                if base + i != self._expect:
-                    stats.resyncs += 1
+                if i != expect:
+                    resyncs += 1
                 out.append(bytes(buf[i:end]))
-                stats.packets += 1
-                i = end
-                self._expect = base + end
+                i = expect = end
                 continue
-            if base + i == self._expect:
+            if i == expect:
                 # A damaged packet where one was due; the next one is due after it.
                 stats.bad_checksums += 1
-                self._expect = base + end
-            stats.rejected_bytes += 1
+                expect = end
+            rejected += 1
             i += 1
+        # (Counters kept in locals in the loop: this runs on every read of the port.)
+        stats.packets += len(out)
+        stats.rejected_bytes += rejected
+        stats.resyncs += resyncs
         del buf[:i]
         self._base = base + i
+        self._expect = base + expect
         return out
 
     def flush(self):

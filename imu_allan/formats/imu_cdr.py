@@ -12,7 +12,7 @@ unexpected length) goes through the generic deserializer (:func:`deserialize`).
 
 Encoding: :func:`encode_imu` (bag writers, the same bytes ``rosbags`` gives), :class:`CdrPacker`
 (the driver: a template serialized once by rclpy, patched in bulk), stamp splitting
-(:func:`seconds_to_stamps`, :func:`split_stamps`).
+(:func:`seconds_to_stamps`).
 
 Also holds what the storage scanners (:mod:`.mcap_scan`, :mod:`.sqlite_pages`,
 :mod:`.ros1_scan`) and :mod:`.bag_reader` share: the Imu type names, topic choice and the
@@ -552,13 +552,6 @@ def encode_imu(t, data6, frame_id='imu_link', ros1=False):
     return rows, stamp_ns
 
 
-def split_stamps(stamps_ns):
-    """Integer nanoseconds -> (sec, nanosec) lists for builtin_interfaces/Time."""
-    ns = np.asarray(stamps_ns, dtype=np.int64)
-    sec = ns // 1_000_000_000
-    return sec.tolist(), (ns - sec * 1_000_000_000).tolist()
-
-
 _SENTINEL_STAMP = (0x7A5A5A01, 0x3A5A5A02)
 
 
@@ -574,15 +567,30 @@ def _find_once(raw, pattern):
     return i
 
 
+def header_padding(raw):
+    """
+    Return the slice of the alignment padding after the header of a serialized message.
+
+    For a little-endian CDR message that starts with a ``std_msgs/Header`` followed by float64
+    fields (Imu, MagneticField): the bytes between the frame_id's NUL and the next 8-byte
+    boundary (counted from the end of the encapsulation header).  rclpy leaves them as they
+    were in memory, so two serializations of one message may differ there.
+    """
+    end = 16 + int.from_bytes(raw[12:16], 'little')
+    return slice(end, end + (-(end - 4)) % 8)
+
+
 class CdrPacker:
     """
     Serialize a batch of messages by patching a CDR template with numpy.
 
     The template is the configured message (frame_id, covariances) serialized once by rclpy
     with sentinel values in the fields that change per message (stamp and float64 vectors);
-    the sentinels locate those fields.  ``pack`` then writes a whole batch at once, and each
-    message is published as bytes (rclpy ``publish`` accepts serialized messages).  Values
-    are the same float64 numbers that would have been assigned to the message fields.
+    the sentinels locate those fields, which a structured dtype over the message bytes then
+    names.  ``pack`` writes a whole batch at once, and each message is published as bytes
+    (rclpy ``publish`` accepts serialized messages).  Values are the same float64 numbers that
+    would have been assigned to the message fields.  For messages of a ``std_msgs/Header``
+    then float64 fields (:func:`header_padding`, zeroed here).
     """
 
     def __init__(self, msg, vectors):
@@ -600,24 +608,44 @@ class CdrPacker:
         if raw[:2] != b'\x00\x01':
             raise RuntimeError('expected little-endian CDR')
         self.size = len(raw)
-        self.template = np.frombuffer(raw, dtype=np.uint8)
+        self.template = np.frombuffer(raw, dtype=np.uint8).copy()
+        self.template[header_padding(raw)] = 0   # not heap bytes, and equal batches equal bytes
         self.stamp = _find_once(raw, struct.pack('<iI', *_SENTINEL_STAMP))
         self.offsets = {}
+        names, formats, offsets = ['sec', 'nanosec'], ['<i4', '<u4'], [self.stamp, self.stamp + 4]
         for name, (first, n) in firsts.items():
             pattern = b''.join(struct.pack('<d', _sentinel(first + j)) for j in range(n))
             self.offsets[name] = (_find_once(raw, pattern), n)
+            names.append(name)
+            formats.append(('<f8', (n,)))
+            offsets.append(self.offsets[name][0])
+        self.dtype = np.dtype({'names': names, 'formats': formats, 'offsets': offsets,
+                               'itemsize': self.size})
+        self._buffers = {}   # batch size -> (bytes array, its field view)
 
-    def pack(self, secs, nsecs, **vectors):
-        """Return ``(bytes of n messages back to back, message size)``."""
-        n = len(secs)
-        out = np.empty((n, self.size), dtype=np.uint8)
-        out[:] = self.template
-        stamp = np.empty((n, 2), dtype='<u4')
-        stamp[:, 0] = np.asarray(secs, dtype=np.int64).astype('<i4').view('<u4')
-        stamp[:, 1] = nsecs
-        out[:, self.stamp:self.stamp + 8] = stamp.view(np.uint8).reshape(n, 8)
+    def pack(self, stamps_ns, **vectors):
+        """
+        Return ``(bytes of n messages back to back, message size)``.
+
+        ``stamps_ns``: (n,) int64 header stamps in ns (split into sec and nanosec, nanosec in
+        [0, 1e9)); ``vectors``: every vector named at construction -> (n, k) values of any
+        real dtype, stored as float64.
+        """
+        if vectors.keys() != self.offsets.keys():
+            raise ValueError(f'pack needs exactly the vectors {sorted(self.offsets)}')
+        stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+        n = stamps_ns.shape[0]
+        # One buffer per batch size, kept: only the fields change, the rest stays the template.
+        cached = self._buffers.get(n)
+        if cached is None:
+            out = np.empty((n, self.size), dtype=np.uint8)
+            out[:] = self.template
+            cached = out, out.view(self.dtype)[:, 0]
+            if len(self._buffers) < 64:
+                self._buffers[n] = cached
+        out, fields = cached
+        # Assignment casts like astype (seconds past 2038 would wrap; rclpy refuses them too).
+        fields['sec'], fields['nanosec'] = np.divmod(stamps_ns, 1_000_000_000)
         for name, values in vectors.items():
-            off, k = self.offsets[name]
-            block = np.ascontiguousarray(values, dtype='<f8').reshape(n, k)
-            out[:, off:off + 8 * k] = block.view(np.uint8).reshape(n, 8 * k)
+            fields[name] = values
         return out.tobytes(), self.size

@@ -42,7 +42,7 @@ from .common import (
 from ..device import gx3_protocol as p
 from ..device.serial_link import check_rate, Gx3Session, MODES
 from ..errors import InputError
-from ..formats.imu_cdr import CdrPacker, split_stamps
+from ..formats.imu_cdr import CdrPacker
 
 DESCRIPTION = ('Reads a LORD MicroStrain 3DM-GX3-25 over a serial port (single-byte '
                'protocol) and publishes imu/data_raw, imu/data (orientation modes), imu/mag '
@@ -91,8 +91,9 @@ PARAMETERS = [
 class DriverNode(Node):
     """The ROS side: parameters, publishers, batch publishing, diagnostics."""
 
-    def __init__(self):
-        super().__init__('driver')
+    def __init__(self, **node_options):
+        """Declare the parameters, open the publishers, start the session thread."""
+        super().__init__('driver', **node_options)
         values = declare_parameter_table(self, PARAMETERS)
         cfg = self._validate(values)
         self.cfg = cfg
@@ -118,6 +119,7 @@ class DriverNode(Node):
         self._set_covariances()
         self.add_on_set_parameters_callback(validate_on_set(self.cfg, PARAMETERS))
         self.add_post_set_parameters_callback(self._post_set)
+        self._clock_handle = self.get_clock().handle
         stall = max(cfg['stall_timeout'], 3.0 * self.decimation / p.BASE_RATE_HZ)
         try:
             self.session = Gx3Session(
@@ -178,7 +180,11 @@ class DriverNode(Node):
 
     # ------------------------------------------------------------ helpers
     def _now(self):
-        return self.get_clock().now().nanoseconds * 1e-9
+        # The node clock's reading (ROS time: simulated time if use_sim_time) in s, without
+        # building an rclpy Time (this runs once per read of the port).
+        handle = self._clock_handle
+        with handle:
+            return handle.get_now().nanoseconds * 1e-9
 
     def _log(self, level, text):
         # One call site per severity (rclpy refuses to change it at a call site).
@@ -193,34 +199,48 @@ class DriverNode(Node):
     # ------------------------------------------------------------ publishing
     def _on_batch(self, code, rec, stamps):
         """Session thread: publish one batch (stamps in integer ns)."""
-        offset_ns = int(round(self.cfg['time_offset'] * 1e9))
         try:
-            self._publish_batch(rec, stamps + offset_ns)
+            self._publish(self.serialize_batch(rec, stamps))
+            self.published += len(stamps)
         except Exception:
             if self.context.ok():
                 raise
             # Shutting down (signal): the last batch has nowhere to go.
 
-    def _publish_batch(self, rec, stamps):
-        secs, nsecs = split_stamps(stamps)
-        gyro = rec['gyro'].astype(np.float64)
-        accel = rec['accel'].astype(np.float64) * self.cfg['gravity']
-        out = [(self.pub_raw, self.pack_raw.pack(
-            secs, nsecs, angular_velocity=gyro, linear_acceleration=accel))]
+    def serialize_batch(self, rec, stamps):
+        """
+        Return ``[(publisher, CDR bytes of the batch's messages back to back, message size)]``.
+
+        ``rec``: records from the session (device units), ``stamps``: int64 ns before
+        ``time_offset``.  Vectorized over the batch; the bytes equal rclpy's serialization
+        of each message.
+        """
+        offset_ns = int(round(self.cfg['time_offset'] * 1e9))
+        if offset_ns:
+            stamps = stamps + offset_ns
+        gyro = rec['gyro']
+        accel = np.multiply(rec['accel'], self.cfg['gravity'], dtype=np.float64)
+        out = [(self.pub_raw, *self.pack_raw.pack(
+            stamps, angular_velocity=gyro, linear_acceleration=accel))]
         if self.orientation:
-            out.append((self.pub_data, self.pack_data.pack(
-                secs, nsecs, angular_velocity=gyro, linear_acceleration=accel,
+            out.append((self.pub_data, *self.pack_data.pack(
+                stamps, angular_velocity=gyro, linear_acceleration=accel,
                 orientation=p.matrix_to_quaternion(rec['matrix']))))
         if self.has_mag:
-            out.append((self.pub_mag, self.pack_mag.pack(
-                secs, nsecs,
-                magnetic_field=rec['mag'].astype(np.float64) * p.GAUSS_TO_TESLA)))
-        # Per message only a slice and a publish of ready CDR bytes.
-        for publisher, (raw, size) in out:
-            publish = publisher.publish
-            for start in range(0, len(raw), size):
-                publish(raw[start:start + size])
-        self.published += len(secs)
+            out.append((self.pub_mag, *self.pack_mag.pack(
+                stamps, magnetic_field=np.multiply(rec['mag'], p.GAUSS_TO_TESLA,
+                                                   dtype=np.float64))))
+        return out
+
+    def _publish(self, batches):
+        # Per message only a slice and rclpy's raw publish of ready CDR bytes (what
+        # Publisher.publish does for bytes, without its per-call type checks).
+        for publisher, raw, size in batches:
+            handle = publisher.handle
+            with handle:
+                publish = handle.publish_raw
+                for start in range(0, len(raw), size):
+                    publish(raw[start:start + size])
 
     # ------------------------------------------------------------ diagnostics
     def _diagnostics(self):

@@ -230,6 +230,68 @@ def test_timer_unwrapper():
     assert out[4] == 2**32 + 20 and out[5] == 2**32 + 30
 
 
+def random_timer_batches(rng, n=3000):
+    """
+    Raw u32 timer values in random batches: even 62/63-tick steps, gaps, repeats, rollovers.
+
+    Also resets (a big backwards step) and a start just below 2**32, so that both the batch
+    path and the value-by-value path of TimerUnwrapper.update_many are taken.
+    """
+    steps = rng.choice([62, 63], size=n)
+    steps[rng.random(n) < 0.02] *= rng.integers(2, 6)          # lost records
+    steps[rng.random(n) < 0.01] = 0                            # repeated value
+    raw = (2**32 - 40 * 62 + np.cumsum(steps)) % 2**32         # rolls over after 40
+    for i in rng.choice(n, size=4, replace=False):             # timer resets
+        raw[i:] = (raw[i:] - raw[i] + int(rng.integers(0, 1000))) % 2**32
+    cuts = np.sort(rng.choice(np.arange(1, n), size=n // 6, replace=False))
+    return [b.astype(np.int64) for b in np.split(raw, cuts)]
+
+
+def test_timer_unwrapper_batches_equal_value_by_value():
+    """
+    update_many gives update()'s ticks, last step and counters, and steps from the last value.
+
+    Batches with a backward step return None without changing anything (the caller then goes
+    value by value); the others are taken at once.  Fixed seeds, exact integer comparison.
+    """
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        ref, fast = p.TimerUnwrapper(), p.TimerUnwrapper()
+        batched = 0
+        for batch in random_timer_batches(rng):
+            expect = [ref.update(int(v)) for v in batch]
+            before = dict(vars(fast))
+            got = fast.update_many(batch)
+            if got is None:
+                assert vars(fast) == before
+                assert [fast.update(int(v)) for v in batch] == expect
+                continue
+            batched += 1
+            ticks, steps = got
+            assert ticks.tolist() == expect
+            previous = [before['last'] if before['last'] is not None else expect[0]]
+            assert steps == np.diff(previous + expect).tolist()
+            for key in ('offset', 'last_raw', 'last', 'last_step', 'rollovers', 'resets'):
+                assert getattr(fast, key) == getattr(ref, key), key
+        assert batched > 400 and ref.rollovers == fast.rollovers >= 1
+        assert ref.resets == fast.resets >= 1
+
+
+@pytest.mark.parametrize('code', sorted(p.DATA_RECORDS))
+def test_record_array_fields_equal_decode_records(code):
+    """The named-field view gives decode_records' values and timers, without a copy."""
+    rng = np.random.default_rng(code)
+    n = sum(k for _, k in p.DATA_RECORDS[code])
+    values = rng.normal(size=(7, n)).astype(np.float32)
+    packets = [p.encode_record(code, v.tolist(), 1000 * i + 7) for i, v in enumerate(values)]
+    data = b''.join(packets)
+    ref = p.decode_records(code, packets)
+    arr = p.record_array(code, data)
+    assert arr.base is not None and arr['timer'].tolist() == ref['timer'].tolist()
+    for name, _ in p.DATA_RECORDS[code]:
+        assert np.array_equal(arr[name].astype(np.float64), ref[name].astype(np.float64))
+
+
 # ---------------------------------------------------------------------------- stream framing
 
 def make_stream(seed=1):

@@ -1,6 +1,8 @@
 """Time sync, back-off, rate validation, CDR packing and the simulator over a real pty."""
 
+from collections import deque
 import csv
+import math
 import signal
 import subprocess
 import sys
@@ -9,6 +11,7 @@ import time
 from imu_allan.device import gx3_protocol as p
 from imu_allan.device.gx3_stream import StreamParser
 from imu_allan.device.serial_link import Backoff, check_rate, LinkError, SerialLink, TimeSync
+from imu_allan.formats.imu_cdr import header_padding
 import numpy as np
 import pytest
 import serial
@@ -81,6 +84,65 @@ def test_time_sync_reanchors_on_discontinuities():
     assert abs(again[0] * 1e-9 - (arrival[4] + 100.0)) < 0.05
 
 
+def stamps_one_by_one(sync, device, host):
+    """
+    Return the stamps of one batch by the module docstring's rule, record by record in floats.
+
+    A reference for :meth:`TimeSync.stamps`: T = the window minimum of host - device over the
+    batches so far, o moves towards T by at most max_slew per second of device time since the
+    last stamp, stamp = round((d + o) * 1e9) ns on a whole-second epoch.  Shares the
+    TimeSync's state (window, offset) so that it can run beside it batch after batch.  Also
+    returns whether the slew limit held back any record's offset.
+    """
+    if sync.epoch is None:
+        sync.epoch = math.floor(host[0])
+    if sync.last_device is not None and device[0] < sync.last_device:
+        sync.reset()
+        sync.jumps += 1
+    batch_min = min((h - sync.epoch) - d for d, h in zip(device, host))
+    minima = [m for m in sync.minima if m[1] < batch_min] + [(device[-1], batch_min)]
+    minima = [m for m in minima if not m[0] < device[-1] - sync.window]
+    sync.minima = deque(minima)
+    target = minima[0][1]
+    if sync.offset is None or abs(target - sync.offset) > sync.jump_threshold:
+        sync.jumps += sync.offset is not None
+        sync.offset, sync.last_device = target, device[0]
+    out, limited = [], False
+    for d in device:
+        allowed = sync.max_slew * max(d - sync.last_device, 0.0)
+        limited |= abs(target - sync.offset) > allowed
+        offset = sync.offset + min(max(target - sync.offset, -allowed), allowed)
+        out.append(round((d + offset) * 1e9) + sync.epoch * 10**9)
+    sync.offset, sync.last_device = offset, device[-1]
+    return out, limited
+
+
+def test_time_sync_batches_equal_the_rule_record_by_record():
+    """
+    TimeSync.stamps gives, to the nanosecond, the rule evaluated per record in plain floats.
+
+    Batches of 1..12 records with jitter (the offset slews element-wise), converged stretches
+    (the scalar shortcut), a host-clock step (a jump) and a device-time reset; fixed seed,
+    exact integer comparison.
+    """
+    device, _, arrival = simulate_arrivals(seconds=40, drift=2e-4, seed=4)
+    arrival[1000:] += 0.9                  # host clock step: a jump once the window forgets
+    device[3000:] -= 25.0                  # device time goes back at a batch start: a reset
+    rng = np.random.default_rng(5)
+    cuts = np.cumsum(rng.integers(1, 13, size=len(device)))
+    cuts = np.union1d(cuts[cuts < len(device)], [3000])
+    fast, ref = TimeSync(), TimeSync()
+    limited = []
+    for d, h in zip(np.split(device, cuts), np.split(arrival, cuts)):
+        expect, held_back = stamps_one_by_one(ref, d.tolist(), h.tolist())
+        got = fast.stamps(d, h)
+        assert got.dtype == np.int64 and got.tolist() == expect
+        assert (fast.offset, fast.last_device, fast.jumps) == (ref.offset, ref.last_device,
+                                                               ref.jumps)
+        limited.append(held_back)
+    assert fast.jumps == 2 and 10 <= sum(limited) <= len(limited) - 10
+
+
 def test_backoff():
     """0.25 s doubling to a 5 s cap; reset after success."""
     b = Backoff()
@@ -114,10 +176,21 @@ def test_serial_link_errors(tmp_path):
 
 # ------------------------------------------------------------------------------ CDR packing
 
+def same_message(expected, got):
+    """
+    Compare serialized messages byte for byte, but for ``expected``'s padding after the header.
+
+    rclpy leaves that padding as it was in memory; CdrPacker zeroes it (checked here).
+    """
+    pad = header_padding(got)
+    return (got[pad] == bytes(pad.stop - pad.start)
+            and expected[:pad.start] + got[pad] + expected[pad.stop:] == got)
+
+
 def test_cdr_packer_matches_rclpy_serializer():
     """Patched CDR bytes deserialize to the values; identical to rclpy's own bytes."""
     pytest.importorskip('rclpy')
-    from imu_allan.nodes.driver import CdrPacker, split_stamps
+    from imu_allan.nodes.driver import CdrPacker
     from rclpy.serialization import deserialize_message, serialize_message
     from sensor_msgs.msg import Imu, MagneticField
     msg = Imu()
@@ -130,8 +203,8 @@ def test_cdr_packer_matches_rclpy_serializer():
     rng = np.random.default_rng(1)
     gyro, accel, quat = rng.normal(size=(4, 3)), rng.normal(size=(4, 3)), rng.normal(size=(4, 4))
     stamps = np.array([0, 1_700_000_000_123_456_789, 5, 2**40], dtype=np.int64)
-    secs, nsecs = split_stamps(stamps)
-    raw, size = packer.pack(secs, nsecs, angular_velocity=gyro, linear_acceleration=accel,
+    secs, nsecs = stamps // 10**9, stamps % 10**9
+    raw, size = packer.pack(stamps, angular_velocity=gyro, linear_acceleration=accel,
                             orientation=quat)
     for i in range(4):
         chunk = raw[i * size:(i + 1) * size]
@@ -144,19 +217,21 @@ def test_cdr_packer_matches_rclpy_serializer():
         assert list(back.angular_velocity_covariance) == [0.5] * 9
         ref = Imu()
         ref.header.frame_id = 'gx3_frame'
-        ref.header.stamp.sec, ref.header.stamp.nanosec = secs[i], nsecs[i]
+        ref.header.stamp.sec, ref.header.stamp.nanosec = int(secs[i]), int(nsecs[i])
         ref.angular_velocity_covariance = [0.5] * 9
         ref.orientation_covariance = [-1.0] + [0.0] * 8
         ref.angular_velocity.x, ref.angular_velocity.y, ref.angular_velocity.z = gyro[i]
         ref.linear_acceleration.x, ref.linear_acceleration.y, ref.linear_acceleration.z = \
             accel[i]
         ref.orientation.x, ref.orientation.y, ref.orientation.z, ref.orientation.w = quat[i]
-        assert serialize_message(ref) == chunk
+        assert same_message(serialize_message(ref), chunk)
     mag = MagneticField()
     mpack = CdrPacker(mag, {'magnetic_field': (mag.magnetic_field, 'xyz')})
-    raw, size = mpack.pack([7], [8], magnetic_field=np.array([[1e-5, 2e-5, -4e-5]]))
+    raw, size = mpack.pack([7 * 10**9 + 8], magnetic_field=np.array([[1e-5, 2e-5, -4e-5]]))
     back = deserialize_message(raw, MagneticField)
+    assert same_message(serialize_message(back), raw)
     assert back.magnetic_field.z == -4e-5 and back.header.stamp.nanosec == 8
+    assert back.header.stamp.sec == 7
 
 
 def test_matrix_to_quaternion_known_rotation():
