@@ -24,6 +24,7 @@ from scipy.special import binom, chdtri
 CI_LEVEL = math.erf(1.0 / math.sqrt(2.0))
 _J_MAX = 100  # Greenhall's switch to the infinite-filter limit for large m (alpha <= 0)
 _SUM_POINTS = 4096  # longer lag sums are integrated (trapezoid, Euler-Maclaurin ends)
+_SUM_BLOCK = 1 << 16  # lags summed at a time where they are summed exactly
 
 
 def _sw(t, alpha):
@@ -129,8 +130,11 @@ def _lag_sum(j_count, big_m, m, f, alpha, moment=0):
     def weight(j):
         return j if moment else 1.0 - j / big_m
     if j_count <= _SUM_POINTS or not math.isinf(f):
-        j = np.arange(1, j_count, dtype=float)
-        return float(np.sum(weight(j) * _sz(j / m, f, alpha) ** 2))
+        total = 0.0
+        for lo in range(1, j_count, _SUM_BLOCK):  # in blocks: a long record's 3m lags would
+            j = np.arange(lo, min(lo + _SUM_BLOCK, j_count), dtype=float)  # take ~100 MB
+            total += float(np.sum(weight(j) * _sz(j / m, f, alpha) ** 2))
+        return total
     j = np.unique(np.concatenate([np.linspace(1.0, j_count - 1.0, _SUM_POINTS),
                                   [float(m), 2.0 * m]]))
     g = weight(j) * _sz(j / m, f, alpha) ** 2

@@ -429,6 +429,19 @@ def release(mm, start, stop):
         mm.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
 
 
+class Passed:
+    """Release a read-only map's pages behind a scanner that walks it front to back."""
+
+    def __init__(self, mm):
+        """Nothing released yet."""
+        self.mm, self.done = mm, 0
+
+    def upto(self, end):
+        """Release everything before byte ``end`` (records between chunks included)."""
+        release(self.mm, self.done, end)
+        self.done = max(self.done, int(end))
+
+
 #: Fewest bytes of a serialized Imu (empty frame_id): a bound for :class:`Collector`'s capacity.
 MIN_IMU_BYTES = 16 + _TAIL
 

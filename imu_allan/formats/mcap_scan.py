@@ -15,7 +15,7 @@ import struct
 
 import numpy as np
 
-from .imu_cdr import Collector, deserialize, IMU_TYPES, map_file, MIN_IMU_BYTES, one_line, release
+from .imu_cdr import Collector, deserialize, IMU_TYPES, map_file, MIN_IMU_BYTES, one_line, Passed
 from ..errors import InputError
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
@@ -93,7 +93,7 @@ class McapScan:
             if f.read(8) != MCAP_MAGIC:
                 raise InputError(self.path, 'not an MCAP file (bad magic bytes)')
             mm = map_file(f)
-        self._mm, self._size, self._released = mm, size, 0
+        self._size, self._passed = size, Passed(mm)
         try:
             buf = memoryview(mm)
             try:
@@ -312,8 +312,7 @@ class McapScan:
             self.warnings.append(f'malformed record in the chunk at byte {pos} '
                                  f'({one_line(err)}): rest of that chunk skipped')
         # everything before this chunk's end is passed (the message indexes between chunks too)
-        release(self._mm, self._released, rec_end)
-        self._released = rec_end
+        self._passed.upto(rec_end)
 
     def _partial_chunk(self, buf, pos, end):
         """Read the complete records of an uncompressed chunk cut off by the end of the file."""

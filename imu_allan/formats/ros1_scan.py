@@ -21,7 +21,7 @@ from .imu_cdr import (
     map_file,
     MIN_IMU_BYTES,
     one_line,
-    release,
+    Passed,
 )
 from .mcap_scan import lz4_decompress
 from ..errors import InputError
@@ -74,7 +74,7 @@ class Ros1Scan:
             if f.read(len(ROS1_MAGIC)) != ROS1_MAGIC:
                 raise InputError(self.path, 'not a ROS 1 bag (bad magic line)')
             mm = map_file(f)
-        self._mm, self._size = mm, size
+        self._size, self._passed = size, Passed(mm)
         buf = memoryview(mm)
         try:
             self._read_index(buf, size)
@@ -268,7 +268,8 @@ class Ros1Scan:
                                  f'({one_line(err)}): rest of that chunk skipped')
         if len(self.warnings) > n_warnings:  # the chunk walk stopped early: say what it cost
             self.warnings[-1] += self._lost(pos, self._wanted_count() - before)
-        release(self._mm, start, end)
+        # everything before this chunk's end is passed (the index records between chunks too)
+        self._passed.upto(end)
 
     def _wanted_count(self):
         return sum(n for c, n in self.counts.items() if self._wanted(c))
