@@ -102,5 +102,6 @@ def main():
                 goal(f'memory: analyze on {hours:g} h of {name}: {ratio:.2f}x the decoded size '
                      '(goal <= 1.5x)', ratio <= 1.5)
 
+
 if __name__ == '__main__':
     main()

@@ -211,7 +211,7 @@ def _profile_interval(profile, chi2_min):
 def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None):
     """Fit one axis; ``terms=None`` selects the IEEE terms by BIC."""
     problem = Problem(np.asarray(tau, float), np.asarray(avar, float),
-                       np.asarray(edf, float), np.asarray(alpha), rate_hz)
+                      np.asarray(edf, float), np.asarray(alpha), rate_hz)
     if problem.tau.size == 0:
         raise FitError('no averaging time with a usable Allan variance')
     if terms is not None:
@@ -242,7 +242,7 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
     which refuses zeros, an honest bound instead of nothing.  Returns NaN if not bounded.
     """
     problem = Problem(np.asarray(tau, float), np.asarray(avar, float), np.asarray(edf, float),
-                       np.asarray(alpha), rate_hz)
+                      np.asarray(alpha), rate_hz)
     others = [t for t in terms if t != term and t in IEEE_TERMS]
     if problem.tau.size < 2 or not others:
         return math.nan

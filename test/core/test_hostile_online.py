@@ -174,7 +174,7 @@ def test_stream_health_warns_with_the_counts():
 
 def test_damaged_stamps_left_out_and_counted():
     """
-    NaN stamps (a nanosecond field of 1e9 or more decodes so) leave out their samples only.
+    Samples with a NaN stamp (a nanosecond field >= 1e9 decodes so) are left out alone.
 
     Before this rule one NaN stamp poisoned the stream monitor's running maximum, and every
     later sample was dropped as out of order.  The samples around them still count: the

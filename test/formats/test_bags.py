@@ -193,8 +193,8 @@ def test_impossible_nanoseconds_dropped_and_counted(tmp_path, storage):
     bad = np.random.default_rng(11).choice(120, 3, replace=False)
     msgs = []
     for i, (ns, r) in enumerate(zip(stamps, rows)):
-        msg = (ts.deserialize_ros1 if ros1 else ts.deserialize_cdr)(r.tobytes(),
-                                                                   'sensor_msgs/msg/Imu')
+        deserialize = ts.deserialize_ros1 if ros1 else ts.deserialize_cdr
+        msg = deserialize(r.tobytes(), 'sensor_msgs/msg/Imu')
         if i in bad:
             msg.header.stamp.nanosec = 1_000_000_000 + 7 * i
         msgs.append((int(ns), msg))

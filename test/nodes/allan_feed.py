@@ -46,7 +46,66 @@ def status_values(array, suffix):
     return None
 
 
-class AllanFeed(NodeRun):
+class AllanClient(NodeRun):
+    """
+    The built ``allan`` node and a client that feeds it and records what it publishes.
+
+    ``coeffs`` and ``diags`` collect ``(receive time, message)`` of ``imu/allan_coeffs`` and
+    ``/diagnostics``; ``publish(msgs)`` sends Imu messages RELIABLE (the node's intake must
+    be made reliable with its QoS override parameter, so that every sample arrives).
+    """
+
+    def __init__(self, cmd, context, client, domain=None, depth=20000, **options):
+        """``depth``: the publisher's history (at least the messages sent in one go)."""
+        super().__init__(cmd, context, client, domain, **options)
+        self.depth = depth
+        self.coeffs, self.diags = [], []
+
+    def __enter__(self):
+        """Start the node and the client; wait until the node subscribes."""
+        from diagnostic_msgs.msg import DiagnosticArray
+        from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+        from sensor_msgs.msg import Imu
+        from std_msgs.msg import Float64MultiArray
+        super().__enter__()
+        self.node.create_subscription(Float64MultiArray, 'imu/allan_coeffs',
+                                      lambda m: self.coeffs.append((time.monotonic(), m)), 10)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda m: self.diags.append((time.monotonic(), m)), 50)
+        qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=self.depth,
+                         reliability=QoSReliabilityPolicy.RELIABLE)
+        self.pub = self.node.create_publisher(Imu, 'imu/data_raw', qos)
+        assert self.spin_until(lambda: self.pub.get_subscription_count() > 0, 30), \
+            'allan node did not subscribe'
+        return self
+
+    def spin_until(self, predicate, timeout):
+        """Spin the client until ``predicate()``; False after ``timeout`` s."""
+        return spin_until(self.executor, predicate, timeout)
+
+    def publish(self, msgs):
+        """Publish messages in bursts of 500, spinning the client between bursts."""
+        for i in range(0, len(msgs), 500):
+            for msg in msgs[i:i + 500]:
+                self.pub.publish(msg)
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def wait_counted(self, n, timeout=60):
+        """Wait until the node's diagnostics count ``n`` samples; return the time (monotonic)."""
+        def complete():
+            return any((status_values(m, 'IMU stream') or {}).get('samples_total') == str(n)
+                       for _, m in self.diags)
+        assert self.spin_until(complete, timeout), 'the node never reported all samples'
+        return time.monotonic()
+
+    def wait_published_after(self, when, timeout=30):
+        """Wait for coefficients and diagnostics published after ``when``; return the former."""
+        assert self.spin_until(lambda: self.coeffs and self.coeffs[-1][0] > when + 0.01
+                               and self.diags[-1][0] > when + 0.01, timeout)
+        return self.coeffs[-1][1]
+
+
+class AllanFeed(AllanClient):
     """Start the node, publish ``n`` samples to it, watch its diagnostics; use with ``with``."""
 
     def __init__(self, context, domain, n=6000, seed=3, params=()):
@@ -63,36 +122,8 @@ class AllanFeed(NodeRun):
         data = simulate(MODEL, n, RATE, seed=seed)
         data[:, 5] += 9.80665
         self.msgs = imu_messages(data, 1_700_000_000.0 + np.arange(n) / RATE)
-        self.diags = []
-
-    def __enter__(self):
-        """Start the node and the client; wait until the node subscribes."""
-        from diagnostic_msgs.msg import DiagnosticArray
-        from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
-        from sensor_msgs.msg import Imu
-        super().__enter__()
-        self.node.create_subscription(DiagnosticArray, '/diagnostics',
-                                      lambda m: self.diags.append((time.monotonic(), m)), 50)
-        qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=20000,
-                         reliability=QoSReliabilityPolicy.RELIABLE)
-        self.pub = self.node.create_publisher(Imu, 'imu/data_raw', qos)
-        assert self.spin_until(lambda: self.pub.get_subscription_count() > 0, 30), \
-            'allan node did not subscribe'
-        return self
-
-    def spin_until(self, predicate, timeout):
-        """Spin the client until ``predicate()``; False after ``timeout`` s."""
-        return spin_until(self.executor, predicate, timeout)
 
     def feed(self):
         """Publish every sample, then wait until the node's diagnostics count them all."""
-        for i in range(0, self.n, 500):
-            for msg in self.msgs[i:i + 500]:
-                self.pub.publish(msg)
-            self.executor.spin_once(timeout_sec=0.01)
-
-        def complete():
-            return any((status_values(m, 'IMU stream') or {}).get('samples_total')
-                       == str(self.n) for _, m in self.diags)
-        assert self.spin_until(complete, 60), 'the node never reported all samples'
-        return time.monotonic()
+        self.publish(self.msgs)
+        return self.wait_counted(self.n)

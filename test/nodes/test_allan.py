@@ -11,14 +11,14 @@ import math
 import subprocess
 import time
 
-from conftest import DOMAIN, executable, NodeRun, ros_env, spin_until
+from conftest import DOMAIN, executable, ros_env, spin_until
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.simulate import simulate
 from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
 from imu_allan.report.coeffs_layout import coefficient_table
-from nodes.allan_feed import imu_messages
+from nodes.allan_feed import AllanClient, imu_messages
 import numpy as np
 import pytest
 
@@ -49,12 +49,8 @@ def _decode_coeffs(msg):
 
 def test_allan_node_end_to_end(ros_context, tmp_path):
     """True coefficients inside the published intervals; node == offline; budget levels."""
-    from diagnostic_msgs.msg import DiagnosticArray
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
-    from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
-    from sensor_msgs.msg import Imu
-    from std_msgs.msg import Float64MultiArray
 
     loose, tight = tmp_path / 'loose.yaml', tmp_path / 'tight.yaml'
     loose.write_text(LOOSE)
@@ -72,22 +68,10 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
            '-p', f'budget_file:={loose}', '-p', 'queue_depth:=40000',
            '-p', 'targets:=bias_instability=0.05', '-p', 'advice_period:=2.0',
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
-    with NodeRun(cmd, ros_context, 'allan_test_client') as run:
+    with AllanClient(cmd, ros_context, 'allan_test_client', depth=40000) as run:
         node, executor = run.node, run.executor
-        coeffs, diags = [], []
-        node.create_subscription(Float64MultiArray, 'imu/allan_coeffs',
-                                 lambda m: coeffs.append((time.monotonic(), m)), 10)
-        node.create_subscription(DiagnosticArray, '/diagnostics',
-                                 lambda m: diags.append((time.monotonic(), m)), 50)
-        qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=40000,
-                         reliability=QoSReliabilityPolicy.RELIABLE)
-        pub = node.create_publisher(Imu, 'imu/data_raw', qos)
-        assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 30), \
-            'allan node did not subscribe'
-        for i in range(0, N, 500):
-            for msg in msgs[i:i + 500]:
-                pub.publish(msg)
-            executor.spin_once(timeout_sec=0.01)
+        diags = run.diags
+        run.publish(msgs)
 
         def status(array, suffix):
             return next(s for s in array.status if s.name.endswith(suffix))
@@ -95,14 +79,8 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
         def values(s):
             return {kv.key: kv.value for kv in s.values}
 
-        def complete():
-            return any(values(status(m, 'IMU stream')).get('samples_total') == str(N)
-                       for _, m in diags)
-        assert spin_until(executor, complete, 60), 'node never reported all samples'
-        seen_complete = time.monotonic()
-        assert spin_until(executor, lambda: coeffs and coeffs[-1][0] > seen_complete + 0.01
-                          and diags[-1][0] > seen_complete + 0.01, 30)
-        table = _decode_coeffs(coeffs[-1][1])
+        seen_complete = run.wait_counted(N)
+        table = _decode_coeffs(run.wait_published_after(seen_complete))
 
         # 1. The node's numbers equal the offline pipeline on the same samples.
         params = dict(_DEFAULTS, budget_file=str(loose))

@@ -9,15 +9,15 @@ record) on exactly the same samples.  RELIABLE QoS so that no sample is lost on 
 
 import math
 import os
-import time
 
-from conftest import executable, NodeRun, spin_until
+from conftest import executable
 from imu_allan.core.analysis import AnalysisOptions, analyze_samples
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
 from imu_allan.formats.imu_adapter import imus_to_arrays
 from imu_allan.formats.samples import Samples
 from imu_allan.report.coeffs_layout import coefficient_table
+from nodes.allan_feed import AllanClient
 import numpy as np
 import pytest
 
@@ -46,11 +46,6 @@ def _messages(t, data):
 
 def test_measured_rate_equals_analyze():
     """No rate_hz: diagnostics report the measured 400 Hz, coefficients equal analyze's."""
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
-    from sensor_msgs.msg import Imu
-    from std_msgs.msg import Float64MultiArray
-
     data = simulate(MODEL, N, RATE, seed=5)
     data[:, 5] += 9.80665
     msgs = _messages(1_700_000_000.0 + np.arange(N) / RATE, data)
@@ -63,31 +58,16 @@ def test_measured_rate_equals_analyze():
     cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=1.0',
            '-p', 'queue_depth:=30000',
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
-    with NodeRun(cmd, context, 'allan_rate_test', DOMAIN, shutdown_context=True) as run:
-        node, executor = run.node, run.executor
-        coeffs, diags = [], []
-        node.create_subscription(Float64MultiArray, 'imu/allan_coeffs',
-                                 lambda m: coeffs.append((time.monotonic(), m)), 10)
-        node.create_subscription(DiagnosticArray, '/diagnostics',
-                                 lambda m: diags.append((time.monotonic(), m)), 50)
-        pub = node.create_publisher(Imu, 'imu/data_raw', QoSProfile(
-            history=QoSHistoryPolicy.KEEP_LAST, depth=30000,
-            reliability=QoSReliabilityPolicy.RELIABLE))
-        assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 30)
-        for i in range(0, N, 500):
-            for msg in msgs[i:i + 500]:
-                pub.publish(msg)
-            executor.spin_once(timeout_sec=0.01)
+    with AllanClient(cmd, context, 'allan_rate_test', DOMAIN, depth=30000,
+                     shutdown_context=True) as run:
+        coeffs, diags = run.coeffs, run.diags
+        run.publish(msgs)
 
         def stream(array):
             status = next(s for s in array.status if s.name.endswith('IMU stream'))
             return {kv.key: kv.value for kv in status.values}
 
-        assert spin_until(executor, lambda: any(stream(m).get('samples_total') == str(N)
-                                                for _, m in diags), 90), 'samples missing'
-        done = time.monotonic()
-        assert spin_until(executor, lambda: coeffs and coeffs[-1][0] > done
-                          and diags[-1][0] > done, 30)
+        run.wait_published_after(run.wait_counted(N, timeout=90))
         values = stream(diags[-1][1])
         assert values['rate_source'] == 'measured'
         # 6 significant digits on /diagnostics; the float stamps' rounding moves the median

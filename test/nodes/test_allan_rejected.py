@@ -9,16 +9,15 @@ RuntimeWarning, no traceback).  12,000 samples at 100 Hz, published about 20x fa
 real time with RELIABLE QoS so that every sample arrives.
 """
 
-import time
 
-from conftest import executable, NodeRun, spin_until
+from conftest import executable
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.simulate import simulate
 from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.formats.imu_adapter import imus_to_arrays
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
 from imu_allan.report.coeffs_layout import coefficient_table, decode_coefficients
-from nodes.allan_feed import imu_messages, MODEL, RATE, status_values
+from nodes.allan_feed import AllanClient, imu_messages, MODEL, RATE, status_values
 import numpy as np
 import pytest
 
@@ -38,11 +37,6 @@ def _offline(t, data):
 
 def test_allan_node_rejects_bad_values_per_axis(ros_context):
     """Publish NaN every 50th gyro_x, 1e300 in accel_y: coefficients kept, WARN with counts."""
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
-    from sensor_msgs.msg import Imu
-    from std_msgs.msg import Float64MultiArray
-
     clean = simulate(MODEL, N, RATE, seed=21)
     clean[:, 5] += 9.80665
     data = clean.copy()
@@ -56,34 +50,14 @@ def test_allan_node_rejects_bad_values_per_axis(ros_context):
     cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=1.0',
            '-p', 'queue_depth:=20000', '-p', f'terms:={TERMS}',
            '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable']
-    with NodeRun(cmd, ros_context, 'allan_rejected_client') as run:
-        node, executor = run.node, run.executor
-        coeffs, diags = [], []
-        node.create_subscription(Float64MultiArray, 'imu/allan_coeffs',
-                                 lambda m: coeffs.append((time.monotonic(), m)), 10)
-        node.create_subscription(DiagnosticArray, '/diagnostics',
-                                 lambda m: diags.append((time.monotonic(), m)), 50)
-        qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=20000,
-                         reliability=QoSReliabilityPolicy.RELIABLE)
-        pub = node.create_publisher(Imu, 'imu/data_raw', qos)
-        assert spin_until(executor, lambda: pub.get_subscription_count() > 0, 30), \
-            'allan node did not subscribe'
-        for i in range(0, N, 500):
-            for msg in msgs[i:i + 500]:
-                pub.publish(msg)
-            executor.spin_once(timeout_sec=0.01)
+    with AllanClient(cmd, ros_context, 'allan_rejected_client', depth=20000) as run:
+        diags = run.diags
+        run.publish(msgs)
 
         def stream(array):
             return next(s for s in array.status if s.name.endswith('IMU stream'))
 
-        def complete():
-            return any((status_values(m, 'IMU stream') or {}).get('samples_total') == str(N)
-                       for _, m in diags)
-        assert spin_until(executor, complete, 60), 'node never reported all samples'
-        seen = time.monotonic()
-        assert spin_until(executor, lambda: coeffs and coeffs[-1][0] > seen + 0.01
-                          and diags[-1][0] > seen + 0.01, 30)
-        table = decode_coefficients(coeffs[-1][1])
+        table = decode_coefficients(run.wait_published_after(run.wait_counted(N)))
 
         # 1. The node's numbers equal the offline pipeline on the same (bad) samples.
         pipe, expected = _offline(t_seen, data_seen)
