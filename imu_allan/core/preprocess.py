@@ -101,10 +101,14 @@ def nominal_interval(steps, share=0.15, tolerance=0.1, max_factor=8):
     within ``tolerance`` of median / k gives the interval (the median of those steps).
     """
     steps = np.asarray(steps, dtype=float)
-    median = float(np.median(steps))
+    # one scratch array of the record's length (partitioned for the median, then reused for
+    # the distances): a 10 h record's steps are 29 MB, and each temporary costs that much
+    work = steps.copy()
+    median = float(np.median(work, overwrite_input=True))
     for k in range(max_factor, 1, -1):
-        near = np.abs(steps - median / k) <= tolerance * median / k
-        if near.sum() >= share * steps.size:
+        np.subtract(steps, median / k, out=work)
+        near = np.abs(work, out=work) <= tolerance * median / k
+        if np.count_nonzero(near) >= share * steps.size:
             return float(np.median(steps[near]))
     return median
 
@@ -120,15 +124,18 @@ def check_timing(t, gap_factor=GAP_FACTOR):
     dt = np.diff(t)
     if dt.size == 0:
         raise ValueError('need at least two samples to know the sample rate')
-    positive = dt[dt > 0]
-    if positive.size == 0:
+    increasing = dt > 0
+    n_increasing = int(np.count_nonzero(increasing))
+    if n_increasing == 0:
         raise ValueError('time stamps never increase')
-    nominal = nominal_interval(positive)
+    # selections copy only when they drop something (the usual clean record: no copy)
+    nominal = nominal_interval(dt if n_increasing == dt.size else dt[increasing])
     gaps, missing = count_gaps(dt, nominal, gap_factor)
-    regular = dt[(dt > 0) & ~gaps]
+    regular = increasing & ~gaps
+    regular = dt if regular.all() else dt[regular]
     jitter = float(np.std(regular) / nominal) if regular.size else 0.0
     return TimingReport(
         rate_hz=1.0 / nominal, nominal_dt=nominal, duration_s=float(t[-1] - t[0]) + nominal,
         n_gaps=int(gaps.sum()), longest_gap_s=float(dt[gaps].max()) if gaps.any() else 0.0,
-        missing_samples=missing, jitter=jitter, n_nonincreasing=int(np.sum(dt <= 0)),
+        missing_samples=missing, jitter=jitter, n_nonincreasing=int(np.count_nonzero(dt <= 0)),
         gap_indices=np.flatnonzero(gaps))

@@ -40,10 +40,12 @@ def _time_scale(path, t):
     error that says why.
     """
     steps = np.diff(t)
-    steps = steps[steps > 0]
+    increasing = steps > 0
+    if not increasing.all():
+        steps = steps[increasing]
     if steps.size == 0:
         return 1.0, None
-    step = float(np.median(steps))
+    step = float(np.median(steps, overwrite_input=True))  # steps is ours: no third copy
     low, high = IMU_RATE_HZ
     if 1.0 / step >= low:
         return 1.0, None
