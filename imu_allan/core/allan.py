@@ -209,7 +209,7 @@ def identify_noise(tau, avar):
     contribution of each term; the exponent of the largest one is used.  Robust where the
     local slope of a noisy curve is not.
     """
-    from scipy.optimize import nnls
+    from .nnls import nnls_scaled
     tau = np.asarray(tau, dtype=float)
     avar = np.atleast_2d(avar)
     basis = np.column_stack([TERMS[t].id_shape(tau) for t in ID_ALPHA])
@@ -221,12 +221,7 @@ def identify_noise(tau, avar):
         if ok.sum() < 2:
             continue
         w = 1.0 / y[ok]
-        # columns scaled to unit norm: the shapes span many decades, and unscaled NNLS can
-        # run out of iterations on smooth model curves (seen on forecast grids)
-        a = basis[ok] * w[:, None]
-        scale = np.linalg.norm(a, axis=0)
-        scale[scale == 0] = 1.0
-        coef = nnls(a / scale, np.ones(ok.sum()), maxiter=50 * a.shape[1])[0] / scale
+        coef = nnls_scaled(basis[ok] * w[:, None], np.ones(ok.sum()))
         contrib = basis * coef
         out[:, j] = alphas[np.argmax(contrib, axis=1)]
     return out

@@ -31,10 +31,11 @@ from itertools import combinations
 import math
 
 import numpy as np
-from scipy.optimize import minimize_scalar, nnls
+from scipy.optimize import minimize_scalar
 
 from . import terms as _terms
 from .model import NoiseModel
+from .nnls import nnls_scaled
 from .terms import TERMS
 from .units import ALL_TERMS, conventional, IEEE_TERMS, si_unit
 
@@ -115,10 +116,7 @@ class Problem:
         design = np.column_stack([shapes, self.avar - offset])
         for _ in range(iterations):
             low = self.whiten(model, design)
-            g, y = low[:, :-1], low[:, -1]
-            scale = np.sqrt(np.einsum('ij,ij->j', g, g))
-            scale[scale == 0] = 1.0
-            coef = nnls(g / scale, y, maxiter=50 * shapes.shape[1])[0] / scale
+            coef = nnls_scaled(low[:, :-1], low[:, -1])
             # keep weights finite where the model vanishes (e.g. a term pinned at zero)
             model = np.maximum(shapes @ coef + offset, 1e-3 * self.avar)
         low = self.whiten(model, design)

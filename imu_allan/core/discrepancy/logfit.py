@@ -11,10 +11,11 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
-from scipy.optimize import least_squares, nnls
+from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 from .band import Z95
+from ..nnls import nnls_scaled
 from ..terms import TERMS
 from ..units import ALL_TERMS
 
@@ -77,10 +78,7 @@ def _nnls_start(prob, names, positions):
     """Relative-error NNLS of squared amplitudes for fixed positions; returns (amps, Q)."""
     shapes = np.column_stack([prob.shape(t, positions.get(t)) for t in names])
     w = 1.0 / (2.0 * prob.target * prob.sd)
-    a = shapes * w[:, None]
-    scale = np.linalg.norm(a, axis=0)
-    scale[scale == 0] = 1.0
-    coef = nnls(a / scale, prob.target * w, maxiter=50 * len(names))[0] / scale
+    coef = nnls_scaled(shapes * w[:, None], prob.target * w)
     avar = shapes @ coef
     if not np.all(avar > 0):
         return np.sqrt(coef), math.inf
