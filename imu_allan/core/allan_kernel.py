@@ -149,22 +149,29 @@ def _cuts(n, parts):
     return [n * c // parts for c in range(parts + 1)]
 
 
-def phase(data, a_lo=0, a_hi=None):
+def column_means(y):
+    """Mean of every column of ``y`` (n, A), float64 C-contiguous: one row-major pass."""
+    cut = _cuts(y.shape[0], 2)
+    sums = _map(lambda c: _column_sums(y, 0, y.shape[1], cut[c], cut[c + 1]), [0, 1])
+    return (sums[0] + sums[1]) / y.shape[0]
+
+
+def phase(data, a_lo=0, a_hi=None, means=None):
     """
     Phase (A, n + 1) of rate samples (n, A), de-meaned, x_0 = 0: as ``allan._phase``.
 
-    Of the axes ``a_lo:a_hi`` only (all by default).  Row-major passes over the samples,
-    each split in two ranges of rows: the column sums, the running sums of each range, then
-    the first range's end value added to the second range (exactly what running on would have
-    given, up to rounding; a start value derived from the column sums instead would carry
+    Of the axes ``a_lo:a_hi`` only (all by default); ``means`` are the column means of all
+    axes (:func:`column_means`, computed here when not given).  Row-major passes over the
+    samples, each split in two ranges of rows: the column sums, the running sums of each range,
+    then the first range's end value added to the second range (exactly what running on would
+    have given, up to rounding; a start value derived from the column sums instead would carry
     their rounding as a step into the phase).
     """
     y = np.ascontiguousarray(data, dtype=np.float64)
     n = y.shape[0]
     a_hi = y.shape[1] if a_hi is None else a_hi
     cut = _cuts(n, 2)
-    sums = _map(lambda c: _column_sums(y, a_lo, a_hi, cut[c], cut[c + 1]), [0, 1])
-    mean = (sums[0] + sums[1]) / n
+    mean = np.ascontiguousarray((column_means(y) if means is None else means)[a_lo:a_hi])
     x = np.empty((a_hi - a_lo, n + 1))
     x[:, 0] = 0.0
     _map(lambda c: _integrate(y, a_lo, a_hi, mean, cut[c], cut[c + 1], x), [0, 1])
@@ -174,8 +181,8 @@ def phase(data, a_lo=0, a_hi=None):
 
 #: Axes integrated and summed together.  One at a time, the phase holds a sixth of the
 #: record's size instead of all of it, so ``analyze`` on 10 h of samples peaks at 1.46x the
-#: samples instead of 2x (3 at a time: 1.73x, bench/bench_memory.py); it costs ten more
-#: strided passes over the samples, about 5 % of the estimator's time.
+#: samples instead of 2x (3 at a time: 1.73x, bench/bench_memory.py); it costs four more
+#: strided passes over the samples (the column means are taken once for all axes).
 AXIS_GROUP = 1
 
 
@@ -198,9 +205,10 @@ def avar(data, ms):
     chunks = -(-8 // n_axes)  # at least 8 jobs: balance on a shared machine
     cut = _cuts(k_max, chunks)
     part = np.zeros((n_axes, chunks, sms.size))
+    means = column_means(y)  # once: each column's sum does not depend on the others
     for a_lo in range(0, n_axes, AXIS_GROUP):
         a_hi = min(a_lo + AXIS_GROUP, n_axes)
-        x = phase(y, a_lo, a_hi)
+        x = phase(y, a_lo, a_hi, means)
 
         def job(index, x=x, a_lo=a_lo):
             a, c = divmod(index, chunks)
