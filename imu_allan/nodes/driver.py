@@ -81,8 +81,9 @@ PARAMETERS = [
           read_only=True),
     Param('record_raw', '', 'if set, append the raw received byte stream to this file '
                             '(analyze --format gx3raw reads it)', read_only=True),
-    Param('read_period', 0.005, 'seconds between reads of the port (each read is published as '
-                                'one batch: latency vs CPU)', (0.001, 0.1), read_only=True),
+    Param('read_period', 0.01, 'seconds between reads of the port (each read is published as '
+                               'one batch: delivery latency vs CPU; stamps do not depend on '
+                               'it)', (0.001, 0.1), read_only=True),
     Param('diagnostics_period', 1.0, 'seconds between /diagnostics messages', (0.1, 60.0),
           read_only=True),
 ]
