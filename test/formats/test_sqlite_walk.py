@@ -12,8 +12,7 @@ import json
 import subprocess
 import sys
 
-from formats.test_bags import (
-    _samples, bad_nanosecond_bag, big_message_bag, mixed_frame_bag)
+from formats.test_bags import _samples, bad_nanosecond_bag, big_message_bag, mixed_frame_bag
 from imu_allan.errors import InputError
 from imu_allan.formats import sqlite_pages
 from imu_allan.formats.bag_reader import read_bag
@@ -246,7 +245,7 @@ print(json.dumps([sqlite_pages.compiled_walk(10 ** 9) is None, r.t.tolist(), r.d
 
 def test_without_numba_the_numpy_walk_reads_the_same(tmp_path):
     """
-    numba is optional: without it the numpy walk reads, with the same numbers, and no error.
+    Without numba (optional) the numpy walk reads: the same numbers, and no error.
 
     The child blocks ``import numba`` as a platform without it would; this process reads the
     same bag with the compiled walk.
