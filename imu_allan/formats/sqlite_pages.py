@@ -8,6 +8,11 @@ a rosbag2 ``messages`` table is a plain rowid B-tree whose leaf cells are (NULL 
 topic_id, timestamp, data), so walking the tree and decoding the cells with numpy is faster,
 and it also reads what is left of a truncated file (SQLite itself refuses such a file): the
 rows of its intact pages.
+
+Two walks of the leaf pages give the same result: the numpy one here (:meth:`SqlitePages._batch`,
+the reference, about 20 vectorised passes per batch of pages) and a numba-compiled one
+(:mod:`.sqlite_kernel`, one pass, about three times faster), used for large files or once numba
+is loaded (:func:`compiled_walk`); numba is optional, without it the numpy walk reads.
 """
 
 import struct
@@ -28,8 +33,10 @@ _PAGE_BATCH = 512  # leaf pages decoded per numpy batch (bounds the index arrays
 
 
 #: Leaf pages (about 12 Imu messages each at 4 KiB) from which the compiled walk reads a file
-#: when numba is not imported yet: importing it and loading the walk costs about 0.5 s, which
-#: the numpy walk spends on about 0.6 M messages.
+#: even when numba is not imported yet.  Importing numba and loading the walk costs about 1 s
+#: and 130-160 MB (numba's runtime, whatever the file) once per process; from here on (0.6 M
+#: messages) ``analyze`` loads numba anyway for the Allan deviation, so the cost moves earlier
+#: instead of adding up, and the walk saves about 0.5 s per million messages.
 COMPILED_MIN_PAGES = 50_000
 
 
