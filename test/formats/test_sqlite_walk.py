@@ -260,3 +260,24 @@ def test_without_numba_the_numpy_walk_reads_the_same(tmp_path):
     r = read_bag(path)
     assert np.array_equal(np.array(t), r.t) and np.array_equal(np.array(data), r.data)
     assert warnings == r.warnings
+
+
+_SMALL_READ = """
+import sys
+from imu_allan.formats.bag_reader import read_bag
+r = read_bag(sys.argv[1], topic='/imu/mixed')
+print(r.n, 'numba' in sys.modules)
+"""
+
+
+def test_small_file_does_not_import_numba(tmp_path):
+    """
+    A file below COMPILED_MIN_PAGES is read by the numpy walk without importing numba.
+
+    Importing numba and loading the walk costs about 1 s, more than such a file takes to read.
+    """
+    path = mixed_frame_bag(tmp_path, 'sqlite3')
+    out = subprocess.run([sys.executable, '-c', _SMALL_READ, str(path / 'mixed.db3')],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ['140', 'False'], out.stdout
