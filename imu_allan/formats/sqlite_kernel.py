@@ -18,7 +18,7 @@ functions with ``cache=True``, the user cache folder where ``__pycache__`` is re
 
 import numpy as np
 
-from ..core.allan_kernel import _jit
+from ..core.allan_kernel import _jit, _UNCACHED
 
 #: Bytes of the 37 float64 at the end of an Imu, and the first byte of a CDR Imu after its
 #: frame_id (encapsulation header, sec, nanosec, the string length) - as :mod:`.imu_cdr`.
@@ -176,3 +176,8 @@ def walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off, length
             ok[kept] = _decode_imu(u8, u4, f8, v3, blob, t, data, kept)
             kept += 1
     return kept, nslow, lost
+
+
+#: False where numba found no writable cache folder: compiling the walk (about 5 s) in every
+#: process would cost more than it saves, so :func:`.sqlite_pages.compiled_walk` declines.
+CACHED = walk.__name__ not in _UNCACHED

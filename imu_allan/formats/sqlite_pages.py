@@ -44,8 +44,9 @@ def compiled_walk(npages):
     """
     Return the compiled page walk's module (:mod:`.sqlite_kernel`) for ``npages``, or None.
 
-    None (the numpy walk) for files too small to repay importing numba, and without numba,
-    which is optional (as for the Allan kernel: same numbers, slower).
+    None (the numpy walk) for files too small to repay importing numba, without numba, which
+    is optional (as for the Allan kernel: same numbers, slower), and where the walk could not
+    be cached (it would be compiled in every process).
     """
     if npages < COMPILED_MIN_PAGES and 'numba' not in sys.modules:
         return None
@@ -53,7 +54,7 @@ def compiled_walk(npages):
         from . import sqlite_kernel
     except ImportError:
         return None
-    return sqlite_kernel
+    return sqlite_kernel if sqlite_kernel.CACHED else None
 
 
 class Unsupported(Exception):

@@ -281,3 +281,11 @@ def test_small_file_does_not_import_numba(tmp_path):
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ['140', 'False'], out.stdout
+
+
+def test_no_compiled_walk_where_it_cannot_be_cached(monkeypatch):
+    """Without a cache folder for numba the walk would compile in every process: numpy walk."""
+    from imu_allan.formats import sqlite_kernel
+    assert sqlite_pages.compiled_walk(10 ** 9) is sqlite_kernel
+    monkeypatch.setattr(sqlite_kernel, 'CACHED', False)
+    assert sqlite_pages.compiled_walk(10 ** 9) is None
