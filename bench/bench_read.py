@@ -7,7 +7,8 @@ then times ``read_bag(..., fast=False)`` (rosbags' per-message deserializer and 
 numpy adapter) and ``read_bag(..., fast=True)`` (direct storage reading and bulk numpy
 decoding), checks both give identical numbers and prints messages/s and the speed-up. Rates
 are given per wall-clock second and per CPU second of this process (the machine is shared,
-CPU time is the steadier figure). Usage: ``python bench/bench_read.py [N]``.
+CPU time is the steadier figure). Usage: ``python bench/bench_read.py [N] [STORAGE ...]``
+(STORAGE: mcap, mcap+zstd, sqlite3, ros1; all by default).
 """
 
 from functools import partial
@@ -51,8 +52,11 @@ def main():
     with tempfile.TemporaryDirectory(prefix='bench_read_') as tmp:
         cases = [('mcap', n, False), ('mcap', n, True), ('sqlite3', n, False),
                  ('ros1', min(n, 200_000), False)]
+        chosen = set(sys.argv[2:])
         for storage, count, zstd in cases:
             label = storage + ('+zstd' if zstd else '')
+            if chosen and label not in chosen:
+                continue
             name = f'bag_{label}' + ('.bag' if storage == 'ros1' else '')
             path = Path(tmp) / name
             samples = Samples(t=t[:count], data=data[:count])

@@ -285,8 +285,9 @@ class Collector:
         k = len(order)
         if self._t is not None and self._fill + k <= self._t.shape[0]:
             a, self._fill = self._fill, self._fill + k
-            self._t[a:self._fill] = t
-            self._data[a:self._fill] = data
+            if not (k and _same_place(t, self._t[a:]) and _same_place(data, self._data[a:])):
+                self._t[a:self._fill] = t
+                self._data[a:self._fill] = data
             t, data = self._t[a:self._fill], self._data[a:self._fill]
         else:
             self._t = self._data = None  # capacity exceeded: concatenate parts in result()
@@ -297,6 +298,17 @@ class Collector:
             key = (int(log_time[i]), int(order[i]))
             if self._first is None or key < self._first[:2]:
                 self._first = (*key, raw(i))
+
+    def reserved(self, k):
+        """
+        Return views (t, data) of the next ``k`` reserved places, or None if fewer remain.
+
+        A decoder may write there and pass (a prefix of) the views to :meth:`add_part`, which
+        then copies nothing; anything added before that overwrites them.
+        """
+        if self._t is None or self._fill + k > self._t.shape[0]:
+            return None
+        return self._t[self._fill:self._fill + k], self._data[self._fill:self._fill + k]
 
     @property
     def frame_id(self):
@@ -407,6 +419,12 @@ class Collector:
             return t, data
         keep = ~np.isnan(t)
         return t[keep], data[keep]
+
+
+def _same_place(a, b):
+    """Return True if arrays ``a`` and ``b`` start at the same address with the same strides."""
+    return (a.__array_interface__['data'][0] == b.__array_interface__['data'][0]
+            and a.strides == b.strides)
 
 
 def map_file(f):

@@ -149,3 +149,45 @@ def test_read_only_install_caches_in_user_folder_and_says_so(tmp_path):
     second = _run(folder, env)
     assert 'saved to' not in second.stdout + second.stderr
     assert 'Allan kernel' not in second.stderr
+
+
+_WALK_SCRIPT = """
+import sys
+from imu_allan.formats import sqlite_pages
+from imu_allan.formats.bag_reader import read_bag
+sqlite_pages.COMPILED_MIN_PAGES = 0   # the compiled sqlite3 page walk even for a small bag
+r = read_bag(sys.argv[1])
+print(r.n, float(r.data.sum()))
+"""
+
+
+def test_sqlite_walk_second_process_compiles_nothing(tmp_path):
+    """
+    The compiled sqlite3 page walk (imu_allan.formats.sqlite_kernel) is compiled once too.
+
+    Same check as above on the installed module: the first process reading a sqlite3 bag saves
+    the walk into a fresh NUMBA_CACHE_DIR, the second loads it and saves nothing.  Budget: one
+    compile (5-10 s) and one load (~1 s).
+    """
+    from imu_allan.formats.bag_writer import write_imu_bag
+    from imu_allan.formats.samples import Samples
+    bag = tmp_path / 'bag'
+    data = np.random.default_rng(2).normal(size=(300, 6))
+    write_imu_bag(bag, Samples(t=1.7e9 + np.arange(300) / 100.0, data=data), storage='sqlite3')
+    cache = tmp_path / 'numba_cache'
+    env = _env(tmp_path, NUMBA_CACHE_DIR=str(cache))
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run([sys.executable, '-c', _WALK_SCRIPT, str(bag)], env=env,
+                              capture_output=True, text=True, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        runs.append((proc, _snapshot(cache)))
+    (first, before), (second, after) = runs
+    saved = [line for line in (first.stdout + first.stderr).splitlines()
+             if 'data saved to' in line]
+    assert any('sqlite_kernel' in line and 'walk' in line for line in saved), saved
+    log = second.stdout + second.stderr
+    assert 'saved to' not in log and 'data loaded from' in log
+    assert after == before
+    assert second.stdout.splitlines()[-1] == first.stdout.splitlines()[-1] == \
+        f'300 {float(data.sum())}'

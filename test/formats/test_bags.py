@@ -148,14 +148,17 @@ def test_bag_without_imu_topic(tmp_path):
 # ------------------------------------------------------------------------ fast == generic
 
 
-@pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
-def test_mixed_frame_id_lengths_fast_equals_generic(tmp_path, storage):
-    """Differing frame_id lengths (so differing CDR paddings) interleaved, plus other topics."""
+def mixed_frame_bag(tmp_path, storage):
+    """
+    Write a bag whose topic /imu/mixed has 140 messages of 7 frame_id lengths interleaved.
+
+    Lengths 1..12 hit every CDR padding case; the 300 base samples go on /imu/base.
+    """
     s = _samples(300)
     ts = get_typestore(Stores.ROS1_NOETIC if storage == 'ros1' else Stores.ROS2_JAZZY)
     extra = []
     from imu_allan.formats.imu_cdr import encode_imu
-    # Odd stamps with other frame ids: lengths 1..12 hit every padding case.
+    # Odd stamps with other frame ids.
     for i, fid in enumerate(['a', 'ab', 'abc', 'abcd', 'abcde', 'abcdef', 'abcdefghijkl']):
         t = s.t[:1] + 0.001 * (i + 1) + np.arange(20) * 0.01
         rows, stamps = encode_imu(t, s.data[:20] * (i + 2), fid, ros1=storage == 'ros1')
@@ -163,11 +166,16 @@ def test_mixed_frame_id_lengths_fast_equals_generic(tmp_path, storage):
             msg = (ts.deserialize_ros1 if storage == 'ros1' else ts.deserialize_cdr)(
                 r.tobytes(), 'sensor_msgs/msg/Imu')
             extra.append((int(ns), msg))
-    # One topic made only of these interleaved messages; the base samples go on another.
-    name = 'mixed.bag' if storage == 'ros1' else 'mixed'
-    path = tmp_path / name
+    path = tmp_path / ('mixed.bag' if storage == 'ros1' else 'mixed')
     write_imu_bag(path, s, topic='/imu/base', storage=storage,
                   extra_topics={'/imu/mixed': ('sensor_msgs/msg/Imu', extra)})
+    return path
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
+def test_mixed_frame_id_lengths_fast_equals_generic(tmp_path, storage):
+    """Differing frame_id lengths (so differing CDR paddings) interleaved, plus other topics."""
+    path = mixed_frame_bag(tmp_path, storage)
     fast = read_bag(path, topic='/imu/mixed', fast=True)
     gen = read_bag(path, topic='/imu/mixed', fast=False)
     assert fast.n == gen.n == 140
@@ -177,13 +185,11 @@ def test_mixed_frame_id_lengths_fast_equals_generic(tmp_path, storage):
     assert np.all(np.diff(fast.t) >= 0)  # receive-time order = stamp order here
 
 
-@pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
-def test_impossible_nanoseconds_dropped_and_counted(tmp_path, storage):
+def bad_nanosecond_bag(tmp_path, storage):
     """
-    A stamp whose nanosecond field is 1e9 or more is damage: dropped, counted, named.
+    Write a bag whose topic /imu/n has 120 messages, 3 of them with nanosec >= 1e9.
 
-    Three of 120 messages at seeded positions; the fast and the generic path drop the same
-    ones and keep every other sample unchanged.
+    Returns (path, samples written, indices of the damaged messages); seeded positions.
     """
     from imu_allan.formats.imu_cdr import encode_imu
     s = _samples(120)
@@ -201,6 +207,18 @@ def test_impossible_nanoseconds_dropped_and_counted(tmp_path, storage):
     path = tmp_path / ('n.bag' if ros1 else 'n')
     write_imu_bag(path, _samples(10), topic='/imu/other', storage=storage,
                   extra_topics={'/imu/n': ('sensor_msgs/msg/Imu', msgs)})
+    return path, s, bad
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
+def test_impossible_nanoseconds_dropped_and_counted(tmp_path, storage):
+    """
+    A stamp whose nanosecond field is 1e9 or more is damage: dropped, counted, named.
+
+    Three of 120 messages at seeded positions; the fast and the generic path drop the same
+    ones and keep every other sample unchanged.
+    """
+    path, s, bad = bad_nanosecond_bag(tmp_path, storage)
     keep = np.setdiff1d(np.arange(120), bad)
     for fast in (True, False):
         r = read_bag(path, topic='/imu/n', fast=fast)
@@ -386,9 +404,12 @@ def test_copy_bag_with_denoised_topic(tmp_path, src):
         copy_bag_with_topic(DATA / src, tmp_path / 'x', '/imu/data', den)
 
 
-@pytest.mark.parametrize('storage', ['sqlite3', 'mcap', 'ros1'])
-def test_big_messages_between_imu_messages(tmp_path, storage):
-    """Large non-Imu messages (SQLite overflow pages, long records) do not disturb the Imu."""
+def big_message_bag(tmp_path, storage):
+    """
+    Write 3000 Imu samples with a large String every 100 (SQLite overflow pages).
+
+    Returns (path, samples).
+    """
     s = _samples(3000)
     ts = get_typestore(Stores.ROS1_NOETIC if storage == 'ros1' else Stores.ROS2_JAZZY)
     text = ts.types['std_msgs/msg/String']
@@ -397,6 +418,13 @@ def test_big_messages_between_imu_messages(tmp_path, storage):
     path = tmp_path / ('b.bag' if storage == 'ros1' else 'b')
     write_imu_bag(path, s, storage=storage,
                   extra_topics={'/log': ('std_msgs/msg/String', big)})
+    return path, s
+
+
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap', 'ros1'])
+def test_big_messages_between_imu_messages(tmp_path, storage):
+    """Large non-Imu messages (SQLite overflow pages, long records) do not disturb the Imu."""
+    path, s = big_message_bag(tmp_path, storage)
     fast = read_bag(path)
     assert _same(fast, read_bag(path, fast=False))
     assert fast.n == 3000 and np.array_equal(fast.data, s.data)
