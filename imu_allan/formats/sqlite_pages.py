@@ -368,8 +368,9 @@ class SqlitePages:
         slow = np.empty((cells, 2), dtype=np.int64)
         if self._views is None:
             self._views = kernel.byte_views(u8)
-        kept, nslow, lost = kernel.walk(u8, *self._views, pages, ps, self.usable, wanted, order,
-                                      stamp, off, length, ok, t, data, slow)
+        kept, nslow, lost = kernel.walk(
+            u8, *self._views, pages, ps, self.usable, wanted, order, stamp, off, length, ok, t,
+            data, slow)
         if kept < 0:
             return False
         self.lost_pages += lost
