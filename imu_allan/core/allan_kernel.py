@@ -1,14 +1,9 @@
 """
 Compiled overlapping Allan variance (numba), imported by :mod:`imu_allan.core.allan` on use.
 
-Compiled once per install: the kernels are module-level functions with ``cache=True``, which
-numba keys by this file and the function names, so the machine code compiled by the first
-process is loaded by every later one.  (Functions defined inside another function never hit
-that cache: their closure is part of the key and differs in every process.)  Where this
-package's ``__pycache__`` cannot be written (a read-only install), numba falls back to the user
-cache directory (``~/.cache/numba``, or ``$NUMBA_CACHE_DIR`` when set), and a one-line warning
-says where the compiled code went; where no directory is writable at all, the warning says the
-kernel is compiled in every process and how to avoid it.
+Compiled once per install (:mod:`.jit`).  Where the compiled code could not go into this
+package's own ``__pycache__``, a one-line warning says where it went; where no directory is
+writable at all, the warning says the kernel is compiled in every process and how to avoid it.
 
 Speed (``bench/bench_allan.py``, ``docs/benchmarks.md``): the second differences
 x_{k+2m} - 2 x_{k+m} + x_k of all averaging times are summed block by block, :data:`BLOCK`
@@ -25,28 +20,17 @@ from concurrent.futures import ThreadPoolExecutor
 import logging
 import os
 
-import numba
 import numpy as np
+
+from .jit import jit, UNCACHED
 
 #: Phase points per block (32 KiB of float64: the L1 data cache of current x86 cores).
 BLOCK = 4096
 
 _LOG = logging.getLogger(__name__)
-_UNCACHED = []  # kernels compiled without a disk cache (no writable cache directory)
 
 
-def _jit(**options):
-    """``numba.njit(cache=True, **options)``; without the cache if no directory is writable."""
-    def wrap(fn):
-        try:
-            return numba.njit(cache=True, **options)(fn)
-        except RuntimeError:  # numba: "cannot cache function ...: no locator available"
-            _UNCACHED.append(fn.__name__)
-            return numba.njit(**options)(fn)
-    return wrap
-
-
-@_jit(fastmath=True, nogil=True, inline='never')
+@jit(fastmath=True, nogil=True, inline='never')
 def _sum_one(xa, m, k0, k1):  # pragma: no cover - compiled; tested against avar_reference
     # Three views indexed from 0 in a function of its own: the form LLVM vectorises.
     x2, x1, x0 = xa[k0 + 2 * m:], xa[k0 + m:], xa[k0:]
@@ -57,7 +41,7 @@ def _sum_one(xa, m, k0, k1):  # pragma: no cover - compiled; tested against avar
     return s
 
 
-@_jit(fastmath=True, nogil=True, inline='never')
+@jit(fastmath=True, nogil=True, inline='never')
 def _sum_four(xa, ma, mb, mc, md, k0, k1):  # pragma: no cover - compiled
     # Four averaging times in one loop: x_k is loaded once for the four (9 loads per 4 terms
     # instead of 12) and four accumulators hide the add latency.
@@ -80,7 +64,7 @@ def _sum_four(xa, ma, mb, mc, md, k0, k1):  # pragma: no cover - compiled
     return sa, sb, sc, sd
 
 
-@_jit(nogil=True)
+@jit(nogil=True)
 def _axis_range(xa, ms, k_lo, k_hi, acc):  # pragma: no cover - compiled
     # acc[t] += sum of squared second differences at ms[t] (ascending) for k in [k_lo, k_hi).
     n_phase = xa.shape[0]
@@ -107,7 +91,7 @@ def _axis_range(xa, ms, k_lo, k_hi, acc):  # pragma: no cover - compiled
                     acc[t] += _sum_one(xa, ms[t], lo, k1t)
 
 
-@_jit(nogil=True)
+@jit(nogil=True)
 def _column_sums(y, a_lo, a_hi, k_lo, k_hi):  # pragma: no cover - compiled
     # Sums of BLOCK rows added to the totals: the rounding error of a long sum of values with a
     # large mean (accelerometers: 9.8) stays ~1e-16 relative instead of growing with n.
@@ -122,7 +106,7 @@ def _column_sums(y, a_lo, a_hi, k_lo, k_hi):  # pragma: no cover - compiled
     return total
 
 
-@_jit(nogil=True)
+@jit(nogil=True)
 def _integrate(y, a_lo, a_hi, mean, k_lo, k_hi, x):  # pragma: no cover - compiled
     # x[a - a_lo, k + 1] = sum_{j=k_lo..k} (y[j, a] - mean[a - a_lo]): one row-major pass.
     run = np.zeros(a_hi - a_lo)
@@ -229,7 +213,7 @@ def _note_compilation():
     if _NOTED:
         return
     _NOTED.append(True)
-    if _UNCACHED:
+    if UNCACHED:
         _LOG.warning('imu_allan: no writable cache directory for numba (set NUMBA_CACHE_DIR '
                      'to one): the Allan kernel is compiled in every process (~2 s)')
         return

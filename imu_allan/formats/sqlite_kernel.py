@@ -12,13 +12,13 @@ walk leaves alone goes back to the caller: cells that are not plain rows (overfl
 damage: the slow Python path) and blobs the bulk layout does not fit (the generic
 deserializer).
 
-Compiled once per install, as :mod:`imu_allan.core.allan_kernel` (same ``_jit``: module-level
+Compiled once per install, as the Allan kernel (:mod:`imu_allan.core.jit`: module-level
 functions with ``cache=True``, the user cache folder where ``__pycache__`` is read-only).
 """
 
 import numpy as np
 
-from ..core.allan_kernel import _jit, _UNCACHED
+from ..core.jit import jit, UNCACHED
 
 #: Bytes of the 37 float64 at the end of an Imu, and the first byte of a CDR Imu after its
 #: frame_id (encapsulation header, sec, nanosec, the string length) - as :mod:`.imu_cdr`.
@@ -29,7 +29,7 @@ _GYRO = 13 * 8
 _ACCEL = 25 * 8
 
 
-@_jit(nogil=True, inline='always')
+@jit(nogil=True, inline='always')
 def _varint(u8, pos, last):  # pragma: no cover - compiled; tested against the numpy walk
     # (value, size) of the SQLite varint at pos; bytes past ``last`` read as byte ``last``, as
     # sqlite_pages._varints does (only cells the checks then refuse ever get there).
@@ -45,7 +45,7 @@ def _varint(u8, pos, last):  # pragma: no cover - compiled; tested against the n
     return (v << 8) | np.int64(u8[min(pos + 8, last)]), 9
 
 
-@_jit(nogil=True, inline='always')
+@jit(nogil=True, inline='always')
 def _serial_size(st):  # pragma: no cover - compiled
     # Bytes of an integer serial type (1-6, 8 and 9); -1 for any other.
     if st >= 1 and st <= 4:
@@ -59,7 +59,7 @@ def _serial_size(st):  # pragma: no cover - compiled
     return -1
 
 
-@_jit(nogil=True, inline='always')
+@jit(nogil=True, inline='always')
 def _be_int(u8, pos, st):  # pragma: no cover - compiled
     # Big-endian signed integer of serial type st (1-6, 8: 0, 9: 1).
     if st == 8:
@@ -77,7 +77,7 @@ def _be_int(u8, pos, st):  # pragma: no cover - compiled
     return v
 
 
-@_jit(nogil=True, inline='always')
+@jit(nogil=True, inline='always')
 def _decode_imu(u8, u4, f8, off, length, t, data, k):  # pragma: no cover - compiled
     # imu_cdr.decode_at for one blob: little-endian CDR Imu of exactly this length -> stamp (s,
     # NaN if nanosec >= 1e9) and values in t[k], data[k]; False if the layout does not fit.
@@ -106,7 +106,7 @@ def byte_views(u8):
             np.ndarray(shape=(max(n - 7, 0),), dtype='<f8', buffer=u8, strides=(1,)))
 
 
-@_jit(nogil=True)
+@jit(nogil=True)
 def walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off, length, ok, t,
          data, slow):  # pragma: no cover - compiled; tested against SqlitePages._batch
     """
@@ -180,4 +180,4 @@ def walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off, length
 
 #: False where numba found no writable cache folder: compiling the walk (about 5 s) in every
 #: process would cost more than it saves, so :func:`.sqlite_pages.compiled_walk` declines.
-CACHED = walk.__name__ not in _UNCACHED
+CACHED = walk.__name__ not in UNCACHED

@@ -13,7 +13,7 @@ import shutil
 import subprocess
 import sys
 
-from imu_allan.core import allan_kernel
+from imu_allan.core import allan_kernel, jit
 from imu_allan.core.allan import _phase, avar_reference
 import numpy as np
 import pytest
@@ -76,7 +76,7 @@ _SCRIPT = """
 import sys
 import numpy as np
 sys.path.insert(0, sys.argv[1])
-import allan_kernel
+from kernels import allan_kernel
 d = np.random.default_rng(0).normal(size=(5000, 2))
 ms = np.array([1, 2, 3, 5, 8, 13, 21, 34, 55])
 print(float(allan_kernel.avar(d, ms)[0, 0]))
@@ -84,7 +84,7 @@ print(float(allan_kernel.avar(d, ms)[0, 0]))
 
 
 def _run(folder, env):
-    proc = subprocess.run([sys.executable, '-c', _SCRIPT, str(folder)], env=env,
+    proc = subprocess.run([sys.executable, '-c', _SCRIPT, str(folder.parent)], env=env,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     return proc
@@ -102,10 +102,16 @@ def _env(tmp_path, **extra):
 
 
 def _module_copy(tmp_path):
-    """Copy the kernel module alone into a fresh folder (own source, so own cache entries)."""
-    folder = tmp_path / 'pkg'
-    folder.mkdir()
-    shutil.copy(allan_kernel.__file__, folder / 'allan_kernel.py')
+    """
+    Copy the kernel module into a fresh package ``kernels`` (own source: own cache entries).
+
+    Return the package's folder; its parent goes on ``sys.path``.
+    """
+    folder = tmp_path / 'pkg' / 'kernels'
+    folder.mkdir(parents=True)
+    (folder / '__init__.py').write_text('')
+    for module in (allan_kernel, jit):
+        shutil.copy(module.__file__, folder / Path(module.__file__).name)
     return folder
 
 

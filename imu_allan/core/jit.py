@@ -1,0 +1,31 @@
+"""
+numba's ``njit`` with the disk cache: how every compiled kernel of the package is made.
+
+Compiled once per install: the kernels are module-level functions with ``cache=True``, which
+numba keys by their file and names, so the machine code compiled by the first process is
+loaded by every later one.  (Functions defined inside another function never hit that cache:
+their closure is part of the key and differs in every process.)  Where the package's
+``__pycache__`` cannot be written (a read-only install), numba falls back to the user cache
+directory (``~/.cache/numba``, or ``$NUMBA_CACHE_DIR`` when set); where no directory is
+writable at all, :func:`jit` compiles without the cache and lists the kernel in
+:data:`UNCACHED`, so that its module can say so or decline to use it.
+
+Imported only by the kernel modules (:mod:`.allan_kernel`, :mod:`..formats.sqlite_kernel`),
+themselves imported on first use: numba is optional and costs about 1 s to load.
+"""
+
+import numba
+
+#: Names of the kernels compiled without a disk cache (no writable cache directory).
+UNCACHED = []
+
+
+def jit(**options):
+    """Compile with numba, cached on disk (``cache=True``); uncached if nothing is writable."""
+    def wrap(fn):
+        try:
+            return numba.njit(cache=True, **options)(fn)
+        except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+            UNCACHED.append(fn.__name__)
+            return numba.njit(**options)(fn)
+    return wrap
