@@ -443,6 +443,26 @@ def test_write_bag_with_second_imu_samples(tmp_path):
     assert np.array_equal(d.data[:, :3], den.data) and not d.data[:, 3:].any()
 
 
+def damaged_copies(raw, seed, count, first=0):
+    """
+    Yield ``count`` seeded damaged copies of the bytes ``raw``.
+
+    Every fourth is cut at a random length; the others get 1-3 random runs of 1-63 random bytes
+    at positions from ``first`` on (``first`` = 4096 spares an SQLite file's header page).
+    """
+    rng = np.random.default_rng(seed)
+    for k in range(count):
+        data = bytearray(raw)
+        if k % 4 == 3:
+            data = data[:int(rng.integers(1, len(data)))]
+        else:
+            for _ in range(1 + k % 3):
+                at = int(rng.integers(first, len(data) - 64))
+                size = int(rng.integers(1, 64))
+                data[at:at + size] = rng.bytes(size)
+        yield bytes(data)
+
+
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
 def test_random_damage_gives_samples_or_input_error(tmp_path, storage):
     """
@@ -457,19 +477,10 @@ def test_random_damage_gives_samples_or_input_error(tmp_path, storage):
     write_imu_bag(path, s, storage=storage, compress=storage == 'mcap')
     f = path if storage == 'ros1' else next(path.glob('good.*'))
     raw = f.read_bytes()
-    rng = np.random.default_rng(11)
     outcomes = {'samples': 0, 'error': 0}
-    for k in range(16):
-        data = bytearray(raw)
-        if k % 4 == 3:
-            data = data[:int(rng.integers(1, len(data)))]
-        else:
-            for _ in range(1 + k % 3):
-                at = int(rng.integers(0, len(data) - 64))
-                size = int(rng.integers(1, 64))
-                data[at:at + size] = rng.bytes(size)
+    for k, data in enumerate(damaged_copies(raw, seed=11, count=16)):
         bad = tmp_path / f'bad{k}{f.suffix}'
-        bad.write_bytes(bytes(data))
+        bad.write_bytes(data)
         for fast in (True, False):
             try:
                 r = read_bag(bad, fast=fast)
