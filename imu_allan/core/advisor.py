@@ -340,7 +340,7 @@ class _AxisAdvisor:
             yield from self._undetected(axis_terms, n_max)
 
     def _data_criterion(self, names):
-        fit = fit_terms(Problem(*self.data, self.rate_hz), names)
+        fit = fit_terms(Problem(*self.data, self.rate_hz), names, profile_intervals=False)
         penalty = SELECTION_PENALTY * math.log(max(fit.n_points, 2))
         return fit, fit.chi2 + _n_params(list(fit.terms)) * penalty
 

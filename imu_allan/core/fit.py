@@ -137,8 +137,14 @@ def _nonlinear_range(problem, name):
     return math.log(lo), math.log(hi)
 
 
-def fit_terms(problem, names):
-    """Fit the named terms; return an :class:`AxisFit` (profiling tau_c / f0 when present)."""
+def fit_terms(problem, names, profile_intervals=True):
+    """
+    Fit the named terms; return an :class:`AxisFit` (profiling tau_c / f0 when present).
+
+    ``profile_intervals=False`` leaves the intervals of tau_c / f0 NaN: their profile
+    bisection is most of the cost of such a fit, and a caller comparing criteria (the
+    recording advisor) does not need them.
+    """
     names = list(names)
     nl_names = [n for n in names if TERMS[n].position]
 
@@ -180,8 +186,11 @@ def fit_terms(problem, names):
         interval = (math.sqrt(max(coef[j] - sd[j], 0.0)), math.sqrt(coef[j] + sd[j]))
         spec = TERMS[name]
         fit.terms[name] = spec.pack(value, nonlinear.get(name))
-        fit.intervals[name] = spec.pack(interval, _profile_interval(profiles[name], chi2)
-                                        if spec.position else None)
+        position = None
+        if spec.position:
+            position = (_profile_interval(profiles[name], chi2) if profile_intervals
+                        else (math.nan, math.nan))
+        fit.intervals[name] = spec.pack(interval, position)
     n_params = int(active.sum()) + sum(1 for n in nl_names if n in fit.terms)
     fit.dof = max(problem.tau.size - n_params, 0)
     return fit
