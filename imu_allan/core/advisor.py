@@ -298,6 +298,7 @@ class _AxisAdvisor:
         self.targets = targets
         j = result.axis_index(axis)
         self.data = (result.tau, result.avar[:, j], result.edf[:, j], result.alpha[:, j])
+        self.problem = Problem(*self.data, result.rate_hz)  # the measured curve, set up once
         self.rate_hz = result.rate_hz
         self.n = int(result.n_samples)
         self.fit = fitted.fits[axis]
@@ -340,7 +341,7 @@ class _AxisAdvisor:
             yield from self._undetected(axis_terms, n_max)
 
     def _data_criterion(self, names):
-        fit = fit_terms(Problem(*self.data, self.rate_hz), names, profile_intervals=False)
+        fit = fit_terms(self.problem, names, profile_intervals=False)
         penalty = SELECTION_PENALTY * math.log(max(fit.n_points, 2))
         return fit, fit.chi2 + _n_params(list(fit.terms)) * penalty
 

@@ -130,9 +130,10 @@ def _lag_sum(j_count, big_m, m, f, alpha, moment=0):
     def weight(j):
         return j if moment else 1.0 - j / big_m
     if j_count <= _SUM_POINTS or not math.isinf(f):
+        # In blocks of lags: a long record's 3m lags at once would take ~100 MB.
         total = 0.0
-        for lo in range(1, j_count, _SUM_BLOCK):  # in blocks: a long record's 3m lags would
-            j = np.arange(lo, min(lo + _SUM_BLOCK, j_count), dtype=float)  # take ~100 MB
+        for lo in range(1, j_count, _SUM_BLOCK):
+            j = np.arange(lo, min(lo + _SUM_BLOCK, j_count), dtype=float)
             total += float(np.sum(weight(j) * _sz(j / m, f, alpha) ** 2))
         return total
     j = np.unique(np.concatenate([np.linspace(1.0, j_count - 1.0, _SUM_POINTS),
