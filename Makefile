@@ -26,9 +26,13 @@ $(STAMP): requirements.txt
 venv: $(STAMP)
 
 # colcon's isolated layout: install/imu_allan/lib/imu_allan/<executable>.
+# Then byte-compile the installed modules, as pip and setuptools do on install, but here
+# explicitly: setuptools skips it under PYTHONDONTWRITEBYTECODE (set on some CI machines), and
+# every command would then compile the package's sources again (60 ms of `analyze`).
 build: $(STAMP)
 	$(RUN_ENV) $(VENV)/bin/colcon --log-base log build --paths . \
 		--build-base build --install-base install --event-handlers console_cohesion- summary-
+	$(VPY) -m compileall -q $(INSTALL)/lib/python3.11/site-packages/imu_allan > /dev/null
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check imu_allan test scripts bench launch setup.py

@@ -35,14 +35,15 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from . import terms as _terms
 from .allan import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
+from .bisection import bisection, guided, log_ratio
+from .bounded_min import bounded_minimum
 from .edf import edf_oadev
 
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
-from .fit import fit_terms, Problem, SELECTION_PENALTY, shape_columns, upper_limit
+from .fit import fit_terms, Problem, SELECTION_PENALTY, shape_columns, UPPER_LIMIT_DELTA_CHI2
 from .units import IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 
@@ -57,8 +58,6 @@ PAIRS = (('bias_instability', 'rate_random_walk'), ('quantization', 'white_noise
          ('gauss_markov', 'bias_instability'))
 #: Criterion difference (chi^2 units) that separates two alternatives (Kass & Raftery 1995).
 SEPARATION_MARGIN = 10.0
-#: Delta chi^2 of the 95 % upper limit of an undetected term (fit.upper_limit).
-UPPER_LIMIT_DELTA_CHI2 = 4.0
 #: Longest record considered, as a multiple of the current one.
 HORIZON = 1.0e4
 #: Bisection steps in log n (10 steps over a factor 1e4: 0.9 % resolution in time).
@@ -256,37 +255,57 @@ def _best_chi2(problem, names, start):
 
     def chi2(log_p):
         return problem.solve(shape_columns(problem, names, {name: math.exp(log_p)}))[1]
-    best = minimize_scalar(chi2, bounds=(centre - 2.0, centre + 2.0), method='bounded',
-                           options={'xatol': 0.02})
-    return min(float(best.fun), chi2(centre))
+    return min(bounded_minimum(chi2, centre - 2.0, centre + 2.0, xatol=0.02)[1], chi2(centre))
 
 
-def _crossing(ok, n0, n_max):
+def _samples(log_n):
+    return int(round(math.exp(log_n)))
+
+
+def bisection_crossing(ok, n0, n_max):
     """
     Smallest n in [n0, n_max] with ``ok(n)`` (assumed monotone), by bisection in log n.
 
-    A generator (it yields between evaluations so a node can interleave other work); returns
-    n, or None when even n_max does not satisfy ``ok``.
+    The reference of :func:`_crossing`, which returns the same n with fewer evaluations.  A
+    generator (it yields between evaluations so a node can interleave other work); returns n,
+    or None when even n_max does not satisfy ``ok``.
     """
     if ok(n0):
         return n0
     yield
     if not ok(n_max):
         return None
-    lo, hi = math.log(n0), math.log(n_max)
-    for _ in range(_BISECTIONS):
-        yield
-        mid = 0.5 * (lo + hi)
-        if ok(int(round(math.exp(mid)))):
-            hi = mid
-        else:
-            lo = mid
+    _, hi = yield from bisection(lambda x: ok(_samples(x)), math.log(n0), math.log(n_max),
+                                 _BISECTIONS)
     return int(math.ceil(math.exp(hi)))
+
+
+def _crossing(evaluate, n0, n_max, slope):
+    """
+    Return the n of :func:`bisection_crossing` with ``ok(n) = evaluate(n)[0]``, sooner.
+
+    ``evaluate(n)`` returns ``(ok, level)``, the level roughly linear in log n and crossing 0
+    about where ok turns true (:func:`~.bisection.guided`); ``slope`` is its expected growth
+    per unit of log n, for the first guess.  n_max is evaluated only when the crossing is not
+    found below it (a forecast of n_max samples is the most costly one).
+    """
+    first = evaluate(n0)
+    if first[0]:
+        return n0
+    lo, hi = math.log(n0), math.log(n_max)
+    cell = yield from guided(lambda x: evaluate(_samples(x)), lo, hi, _BISECTIONS,
+                             (first[1], first[1] + slope * (hi - lo)), key=_samples,
+                             hi_known=False)
+    return None if cell is None else int(math.ceil(math.exp(cell[1])))
 
 
 def _separated(gap):
     """Return a noise-free criterion gap that exceeds the margin even 1 sd below its mean."""
     return gap - 2.0 * math.sqrt(max(gap, 0.0)) >= SEPARATION_MARGIN
+
+
+#: The smallest separated gap: g - 2 sqrt(g) = margin at sqrt(g) = 1 + sqrt(1 + margin).
+_SEPARATED_GAP = (1.0 + math.sqrt(1.0 + SEPARATION_MARGIN)) ** 2
 
 
 class _AxisAdvisor:
@@ -297,10 +316,12 @@ class _AxisAdvisor:
         self.undetected = undetected
         self.targets = targets
         j = result.axis_index(axis)
-        self.data = (result.tau, result.avar[:, j], result.edf[:, j], result.alpha[:, j])
-        self.problem = Problem(*self.data, result.rate_hz)  # the measured curve, set up once
+        # the measured curve, set up once
+        self.problem = Problem(result.tau, result.avar[:, j], result.edf[:, j],
+                               result.alpha[:, j], result.rate_hz)
         self.rate_hz = result.rate_hz
         self.n = int(result.n_samples)
+        self.fitted = fitted
         self.fit = fitted.fits[axis]
         self.forecast = _Forecast(result.rate_hz, grid)
         self.terms = {}
@@ -330,10 +351,11 @@ class _AxisAdvisor:
             now = self.forecast.rel_halfwidths(self.n, axis_terms).get(term, math.nan)
             scale = rel / now if now > 0 else 1.0
 
-            def ok(n, term=term, target=target, scale=scale):
-                return scale * self.forecast.rel_halfwidths(n, axis_terms).get(
-                    term, math.inf) <= target
-            n_hit = yield from _crossing(ok, self.n, n_max)
+            def evaluate(n, term=term, target=target, scale=scale):
+                rel = scale * self.forecast.rel_halfwidths(n, axis_terms).get(term, math.inf)
+                return rel <= target, log_ratio(target, rel)
+            # the half-width falls as n^-1/2
+            n_hit = yield from _crossing(evaluate, self.n, n_max, 0.5)
             self.terms[term] = TermAdvice(rel, self._more_s(n_hit), None if n_hit else
                                           f'not reached within {HORIZON:g} x the record')
         yield from self._pairs(axis_terms, n_max)
@@ -367,10 +389,11 @@ class _AxisAdvisor:
                 gap0 = self.forecast.criterion_gap(self.n, truth, key, names, start)
                 scale = max(abs(alt_crit - crit), 1.0) / gap0 if _separated(gap0) else 1.0
 
-                def ok(n, truth=truth, names=names, key=key, scale=scale, start=start):
-                    return _separated(scale * self.forecast.criterion_gap(n, truth, key, names,
-                                                                          start))
-                times.append((yield from _crossing(ok, self.n, n_max)))
+                def evaluate(n, truth=truth, names=names, key=key, scale=scale, start=start):
+                    gap = scale * self.forecast.criterion_gap(n, truth, key, names, start)
+                    return _separated(gap), log_ratio(gap, _SEPARATED_GAP)
+                # the noise-free gap grows as n
+                times.append((yield from _crossing(evaluate, self.n, n_max, 1.0)))
             if any(t is None for t in times):
                 self.unresolved.append(Unresolved(self.axis, pair, None, 'not separated '
                                                   f'within {HORIZON:g} x the record'))
@@ -382,8 +405,7 @@ class _AxisAdvisor:
         for term in IEEE_TERMS:
             if term in chosen or term not in self.targets or not chosen:
                 continue
-            limit = upper_limit(*self.data, self.rate_hz, chosen + [term], term,
-                                UPPER_LIMIT_DELTA_CHI2)
+            limit = self.fitted.upper_limit(self.axis, term)  # cached: exports use it too
             yield
             if not math.isfinite(limit):
                 self.terms[term] = TermAdvice(None, None, 'no upper limit from these data',
@@ -400,11 +422,13 @@ class _AxisAdvisor:
                                               'model curve', detected=False, upper_limit=limit)
                 continue
 
-            def ok(n, truth=truth, key=key, gain0=gain0):
-                gain = self.forecast.criterion_gap(n, truth, key, chosen) + self._penalty(
-                    n, truth, key)
-                return UPPER_LIMIT_DELTA_CHI2 * gain / gain0 >= self._penalty(n, truth, key)
-            n_hit = yield from _crossing(ok, self.n, n_max)
+            def evaluate(n, truth=truth, key=key, gain0=gain0):
+                penalty = self._penalty(n, truth, key)
+                gain = UPPER_LIMIT_DELTA_CHI2 * (self.forecast.criterion_gap(
+                    n, truth, key, chosen) + penalty) / gain0
+                return gain >= penalty, log_ratio(gain, penalty)
+            # the gain grows as n, the penalty as log of the number of averaging times
+            n_hit = yield from _crossing(evaluate, self.n, n_max, 1.0)
             self.terms[term] = TermAdvice(None, self._more_s(n_hit), None if n_hit else
                                           f'not detected within {HORIZON:g} x the record',
                                           detected=False, upper_limit=limit)

@@ -31,9 +31,10 @@ from itertools import combinations
 import math
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from . import terms as _terms
+from .bisection import guided, log_ratio, run
+from .bounded_min import bounded_minimum
 from .model import NoiseModel
 from .nnls import nnls_scaled
 from .terms import TERMS
@@ -50,6 +51,9 @@ _MIN_EDF = 1.0
 #: exactly the true terms (4 spurious random walks from flicker drift), 2 -> 95 of 96.
 SELECTION_PENALTY = 2.0
 _IRLS_ITERATIONS = 6
+#: Delta chi^2 of the 95 % upper limit of an undetected term (:func:`upper_limit`).
+UPPER_LIMIT_DELTA_CHI2 = 4.0
+_LIMIT_RESOLUTION = 1e-3  # of the upper limit in log c: 0.05 % of the coefficient
 
 
 @dataclass
@@ -100,6 +104,15 @@ class Problem:
         corr = correlation_matrix(self.tau, alpha[ok]) + 1e-9 * np.eye(ok.sum())
         self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(corr)))
         self._rel_sd = np.sqrt(2.0 / self.edf)
+        self._columns = {}
+
+    def column(self, name, position=None):
+        """AVAR shape of a term at the averaging times (kept for terms without a position)."""
+        if position is not None:
+            return TERMS[name].shape(self.tau, self.rate_hz, position)
+        if name not in self._columns:  # profiles and forecasts ask again for every trial
+            self._columns[name] = TERMS[name].shape(self.tau, self.rate_hz, None)
+        return self._columns[name]
 
     def whiten(self, model, columns):
         """Return ``columns`` (AVAR per tau, one column each) whitened for ``model`` AVAR."""
@@ -127,8 +140,7 @@ class Problem:
 
 def shape_columns(problem, names, nonlinear):
     """AVAR shape of each named term at the problem's averaging times, one column each."""
-    return np.column_stack([TERMS[name].shape(problem.tau, problem.rate_hz, nonlinear.get(name))
-                            for name in names])
+    return np.column_stack([problem.column(name, nonlinear.get(name)) for name in names])
 
 
 def _nonlinear_range(problem, name):
@@ -165,9 +177,8 @@ def fit_terms(problem, names, profile_intervals=True):
         values = np.array([chi2_at(v) for v in grid])
         k = int(np.argmin(values))
         a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
-        best = minimize_scalar(chi2_at, bounds=(a, b), method='bounded',
-                               options={'xatol': 1e-3}) if b > a else None
-        logp = best.x if best is not None and best.fun <= values[k] else grid[k]
+        best = bounded_minimum(chi2_at, a, b, xatol=1e-3) if b > a else None
+        logp = best[0] if best is not None and best[1] <= values[k] else grid[k]
         nonlinear[name] = math.exp(logp)
         profiles[name] = (grid, values, logp, chi2_at)
     coef, chi2, g = evaluate(nonlinear)
@@ -240,7 +251,7 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None):
     return best if best is not None else AxisFit(n_points=problem.tau.size)
 
 
-def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
+def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LIMIT_DELTA_CHI2):
     """
     Largest coefficient of an undetected ``term`` the data allow (profile likelihood).
 
@@ -254,22 +265,32 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=4.0):
     if problem.tau.size < 2 or not others:
         return math.nan
     base = shape_columns(problem, others, {})
-    extra = TERMS[term].shape(problem.tau, rate_hz)
+    extra = problem.column(term)
 
     def chi2(log_c):
         return problem.solve(base, offset=math.exp(log_c) * extra)[1]
 
-    chi2_min = problem.solve(np.column_stack([base, extra]))[1]
+    def evaluate(log_c):  # (beyond the limit, level): the level ~ linear in log c
+        excess = chi2(log_c) - chi2_min
+        # (the floor keeps a level where re-weighting leaves the excess at or below 0)
+        return excess > delta_chi2, log_ratio(max(excess, 1e-3 * delta_chi2), delta_chi2)
+
+    coef, chi2_min, g = problem.solve(np.column_stack([base, extra]))
     hi = math.log(float(np.max(problem.avar / extra)))
-    if chi2(hi) - chi2_min <= delta_chi2:
+    if not evaluate(hi)[0]:
         return math.nan
-    lo = hi - 60.0
-    while hi - lo > 1e-3:  # 0.05 % on the coefficient: 16 refits instead of 60
-        mid = 0.5 * (lo + hi)
-        if chi2(mid) - chi2_min <= delta_chi2:
-            lo = mid
-        else:
-            hi = mid
+    # Above the best-fitting coefficient the excess only grows (chi^2 is convex in c); below
+    # it, where the data may want the term, the excess can pass delta as well, and that
+    # crossing is not the limit.
+    lo = max(hi - 60.0, math.log(coef[-1])) if coef[-1] > 0 else hi - 60.0
+    halvings = max(math.ceil(math.log2((hi - lo) / _LIMIT_RESOLUTION)), 0)
+    # First guess: the limit of the linear problem with these weights, c + sqrt(delta) sd(c)
+    # (GLS covariance); the re-weighting moves it a little.  The levels given for the ends
+    # only make that guess (the excess grows about as c^2 near the limit: slope 2 in log c).
+    with np.errstate(invalid='ignore'):
+        guess = math.log(max(coef[-1] + np.sqrt(delta_chi2 * np.linalg.pinv(g.T @ g)[-1, -1]),
+                             math.exp(lo)))
+    lo, _ = run(guided(evaluate, lo, hi, halvings, (2.0 * (lo - guess), 2.0 * (hi - guess))))
     return math.sqrt(math.exp(lo))
 
 

@@ -6,17 +6,27 @@ in scipy.  The fits solve thousands of these problems of at most seven columns (
 parameter profiles, the recording advisor's forecasts), and ``scipy.optimize.nnls`` spends
 about 29 us checking its arguments around a solve of about 6 us.  :func:`nnls` checks only
 what matters here (finite input: scipy's routine returns zeros for NaN without a word) and
-calls the compiled routine directly when the installed scipy has it (``requirements.txt``
-pins the version), the public function otherwise; a test compares the two.
+calls the compiled routine directly when the installed scipy has it, loaded without the
+0.3 s import of ``scipy.optimize`` (:mod:`.scipy_compiled`), the public function otherwise; a
+test compares the two.
 """
 
 import numpy as np
-from scipy.optimize import nnls as _public_nnls
 
-try:
-    from scipy.optimize._slsqplib import nnls as _compiled_nnls
-except ImportError:  # another scipy layout: the public function, checks and all
-    _compiled_nnls = None
+from .scipy_compiled import extension
+
+_compiled_nnls = getattr(extension('optimize', '_slsqplib'), 'nnls', None)
+
+
+def _solve(a, b, maxiter):
+    """Run the compiled routine on finite, C-contiguous float64 ``a`` and ``b``."""
+    if _compiled_nnls is None:  # another scipy layout: the public function, checks and all
+        from scipy.optimize import nnls as public_nnls
+        return public_nnls(a, b, maxiter=maxiter)[0]
+    x, _, info = _compiled_nnls(a, b, maxiter)
+    if info == 3:
+        raise RuntimeError('Maximum number of iterations reached.')
+    return x
 
 
 def nnls(a, b, maxiter=None):
@@ -28,15 +38,9 @@ def nnls(a, b, maxiter=None):
     """
     a = np.ascontiguousarray(a, dtype=np.float64)
     b = np.ascontiguousarray(b, dtype=np.float64)
-    maxiter = maxiter or 3 * a.shape[1]
-    if _compiled_nnls is None:
-        return _public_nnls(a, b, maxiter=maxiter)[0]
     if not (np.isfinite(a).all() and np.isfinite(b).all()):
         raise ValueError('array must not contain infs or NaNs')
-    x, _, info = _compiled_nnls(a, b, maxiter)
-    if info == 3:
-        raise RuntimeError('Maximum number of iterations reached.')
-    return x
+    return _solve(a, b, maxiter or 3 * a.shape[1])
 
 
 def nnls_scaled(a, b):
@@ -45,8 +49,15 @@ def nnls_scaled(a, b):
 
     The term shapes span many decades; unscaled, the active-set method can run out of
     iterations on smooth curves (seen on the advisor's forecast grids), so every fit here
-    solves the scaled problem, with 50 iterations per column, and scales back.
+    solves the scaled problem, with 50 iterations per column, and scales back.  A non-finite
+    entry of ``a`` makes its column's norm non-finite, so the norms are the finiteness check
+    (the fits call this ten thousand times a run); a column whose norm overflows (entries
+    above 1e154) is refused with them.
     """
+    a = np.asarray(a, dtype=np.float64)
+    b = np.ascontiguousarray(b, dtype=np.float64)
     scale = np.sqrt(np.einsum('ij,ij->j', a, a))
+    if not (np.isfinite(scale).all() and np.isfinite(b).all()):
+        raise ValueError('array must not contain infs or NaNs (nor columns of norm > 1e308)')
     scale[scale == 0] = 1.0
-    return nnls(a / scale, b, maxiter=50 * a.shape[1]) / scale
+    return _solve(np.ascontiguousarray(a / scale), b, 50 * a.shape[1]) / scale

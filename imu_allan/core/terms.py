@@ -36,13 +36,36 @@ FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)
 
 def flicker_shape(tau, f0):
     """AVAR of bias instability per unit B^2 with the 1/f PSD cut off at ``f0`` (Hz)."""
-    from scipy.special import sici  # here, so that importing the registry needs no scipy
     x = math.pi * f0 * np.asarray(tau, dtype=float)
-    ci2 = sici(2.0 * x)[1]
-    ci4 = sici(4.0 * x)[1]
     s, c = np.sin(x), np.cos(x)
     return (2.0 / math.pi) * (math.log(2.0) - s ** 3 * (s + 4.0 * x * c) / (2.0 * x * x)
-                              + ci2 - ci4)
+                              + cosine_integral(2.0 * x) - cosine_integral(4.0 * x))
+
+
+#: From here on Ci(z) is summed from its asymptotic series (8 terms: error below 1e-19).
+_CI_SERIES_MIN = 100.0
+_CI_F = [(-1) ** k * math.factorial(2 * k) for k in range(8)]      # of f(z) z
+_CI_G = [(-1) ** k * math.factorial(2 * k + 1) for k in range(8)]  # of g(z) z^2
+
+
+def cosine_integral(z):
+    """
+    Ci(z) = -int_z^inf cos(t) / t dt for z > 0.
+
+    For z >= 100 (the flicker curve's arguments at averaging factors above 1000, where
+    :func:`sampled_flicker_shape` uses the continuous curve) from Ci = f sin z - g cos z with
+    the auxiliary functions' asymptotic series (Abramowitz & Stegun 5.2.9, 5.2.34-35),
+    truncated after 8 terms, the last of which is below 2e-19 there; this avoids importing
+    scipy.special (0.3 s).  Smaller arguments use scipy's ``sici``.
+    """
+    z = np.asarray(z, dtype=float)
+    if not np.all(z >= _CI_SERIES_MIN):
+        from scipy.special import sici
+        return sici(z)[1]
+    w = 1.0 / (z * z)
+    f = np.polynomial.polynomial.polyval(w, _CI_F) / z
+    g = np.polynomial.polynomial.polyval(w, _CI_G) * w
+    return f * np.sin(z) - g * np.cos(z)
 
 
 #: Above this averaging factor the sampled and the continuous flicker curves agree to 1e-4.
@@ -76,12 +99,13 @@ _GL16 = np.polynomial.legendre.leggauss(16)  # nodes on [-1, 1] and weights
 def sampled_flicker_shape(tau, rate_hz):
     """AVAR per unit B^2 of bias instability for data sampled at ``rate_hz`` (exact)."""
     tau = np.asarray(tau, dtype=float)
-    m = np.rint(tau * rate_hz).astype(np.int64)
-    out = flicker_shape(tau, rate_hz / 2.0)
+    flat = np.atleast_1d(tau)
+    m = np.rint(flat * rate_hz).astype(np.int64)
     small = (m >= 1) & (m <= _DISCRETE_FLICKER_MAX_M)
-    out = np.array(out, dtype=float, copy=True, ndmin=1)
-    out[np.atleast_1d(small)] = [_sampled_flicker(int(k)) for k in np.atleast_1d(m)[
-        np.atleast_1d(small)]]
+    out = np.empty(flat.shape)
+    out[small] = [_sampled_flicker(int(k)) for k in m[small]]
+    if not small.all():
+        out[~small] = flicker_shape(flat[~small], rate_hz / 2.0)
     return out.reshape(tau.shape)
 
 

@@ -184,3 +184,27 @@ def test_upper_limit_of_an_undetected_random_walk_covers_the_truth():
         assert math.isfinite(limit) and limit > 0
         above += limit >= truth['rate_random_walk']
     assert above >= 9
+
+
+def test_upper_limit_of_a_term_the_data_want_is_above_its_fitted_value():
+    """
+    The limit is the crossing above the best-fitting coefficient.
+
+    Here the random walk is plain in the (noise-free) curve, so chi^2 exceeds its minimum by
+    more than 4 at small coefficients too; a search from below took that crossing and gave
+    1e-14 rad/s^2/sqrt(Hz) as the "limit" of a 2e-5 random walk.
+    """
+    from imu_allan.core.allan import identify_noise
+    from imu_allan.core.edf import edf_oadev
+    from imu_allan.core.fit import upper_limit
+    from imu_allan.core.terms import model_avar
+    n, rate = 360_000, 100.0
+    ms = np.unique(np.round(np.geomspace(1, n / 10, 60)).astype(int))
+    tau = ms / rate
+    truth = {'white_noise': {'value': 1e-3}, 'rate_random_walk': {'value': 2e-5}}
+    avar = model_avar(truth, tau, rate)
+    alpha = identify_noise(tau, avar[:, None])[:, 0]
+    edf = np.array([edf_oadev(int(a), int(m), n + 1) for a, m in zip(alpha, ms)])
+    limit = upper_limit(tau, avar, edf, alpha, rate, list(truth), 'rate_random_walk')
+    # above the truth (the best fit of a noise-free curve), by a few standard deviations
+    assert 2e-5 < limit < 4e-5

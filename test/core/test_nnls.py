@@ -53,3 +53,14 @@ def test_non_finite_input_is_refused(bad):
         core_nnls.nnls(a, np.ones(3))
     with pytest.raises(ValueError, match='infs or NaNs'):
         core_nnls.nnls(np.eye(3), np.array([1.0, bad, 0.0]))
+
+
+@pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
+def test_scaled_solve_refuses_non_finite_input_too(bad):
+    """nnls_scaled checks finiteness through the column norms (one reduction, not two)."""
+    a = np.eye(3)
+    a[2, 0] = bad
+    with pytest.raises(ValueError, match='infs or NaNs'):
+        core_nnls.nnls_scaled(a, np.ones(3))
+    with pytest.raises(ValueError, match='infs or NaNs'):
+        core_nnls.nnls_scaled(np.eye(3), np.array([1.0, bad, 0.0]))

@@ -1,0 +1,39 @@
+"""scipy's compiled routines, loaded without their subpackages, equal the public ones."""
+
+import subprocess
+import sys
+
+from imu_allan.core import scipy_compiled
+from imu_allan.core.edf import chi2_interval
+import numpy as np
+import scipy.special
+
+
+def test_the_fits_and_intervals_import_neither_scipy_optimize_nor_scipy_special():
+    """The point of the module: the 0.6 s of those imports is not paid by ``analyze``."""
+    code = ('import sys; import imu_allan.core.analysis, imu_allan.core.advisor; '
+            'from imu_allan.core import edf, nnls; '
+            'assert nnls._compiled_nnls is not None; '
+            'print(sorted(m for m in sys.modules if m.startswith("scipy")))')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         check=True).stdout
+    # only the two compiled modules, under their names, not the packages around them
+    assert out.strip() == "['scipy.optimize._slsqplib', 'scipy.special._special_ufuncs']"
+
+
+def test_inverse_gamma_gives_scipy_chi_square_quantiles_bit_for_bit():
+    rng = np.random.default_rng(0)
+    k = np.concatenate([10.0 ** rng.uniform(-0.5, 7.5, 5000), np.arange(1.0, 200.0)])
+    q = rng.uniform(0.0, 1.0, k.size)
+    inverse = scipy_compiled.function('special', '_special_ufuncs', 'gammainccinv')
+    assert np.array_equal(2.0 * inverse(0.5 * k, q), scipy.special.chdtri(k, q))
+    low, high = chi2_interval(np.ones(k.size), k)
+    p = (1.0 - 0.6826894921370859) / 2.0
+    assert np.array_equal(low, np.sqrt(k / scipy.special.chdtri(k, p)))
+    assert np.array_equal(high, np.sqrt(k / scipy.special.chdtri(k, 1.0 - p)))
+
+
+def test_missing_module_falls_back_to_the_public_function():
+    assert scipy_compiled.extension('special', 'no_such_module') is None
+    assert scipy_compiled.function('special', 'no_such_module', 'gammainccinv') is \
+        scipy.special.gammainccinv
