@@ -317,8 +317,9 @@ def test_clean_stream_values_units_stamps_rollover(node, procs, tmp_path):
     rel = spacing / (steps / TICKS) - 1.0
     assert np.max(np.abs(rel)) <= 5e-4 + 1e-6
     assert np.all(spacing > 0)
-    # Stamps are on the host clock (huge margin: this only catches a wrong epoch).
-    assert abs(stamp_ns(msgs[-1]) * 1e-9 - run.received[-1]) < 1.0
+    # Stamps are on the host clock.  The margin only catches a wrong epoch (hours off): in a
+    # full test run on 2 loaded cores the last message has arrived 1.2 s after its stamp.
+    assert abs(stamp_ns(msgs[-1]) * 1e-9 - run.received[-1]) < 10.0
     m = msgs[0]
     assert m.header.frame_id == 'gx3'
     assert m.orientation_covariance[0] == -1.0
