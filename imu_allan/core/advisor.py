@@ -195,6 +195,7 @@ class _Forecast:
         self.rate_hz = rate_hz
         self.grid = grid
         self._cache = {}
+        self._gaps = {}  # a crossing search starts where its scale was taken: asked twice
 
     def problem(self, n, axis_terms, key):
         """Return the fit's problem for a record of ``n`` samples whose AVAR is the model's."""
@@ -237,12 +238,15 @@ class _Forecast:
 
         ``start`` holds starting values of nonlinear parameters (tau_c) of ``other_names``.
         """
-        problem = self.problem(n, truth, key)
-        if problem is None:
-            return 0.0
-        penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
-        return (_best_chi2(problem, other_names, start or {})
-                + (_n_params(other_names) - _n_params(truth)) * penalty)
+        memo = (n, key, tuple(other_names), tuple(sorted((start or {}).items())))
+        if memo not in self._gaps:
+            problem = self.problem(n, truth, key)
+            if problem is None:
+                return 0.0
+            penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
+            self._gaps[memo] = (_best_chi2(problem, other_names, start or {})
+                                + (_n_params(other_names) - _n_params(truth)) * penalty)
+        return self._gaps[memo]
 
 
 def _best_chi2(problem, names, start):

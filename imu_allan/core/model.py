@@ -21,11 +21,10 @@ Single-parameter terms take a number; ``gauss_markov`` takes ``sigma`` (stationa
 
 import copy
 from dataclasses import dataclass, field
+import functools
 import math
 import os
 import stat
-
-import yaml
 
 from .units import ALL_TERMS, AXES, sensor_of, TERM_PARAMETERS
 from ..errors import InputError
@@ -53,23 +52,32 @@ MAX_PARAMETER = 1.0e6  # no SI noise parameter, correlation time (s) or frequenc
 MAX_RATE_HZ = 1.0e6
 
 
-class _StrictLoader(yaml.SafeLoader):
-    """SafeLoader that refuses duplicate keys (YAML would silently keep the last one)."""
+@functools.cache
+def _strict_loader():
+    """
+    Return a SafeLoader that refuses duplicate keys (YAML would silently keep the last one).
 
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=True)
-            try:
-                duplicate = key in seen
-            except TypeError:  # an unhashable key: the base class reports it
-                break
-            if duplicate:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f'duplicate key {key!r} (line {key_node.start_mark.line + 1})',
-                    key_node.start_mark)
-            seen.add(key)
-        return super().construct_mapping(node, deep)
+    Built on first use: importing yaml costs 20 ms, and most commands read no model file.
+    """
+    import yaml
+
+    class StrictLoader(yaml.SafeLoader):
+        def construct_mapping(self, node, deep=False):
+            seen = set()
+            for key_node, _ in node.value:
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    duplicate = key in seen
+                except TypeError:  # an unhashable key: the base class reports it
+                    break
+                if duplicate:
+                    raise yaml.constructor.ConstructorError(
+                        None, None,
+                        f'duplicate key {key!r} (line {key_node.start_mark.line + 1})',
+                        key_node.start_mark)
+                seen.add(key)
+            return super().construct_mapping(node, deep)
+    return StrictLoader
 
 
 def _kind(value):
@@ -103,8 +111,9 @@ def read_yaml_file(path, what='model'):
         text = raw.decode('utf-8')
     except UnicodeDecodeError as exc:
         raise ModelError(where, f'not UTF-8 text at byte {exc.start}: not a {what} file') from None
+    import yaml
     try:
-        return yaml.load(text, Loader=_StrictLoader)  # noqa: S506 (a SafeLoader subclass)
+        return yaml.load(text, Loader=_strict_loader())  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as exc:
         raise ModelError(where, f'not valid YAML ({" ".join(str(exc).split())[:160]})') from None
     except RecursionError:
@@ -265,6 +274,7 @@ class NoiseModel:
         text = '# imu_allan noise model: continuous-time coefficients, SI units\n'
         if header:
             text += ''.join(f'# {line}\n' for line in header.splitlines())
+        import yaml
         text += yaml.safe_dump(self.to_dict(), sort_keys=False)
         with open(path, 'w', encoding='utf-8') as stream:
             stream.write(text)
