@@ -17,7 +17,7 @@ type identified on the model curve as :func:`~.allan.identify_noise` does on dat
 the covariance with the fitted model's own curve on that grid predicts the half-width a record
 of n' samples would give.  Scaled so that at the current length it equals the fit's own
 half-width (they differ only by the grid and the noise identification, a few %), the smallest
-n' that meets a target is found by bisection in log n'.
+n' that meets a target is found by bisection in log n' (guided: :mod:`.bisection`).
 
 Two alternatives (term sets S and S') are told apart when the selection criterion
 chi^2 + k x penalty (fit.py) of the worse exceeds the better's by SEPARATION_MARGIN (10, "very

@@ -5,10 +5,13 @@ The EDF follows Greenhall & Riley (2004), "Uncertainty of stability variances ba
 differences" (the algorithm NIST SP1065 and allantools use), for the unmodified, fully
 overlapping Allan variance (d = 2, F = S = m).  Where the paper switches to a fitted table for
 long sums (J > 100), we evaluate the same basic sum instead: exactly up to J = 4096 lags, and
-above that (infinite-filter limit only, where the summand is smooth) by the trapezoid rule on
-4096 points with Euler-Maclaurin end corrections, measured within 8e-7 of the exact sum for
-alpha = 0, -1, -2, m = 2,000 to 100,000 and M = 3m to 100m (well below the EDF's own
-accuracy).  With numpy this costs microseconds and removes the table's approximation.
+above that (infinite-filter limit only, where the summand is smooth between kinks at j = m,
+2m) as Euler-Maclaurin's integral plus half end-values, the integral by 32-point
+Gauss-Legendre on each smooth piece: within 7e-7 of the exact sum at the smallest such m
+(1366) and within 6e-8 from m = 5000 on, for alpha = 0, -1, -2 (the derivative terms left
+out fall as 1/m^2; well below the EDF's own accuracy).  It replaced the trapezoid rule on 4096
+points, which was up to 7e-7 off at every m and cost 40 times as many evaluations.  With
+numpy this costs microseconds and removes the table's approximation.
 Power-law noise types are given by the frequency-PSD exponent alpha: +2 white PM
 (quantization), +1 flicker PM, 0 white FM (white noise), -1 flicker FM (bias instability), -2
 random-walk FM (rate random walk, ramp).
@@ -28,7 +31,8 @@ _gammainccinv = function('special', '_special_ufuncs', 'gammainccinv')
 #: The 1-sigma (68.27 %) two-sided confidence level used throughout the package.
 CI_LEVEL = math.erf(1.0 / math.sqrt(2.0))
 _J_MAX = 100  # Greenhall's switch to the infinite-filter limit for large m (alpha <= 0)
-_SUM_POINTS = 4096  # longer lag sums are integrated (trapezoid, Euler-Maclaurin ends)
+_SUM_POINTS = 4096  # longer lag sums are integrated (Euler-Maclaurin, Gauss-Legendre)
+_GL32 = np.polynomial.legendre.leggauss(32)  # nodes on [-1, 1] and weights
 _SUM_BLOCK = 1 << 16  # lags summed at a time where they are summed exactly
 
 
@@ -127,8 +131,8 @@ def _lag_sums(j_count, m, f, alpha, weights):
     sum_{j=1}^{J-1} w(j) sz(j/m)^2 for each weight function w (None: 1), exactly or integrated.
 
     In the infinite-filter limit (f = inf) the summand is smooth in j apart from kinks at
-    j = m, 2m, so the trapezoid rule on 4096 points plus the half end-points (Euler-Maclaurin)
-    is used above 4096 lags: measured within 8e-7 of the exact sum (module docstring); a
+    j = m, 2m, so above 4096 lags the sum is the integral (Gauss-Legendre on each piece between
+    the kinks) plus the half end-values (Euler-Maclaurin; accuracy in the module docstring); a
     finite filter has kinks at every lag, so it is always summed.  The weights share one
     evaluation of sz (the EDF needs the sums with 1 and with j; sz costs the most).
     """
@@ -142,9 +146,12 @@ def _lag_sums(j_count, m, f, alpha, weights):
             for i, g in enumerate(weighted(j, _sz(j / m, f, alpha) ** 2)):
                 totals[i] += float(np.sum(g))
         return totals
-    j = np.unique(np.concatenate([np.linspace(1.0, j_count - 1.0, _SUM_POINTS),
-                                  [float(m), 2.0 * m]]))
-    return [float(np.sum(0.5 * (g[1:] + g[:-1]) * np.diff(j)) + 0.5 * (g[0] + g[-1]))
+    edges = np.unique(np.clip([1.0, m, 2.0 * m, j_count - 1.0], 1.0, j_count - 1.0))
+    half = 0.5 * np.diff(edges)[:, None]
+    nodes = (half * _GL32[0] + (edges[:-1, None] + half)).ravel()
+    gl_weights = (half * _GL32[1]).ravel()
+    j = np.concatenate([nodes, [1.0, j_count - 1.0]])  # the nodes, then the two ends
+    return [float(np.sum(gl_weights * g[:-2]) + 0.5 * (g[-2] + g[-1]))
             for g in weighted(j, _sz(j / m, f, alpha) ** 2)]
 
 

@@ -118,6 +118,24 @@ def test_edf_matches_allantools_where_both_are_exact():
             assert edf_oadev(alpha, m, 5000) == pytest.approx(theirs, rel=1e-9)
 
 
+@pytest.mark.parametrize('alpha', [0, -1, -2])
+def test_long_lag_sums_are_within_their_stated_accuracy_of_the_exact_sums(alpha):
+    """Above 4096 lags the EDF's sums are integrated: 7e-7 at m = 1366, 6e-8 from m = 5000."""
+    from imu_allan.core.edf import _lag_sums, _sz
+    for m, tolerance in [(1366, 7e-7), (5000, 6e-8), (40_000, 6e-8)]:
+        j_count = 3 * m
+        j = np.arange(1.0, j_count)
+        sz_sq = _sz(j / m, math.inf, alpha) ** 2
+        exact = [np.sum(sz_sq), np.sum(j * sz_sq)]
+        got = _lag_sums(j_count, m, math.inf, alpha, (None, lambda j: j))
+        np.testing.assert_allclose(got, exact, rtol=tolerance)
+        m_short = int(2.5 * m)  # a record with M < 3m: the sum stops between the kinks
+        w = 1.0 - j[:m_short - 1] / m_short
+        exact = np.sum(w * sz_sq[:m_short - 1])
+        got = _lag_sums(m_short, m, math.inf, alpha, (lambda j: 1.0 - j / m_short,))[0]
+        assert got == pytest.approx(exact, rel=tolerance)
+
+
 def test_chi2_interval_for_edf_100():
     low, high = chi2_interval(1.0, 100.0)
     assert low == pytest.approx(0.93619, abs=2e-5)
