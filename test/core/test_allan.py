@@ -132,7 +132,8 @@ def test_long_lag_sums_are_within_their_stated_accuracy_of_the_exact_sums(alpha)
         m_short = int(2.5 * m)  # a record with M < 3m: the sum stops between the kinks
         w = 1.0 - j[:m_short - 1] / m_short
         exact = np.sum(w * sz_sq[:m_short - 1])
-        got = _lag_sums(m_short, m, math.inf, alpha, (lambda j: 1.0 - j / m_short,))[0]
+        got = _lag_sums(m_short, m, math.inf, alpha,
+                        (lambda j, big_m=m_short: 1.0 - j / big_m,))[0]
         assert got == pytest.approx(exact, rel=tolerance)
 
 
