@@ -12,9 +12,35 @@ writable at all, :func:`jit` compiles without the cache and lists the kernel in
 
 Imported only by the kernel modules (:mod:`.allan_kernel`, :mod:`..formats.sqlite_kernel`),
 themselves imported on first use: numba is optional and costs about 1 s to load.
+
+Before the first kernel runs, even from the cache, numba loads its typing registries, and one
+of them probes for BLAS with ``import scipy.linalg.cython_blas``: that imports all of
+``scipy.linalg`` (0.2-0.4 s here), which no kernel here uses.  So the registries are loaded
+here, with that one compiled module loaded on its own (:mod:`.scipy_compiled`) for the probe
+to find, and taken out of ``sys.modules`` again: a later ``import scipy.linalg`` loads it as
+usual.
 """
 
+import sys
+
 import numba
+
+from .scipy_compiled import extension
+
+
+def _load_registries():
+    name = 'scipy.linalg.cython_blas'
+    blas = None if name in sys.modules else extension('linalg', 'cython_blas')
+    try:
+        numba.core.registry.cpu_target.target_context.refresh()
+    except AttributeError:  # another numba layout: the first kernel call loads them
+        pass
+    finally:
+        if blas is not None and sys.modules.get(name) is blas:
+            del sys.modules[name]
+
+
+_load_registries()
 
 #: Names of the kernels compiled without a disk cache (no writable cache directory).
 UNCACHED = []

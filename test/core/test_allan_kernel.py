@@ -13,7 +13,7 @@ import shutil
 import subprocess
 import sys
 
-from imu_allan.core import allan_kernel, jit
+from imu_allan.core import allan_kernel, jit, scipy_compiled
 from imu_allan.core.allan import _phase, avar_reference
 import numpy as np
 import pytest
@@ -110,7 +110,7 @@ def _module_copy(tmp_path):
     folder = tmp_path / 'pkg' / 'kernels'
     folder.mkdir(parents=True)
     (folder / '__init__.py').write_text('')
-    for module in (allan_kernel, jit):
+    for module in (allan_kernel, jit, scipy_compiled):
         shutil.copy(module.__file__, folder / Path(module.__file__).name)
     return folder
 

@@ -37,3 +37,16 @@ def test_missing_module_falls_back_to_the_public_function():
     assert scipy_compiled.extension('special', 'no_such_module') is None
     assert scipy_compiled.function('special', 'no_such_module', 'gammainccinv') is \
         scipy.special.gammainccinv
+
+
+def test_numba_kernels_load_without_importing_scipy_linalg():
+    """numba's BLAS probe is served without scipy.linalg, which imports normally later."""
+    code = ('import sys; import numpy as np; from imu_allan.core import allan_kernel; '
+            'allan_kernel.column_means(np.ones((8, 2))); '
+            'assert "scipy.linalg" not in sys.modules, "the probe imported scipy.linalg"; '
+            'import scipy.linalg; '
+            'assert scipy.linalg.cython_blas is sys.modules["scipy.linalg.cython_blas"]; '
+            'print(scipy.linalg.solve(np.eye(2), np.ones(2)))')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ['[1.', '1.]']
