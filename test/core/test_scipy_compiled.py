@@ -40,7 +40,7 @@ def test_missing_module_falls_back_to_the_public_function():
 
 
 def test_numba_kernels_load_without_importing_scipy_linalg():
-    """numba's BLAS probe is served without scipy.linalg, which imports normally later."""
+    """The BLAS probe of numba is served without scipy.linalg, which imports normally later."""
     code = ('import sys; import numpy as np; from imu_allan.core import allan_kernel; '
             'allan_kernel.column_means(np.ones((8, 2))); '
             'assert "scipy.linalg" not in sys.modules, "the probe imported scipy.linalg"; '
