@@ -285,11 +285,10 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LI
     lo = max(hi - 60.0, math.log(coef[-1])) if coef[-1] > 0 else hi - 60.0
     halvings = max(math.ceil(math.log2((hi - lo) / _LIMIT_RESOLUTION)), 0)
     # First guess: the limit of the linear problem with these weights, c + sqrt(delta) sd(c)
-    # (GLS covariance); the re-weighting moves it a little.  The levels given for the ends
-    # only make that guess (the excess grows about as c^2 near the limit: slope 2 in log c).
-    with np.errstate(invalid='ignore'):
-        guess = math.log(max(coef[-1] + np.sqrt(delta_chi2 * np.linalg.pinv(g.T @ g)[-1, -1]),
-                             math.exp(lo)))
+    # (GLS covariance; the re-weighting moves it a little).  The levels given for the ends
+    # only make that guess (near the limit the excess grows about as c^2: slope 2 in log c).
+    sd = math.sqrt(max(float(np.linalg.pinv(g.T @ g)[-1, -1]), 0.0))
+    guess = math.log(max(coef[-1] + math.sqrt(delta_chi2) * sd, math.exp(lo)))
     lo, _ = run(guided(evaluate, lo, hi, halvings, (2.0 * (lo - guess), 2.0 * (hi - guess))))
     return math.sqrt(math.exp(lo))
 

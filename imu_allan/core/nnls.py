@@ -18,17 +18,6 @@ from .scipy_compiled import extension
 _compiled_nnls = getattr(extension('optimize', '_slsqplib'), 'nnls', None)
 
 
-def _solve(a, b, maxiter):
-    """Run the compiled routine on finite, C-contiguous float64 ``a`` and ``b``."""
-    if _compiled_nnls is None:  # another scipy layout: the public function, checks and all
-        from scipy.optimize import nnls as public_nnls
-        return public_nnls(a, b, maxiter=maxiter)[0]
-    x, _, info = _compiled_nnls(a, b, maxiter)
-    if info == 3:
-        raise RuntimeError('Maximum number of iterations reached.')
-    return x
-
-
 def nnls(a, b, maxiter=None):
     """
     Return x >= 0 minimising ||a x - b||_2 (a: (m, k), b: (m,), finite).
@@ -38,9 +27,16 @@ def nnls(a, b, maxiter=None):
     """
     a = np.ascontiguousarray(a, dtype=np.float64)
     b = np.ascontiguousarray(b, dtype=np.float64)
+    maxiter = maxiter or 3 * a.shape[1]
+    if _compiled_nnls is None:  # another scipy layout: the public function, checks and all
+        from scipy.optimize import nnls as public_nnls
+        return public_nnls(a, b, maxiter=maxiter)[0]
     if not (np.isfinite(a).all() and np.isfinite(b).all()):
         raise ValueError('array must not contain infs or NaNs')
-    return _solve(a, b, maxiter or 3 * a.shape[1])
+    x, _, info = _compiled_nnls(a, b, maxiter)
+    if info == 3:
+        raise RuntimeError('Maximum number of iterations reached.')
+    return x
 
 
 def nnls_scaled(a, b):
@@ -49,15 +45,8 @@ def nnls_scaled(a, b):
 
     The term shapes span many decades; unscaled, the active-set method can run out of
     iterations on smooth curves (seen on the advisor's forecast grids), so every fit here
-    solves the scaled problem, with 50 iterations per column, and scales back.  A non-finite
-    entry of ``a`` makes its column's norm non-finite, so the norms are the finiteness check
-    (the fits call this ten thousand times a run); a column whose norm overflows (entries
-    above 1e154) is refused with them.
+    solves the scaled problem, with 50 iterations per column, and scales back.
     """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.ascontiguousarray(b, dtype=np.float64)
     scale = np.sqrt(np.einsum('ij,ij->j', a, a))
-    if not (np.isfinite(scale).all() and np.isfinite(b).all()):
-        raise ValueError('array must not contain infs or NaNs (nor columns of norm > 1e308)')
     scale[scale == 0] = 1.0
-    return _solve(np.ascontiguousarray(a / scale), b, 50 * a.shape[1]) / scale
+    return nnls(a / scale, b, maxiter=50 * a.shape[1]) / scale

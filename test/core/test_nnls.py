@@ -57,7 +57,7 @@ def test_non_finite_input_is_refused(bad):
 
 @pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
 def test_scaled_solve_refuses_non_finite_input_too(bad):
-    """nnls_scaled checks finiteness through the column norms (one reduction, not two)."""
+    """The scaled solve refuses them too (a non-finite entry makes a scaled column NaN)."""
     a = np.eye(3)
     a[2, 0] = bad
     with pytest.raises(ValueError, match='infs or NaNs'):
