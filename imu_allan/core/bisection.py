@@ -80,12 +80,10 @@ def guided(evaluate, lo, hi, steps, levels, key=None, hi_known=True):
         open_ends = [x for x in (a, b) if known(x) is None]
         if not open_ends:  # b is false only if hi is (its key equals a false point's)
             return (a, b) if known(b) else None
-        # Without a guess, bisection's own next point; else the guessed cell's end nearer
-        # the guess whose answer is open (the next guess, closer, usually asks the other).
-        if guess is not None or first_open is None:
-            x = min(open_ends, key=lambda x: abs(x - (b if guess is None else guess)))
-        else:
-            x = first_open
+        if guess is None:  # bisection's own next point (hi, when only hi is left open)
+            x = first_open if first_open is not None else open_ends[-1]
+        else:  # the guessed cell's open end nearer the guess (the next guess asks the other)
+            x = min(open_ends, key=lambda x: abs(x - guess))
         yield
         ok, level = evaluate(x)
         if x == hi:
