@@ -429,7 +429,8 @@ class Truth:
         if self.stream:
             self.stream.write('# gx3_sim truth: device units (accel g, gyro rad/s, mag gauss, '
                               'timer ticks at 62500/s); status ok, corrupted, dropped, '
-                              'overrun, unread, reply, event\n')
+                              'overrun, unread, reply, event (code 0 stall, 1 disconnect, '
+                              '2 stream stopped by a command)\n')
             self.stream.write(','.join(TRUTH_COLUMNS) + '\n')
 
     def row(self, status, code, timer, truth=None):
@@ -610,8 +611,11 @@ class Simulator:
             data = self.term.read() if ready else b''
             if data and not self.baud_matches():
                 data = b''      # framing errors: the device cannot read a wrong baud rate
+            streaming = self.device.stream_code
             for reply in self.device.feed(data, now) + self.device.delayed_due(now):
                 self.send_reply(reply, now)
+            if streaming and not self.device.stream_code:  # a command stopped the stream
+                self.truth.row('event', 2, self.device.ticks(now))
             self.stream_records(now)
             self.faults(now)
 
