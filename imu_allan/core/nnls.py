@@ -49,4 +49,6 @@ def nnls_scaled(a, b):
     """
     scale = np.sqrt(np.einsum('ij,ij->j', a, a))
     scale[scale == 0] = 1.0
-    return nnls(a / scale, b, maxiter=50 * a.shape[1]) / scale
+    with np.errstate(invalid='ignore'):  # inf / inf: non-finite input, refused by nnls
+        scaled = a / scale
+    return nnls(scaled, b, maxiter=50 * a.shape[1]) / scale
