@@ -32,7 +32,9 @@ def extension(subpackage, name):
         scipy_spec = importlib.util.find_spec('scipy')  # finds the package, does not run it
     except (ImportError, ValueError):
         return None
-    for root in (scipy_spec.submodule_search_locations or []) if scipy_spec else []:
+    if scipy_spec is None:
+        return None
+    for root in scipy_spec.submodule_search_locations or []:
         for suffix in importlib.machinery.EXTENSION_SUFFIXES:
             path = os.path.join(root, subpackage, name + suffix)
             if not os.path.isfile(path):
