@@ -42,8 +42,8 @@ class StreamParser:
 
     ``codes``: reply codes to accept (default: every reply of the protocol).  Use
     :meth:`feed` for each chunk; it returns the complete good packets (``bytes``, header to
-    checksum) in stream order.  :meth:`flush` at end of stream counts a trailing partial
-    packet as rejected.
+    checksum) in stream order.  :meth:`flush` at end of stream returns the packets still held
+    back and counts a trailing partial packet as rejected.
     """
 
     def __init__(self, codes=None):
@@ -120,14 +120,27 @@ class StreamParser:
         return out
 
     def flush(self):
-        """End of stream: count the bytes still buffered (a partial packet) as rejected."""
-        self.stats.rejected_bytes += len(self._buf)
+        """
+        End of stream: return the good packets still buffered; count the rest as rejected.
+
+        A header-like byte in junk near the end (or inside a damaged packet) announces a packet
+        that reaches past the last byte; :meth:`feed` waits for the rest of it, holding back
+        any good packets behind it.  No more bytes will come, so that candidate is rejected
+        one byte at a time and the packets behind it are framed as usual.
+        """
+        out = []
+        while self._buf:
+            out += self.feed(b'')
+            if self._buf:       # the first byte announces a packet longer than what is left
+                self.stats.rejected_bytes += 1
+                del self._buf[:1]
+                self._base += 1
         self.reset()
+        return out
 
 
 def parse_bytes(data, codes=None):
     """Parse a complete byte string; return ``(packets, stats)``."""
     parser = StreamParser(codes)
-    packets = parser.feed(data)
-    parser.flush()
+    packets = parser.feed(data) + parser.flush()
     return packets, parser.stats

@@ -52,8 +52,7 @@ def read_gx3raw(path, gravity=STANDARD_GRAVITY):
     if not data:
         raise InputError(path, 'empty file')
     parser = StreamParser()
-    packets = parser.feed(data)
-    parser.flush()
+    packets = parser.feed(data) + parser.flush()
     stats = parser.stats
     by_code = {}
     for packet in packets:

@@ -357,6 +357,32 @@ def test_junk_corruption_and_truncation_with_random_chunks():
         assert parser.stats.rejected_bytes == len(data) - sum(map(len, expected))
 
 
+def test_flush_frames_packets_behind_a_false_header(tmp_path):
+    """
+    Junk whose header-like byte announces a packet longer than the rest of the stream.
+
+    The real packets behind it come out of :meth:`StreamParser.flush` (and out of
+    ``parse_bytes`` and the raw-capture reader), each counted once; only the junk is rejected.
+    """
+    tail = [p.encode_record(0xC2, [0.5 * k] * 6, 625 * k) for k in range(2)]
+    junk = bytes([0xCC, 1, 2, 3])          # 0xCC announces 79 bytes; 4 + 2 x 31 remain
+    head = p.encode_record(0xC2, [1.0] * 6, 0)
+    data = head + junk + b''.join(tail)
+    parser = StreamParser()
+    got = parser.feed(data)
+    assert got == [head] and parser.buffered == len(junk) + 62
+    assert parser.flush() == tail and parser.buffered == 0
+    assert parser.stats.packets == 3 and parser.stats.resyncs == 1
+    assert parser.stats.rejected_bytes == len(junk) and parser.stats.bad_checksums == 0
+    # A real truncated packet at the very end is still rejected as a whole.
+    assert parser.feed(tail[0][:20]) == [] and parser.flush() == []
+    assert parser.stats.rejected_bytes == len(junk) + 20
+    assert parse_bytes(data)[0] == [head] + tail
+    path = tmp_path / 'false_header.bin'
+    path.write_bytes(data)
+    assert len(read_gx3raw(str(path)).t) == 3
+
+
 def test_garbage_flood_does_not_grow_buffer():
     """A long flood of header-like garbage is consumed; the buffer stays below one packet."""
     parser = StreamParser()

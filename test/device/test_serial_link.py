@@ -334,7 +334,10 @@ def test_sim_faults_match_truth(sim):
         if chunk:
             packets += parser.feed(chunk)
             quiet_since = time.monotonic()
-    parser.flush()
+    # Junk or a damaged record near the end can hold a header-like byte announcing a packet
+    # longer than what follows; the records behind it come out of flush (that was a record
+    # short in about one run in ten).
+    packets += parser.flush()
     proc.send_signal(signal.SIGTERM)
     proc.wait(10)
     rows = read_truth(truth)
