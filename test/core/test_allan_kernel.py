@@ -180,20 +180,54 @@ def test_sqlite_walk_second_process_compiles_nothing(tmp_path):
     bag = tmp_path / 'bag'
     data = np.random.default_rng(2).normal(size=(300, 6))
     write_imu_bag(bag, Samples(t=1.7e9 + np.arange(300) / 100.0, data=data), storage='sqlite3')
+    first, second = _twice(tmp_path, [_WALK_SCRIPT, str(bag)], 'sqlite_kernel', ['walk'])
+    assert second.stdout.splitlines()[-1] == first.stdout.splitlines()[-1] == \
+        f'300 {float(data.sum())}'
+
+
+def _twice(tmp_path, args, module, kernels):
+    """
+    Run ``python -c *args`` twice with a fresh NUMBA_CACHE_DIR; return both processes.
+
+    Asserts that the first saved each of ``kernels`` of ``module`` and the second saved nothing.
+    """
     cache = tmp_path / 'numba_cache'
     env = _env(tmp_path, NUMBA_CACHE_DIR=str(cache))
     runs = []
     for _ in range(2):
-        proc = subprocess.run([sys.executable, '-c', _WALK_SCRIPT, str(bag)], env=env,
-                              capture_output=True, text=True, timeout=300)
+        proc = subprocess.run([sys.executable, '-c', *args], env=env, capture_output=True,
+                              text=True, timeout=300)
         assert proc.returncode == 0, proc.stderr
         runs.append((proc, _snapshot(cache)))
     (first, before), (second, after) = runs
     saved = [line for line in (first.stdout + first.stderr).splitlines()
              if 'data saved to' in line]
-    assert any('sqlite_kernel' in line and 'walk' in line for line in saved), saved
+    for kernel in kernels:
+        assert any(module in line and kernel in line for line in saved), (kernel, saved)
     log = second.stdout + second.stderr
     assert 'saved to' not in log and 'data loaded from' in log
     assert after == before
-    assert second.stdout.splitlines()[-1] == first.stdout.splitlines()[-1] == \
-        f'300 {float(data.sum())}'
+    return first, second
+
+
+_QUARTILE_SCRIPT = """
+import numpy as np
+from imu_allan.core import preprocess
+preprocess.KERNEL_ROWS = 0   # the compiled order statistics even for a short record
+data = np.random.default_rng(4).normal(size=(2000, 6))
+data[10, 3] = 99.0
+_, report = preprocess.replace_outliers(data, 'abcdef', replace=False)
+print(report.counts, preprocess.quartiles(data).tolist())
+"""
+
+
+def test_quantile_kernels_second_process_compile_nothing(tmp_path):
+    """
+    The compiled order statistics (imu_allan.core.quantile_kernel) are compiled once too.
+
+    Budget: one compile (about 3 s) and one load.
+    """
+    first, second = _twice(tmp_path, [_QUARTILE_SCRIPT], 'quantile_kernel',
+                           ['order_stats', 'outside'])
+    result = first.stdout.splitlines()[-1]
+    assert second.stdout.splitlines()[-1] == result and "'d': 1" in result
