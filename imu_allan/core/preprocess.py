@@ -167,6 +167,11 @@ def nominal_interval(steps, share=0.15, tolerance=0.1, max_factor=8):
     # the distances): a 10 h record's steps are 29 MB, and each temporary costs that much
     work = steps.copy()
     median = float(np.median(work, overwrite_input=True))
+    # Every step within tolerance of median / k (k >= 2) is at most (1 + tolerance) median / 2:
+    # when fewer than ``share`` are, no k can qualify (the usual record: one pass, not seven).
+    below = (1.0 + tolerance) * median / 2.0 * (1.0 + 1e-9)
+    if np.count_nonzero(steps <= below) < share * steps.size:
+        return median
     for k in range(max_factor, 1, -1):
         np.subtract(steps, median / k, out=work)
         near = np.abs(work, out=work) <= tolerance * median / k

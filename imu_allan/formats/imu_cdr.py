@@ -19,8 +19,10 @@ Also holds what the storage scanners (:mod:`.mcap_scan`, :mod:`.sqlite_pages`,
 one-line error text.
 """
 
+import importlib
 import mmap
 import struct
+import sys
 
 import numpy as np
 
@@ -324,6 +326,21 @@ class Collector:
             t[i], data[i] = self.generic(blob_of(i))
         return t, data
 
+    def add_decoded(self, log_time, t, data, ok, blob_of, order=None):
+        """
+        Add k messages a compiled walk decoded where ``ok``; generic deserializing for the rest.
+
+        ``log_time``: receive times (ns); ``t`` / ``data``: their stamps (s) and values, written
+        here where not ``ok``; ``blob_of(i)``: the bytes of message i; ``order``: their file
+        order numbers (default: the next k).
+        """
+        if order is None:
+            order = np.arange(self.count, self.count + len(t))
+            self.count += len(t)
+        for i in np.flatnonzero(~ok).tolist():
+            t[i], data[i] = self.generic(blob_of(i))
+        self.add_part(order, log_time, t, data, blob_of)
+
     def add_rows(self, log_time, rows):
         """Add k messages given as a (k, L) uint8 array with their receive times (ns)."""
         k = rows.shape[0]
@@ -425,6 +442,24 @@ def _same_place(a, b):
     """Return True if arrays ``a`` and ``b`` start at the same address with the same strides."""
     return (a.__array_interface__['data'][0] == b.__array_interface__['data'][0]
             and a.strides == b.strides)
+
+
+def compiled_module(name, large):
+    """
+    Return the compiled walk module ``name`` of this package (numba), or None.
+
+    None (the numpy walk) for inputs too small to repay importing numba (``large`` False and
+    numba not imported yet: about 1 s and 130-160 MB once per process), without numba, which
+    is optional (same numbers, slower), and where the walk could not be cached (it would be
+    compiled in every process).
+    """
+    if not large and 'numba' not in sys.modules:
+        return None
+    try:
+        module = importlib.import_module(f'.{name}', __package__)
+    except ImportError:
+        return None
+    return module if module.CACHED else None
 
 
 def map_file(f):

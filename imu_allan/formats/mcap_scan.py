@@ -9,13 +9,28 @@ chunks (and the complete records of an uncompressed chunk cut short), a corrupt 
 chunk is skipped.
 """
 
-from binascii import crc32
 from collections import defaultdict
+from concurrent.futures import ThreadPoolExecutor
+import os
 import struct
+
+try:  # 3-4x zlib's speed (carry-less multiply); optional
+    from isal.isal_zlib import crc32
+except ImportError:
+    from zlib import crc32  # (binascii's holds the GIL: zlib's lets threads check chunks)
 
 import numpy as np
 
-from .imu_cdr import Collector, deserialize, IMU_TYPES, map_file, MIN_IMU_BYTES, one_line, Passed
+from .imu_cdr import (
+    Collector,
+    compiled_module,
+    deserialize,
+    IMU_TYPES,
+    map_file,
+    MIN_IMU_BYTES,
+    one_line,
+    Passed,
+)
 from ..errors import InputError
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
@@ -47,12 +62,46 @@ def decompress_chunk(compression, data, size):
     return raw
 
 
+def open_chunk(buf, pos, rec_end):
+    """
+    Return the records of the Chunk record at byte ``pos``: ``(buffer, start, size, has_crc)``.
+
+    Decompressed and checked against the chunk's CRC (when its writer stored one); the records
+    of an uncompressed chunk are returned in place (``buf`` and their offset).  Raises
+    ValueError (or the decompressor's error) for any damage.
+    """
+    _t0, _t1, usize = struct.unpack_from('<QQQ', buf, pos + 9)
+    (crc,) = struct.unpack_from('<I', buf, pos + 33)
+    comp, p = McapScan._string(buf, pos + 37)
+    (csize,) = struct.unpack_from('<Q', buf, p)
+    p += 8
+    if p + csize > rec_end or comp not in _DECOMPRESS:
+        raise ValueError('bad chunk header')
+    if comp:
+        inner, base = memoryview(decompress_chunk(comp, buf[p:p + csize], usize)), 0
+    else:
+        if csize != usize:
+            raise ValueError('chunk size mismatch')
+        inner, base = buf, p
+    if crc and crc32(inner[base:base + usize]) != crc:
+        raise ValueError('chunk checksum mismatch')
+    return inner, base, usize, bool(crc)
+
+
+#: Chunks decompressed and checked ahead of the walk (:meth:`McapScan._open_chunk`).
+AHEAD = 4
+
 _MCAP_OPS = frozenset(range(0x01, 0x11))  # record opcodes of MCAP v0 (0x80-0xFF: private)
 
 
 #: Bytes of an MCAP Message record before its data: opcode, length, channel id, sequence,
 #: log time and publish time.
 _MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
+
+#: File size from which the compiled walk (:func:`.bag_kernels.mcap_walk`) reads the chunks
+#: even when numba is not imported yet: about 0.6 M Imu messages, from where ``analyze`` loads
+#: numba for the Allan deviation anyway (as ``sqlite_pages.COMPILED_MIN_PAGES``).
+COMPILED_MIN_BYTES = 200 << 20
 
 
 class McapScan:
@@ -76,6 +125,12 @@ class McapScan:
         self.chunk_offsets = []
         self.chunk_counts = {}  # chunk offset -> {channel id: messages}, from the summary
         self.chunks_without_crc = 0  # chunks whose writer stored no CRC: content unverifiable
+        self._kernel = None  # the compiled chunk walk, when it is used
+        self._kernel_counts = None  # messages per channel id that it walked
+        self._role_cache = (None, None, None)  # channels, role per id, topic (_roles)
+        self._pool = None  # threads opening the chunks ahead of the walk
+        self._ahead = {}  # chunk offset -> future of open_chunk
+        self._next = 0  # index in chunk_offsets of the next chunk to open ahead
 
     def _wanted(self, cid):
         ch = self.channels.get(cid)
@@ -94,15 +149,26 @@ class McapScan:
                 raise InputError(self.path, 'not an MCAP file (bad magic bytes)')
             mm = map_file(f)
         self._size, self._passed = size, Passed(mm)
+        if self.collect and not self.force_generic:
+            self._kernel = compiled_module('bag_kernels', size >= COMPILED_MIN_BYTES)
+            self._kernel_counts = np.zeros(1 << 16, dtype=np.int64)
         try:
             buf = memoryview(mm)
             try:
                 self._read_summary(buf, size)
+                if len(self.chunk_offsets) > 1:
+                    self._pool = ThreadPoolExecutor(min(2, os.cpu_count() or 1))
                 self._walk(buf, 8, size, top=True)
             except (struct.error, ValueError, IndexError, KeyError) as err:
                 self.warnings.append(f'malformed MCAP record ({one_line(err)}): '
                                      'rest of the file skipped')
             finally:
+                if self._pool is not None:  # done with the map before it is released
+                    self._pool.shutdown(cancel_futures=True)
+                    self._pool, self._ahead = None, {}
+                if self._kernel is not None:
+                    for cid in np.flatnonzero(self._kernel_counts).tolist():
+                        self.counts[cid] += int(self._kernel_counts[cid])
                 try:
                     buf.release()
                 except BufferError:
@@ -188,7 +254,14 @@ class McapScan:
         unpack_h = struct.Struct('<H').unpack_from
         backoff = 0
         where = 'file' if top else 'chunk'
+        views = None if top or self._kernel is None else self._kernel.mcap_views(u8)
         while pos < end:
+            if views is not None:
+                # The compiled walk takes the Message records it can; this loop takes the
+                # record it stopped at (or returns at the end).
+                pos = self._compiled_walk(u8, views, pos, end)
+                if pos >= end:
+                    return
             if end - pos < 9:
                 self._truncated(pos, end, where)
                 return
@@ -256,6 +329,46 @@ class McapScan:
             self.warnings.append('MCAP file has no end marker (recording not closed?); '
                                  'read all complete records')
 
+    def _compiled_walk(self, u8, views, pos, end):
+        """Walk the Message records of u8[pos:end] compiled; return where the walk stopped."""
+        kernel = self._kernel
+        role, topic = self._roles()
+        room = (end - pos) // kernel.MESSAGE_HEADER + 1 if topic is not None else 0
+        coll = self.collectors.get(topic)
+        slots = coll.reserved(room) if coll is not None else None
+        t, data = slots if slots is not None else (np.empty(room), np.empty((room, 6)))
+        log_time, off, length = np.empty((3, room), dtype=np.int64)
+        ok = np.empty(room, dtype=bool)
+        pos, kept = kernel.mcap_walk(u8, *views, pos, end, role, self._kernel_counts, log_time,
+                                     off, length, ok, t, data)
+        if kept:
+            def blob_of(i):
+                return bytes(u8[off[i]:off[i] + length[i]])
+            cid = next(c for c in sorted(self.channels) if role[c] == kernel.DECODE)
+            self._collector(cid).add_decoded(log_time[:kept].copy(), t[:kept], data[:kept],
+                                             ok[:kept], blob_of)
+        return pos
+
+    def _roles(self):
+        """
+        Return what the compiled walk does per channel id, and the topic it decodes.
+
+        It decodes the first wanted topic's channels and counts the other channels' messages;
+        the channels of other wanted topics are left to :meth:`_walk`.  Kept until a channel
+        record changes the channels.
+        """
+        key = tuple(self.channels.items())
+        if self._role_cache[0] != key:
+            kernel = self._kernel
+            role = np.full(1 << 16, kernel.COUNT, dtype=np.int8)
+            topic = None
+            for cid in sorted(self.channels):
+                if self._wanted(cid):
+                    topic = topic or self.channels[cid][0]
+                    role[cid] = kernel.DECODE if self.channels[cid][0] == topic else kernel.LEAVE
+            self._role_cache = key, role, topic
+        return self._role_cache[1:]
+
     @staticmethod
     def _string(buf, pos):
         (n,) = struct.unpack_from('<I', buf, pos)
@@ -278,27 +391,8 @@ class McapScan:
 
     def _chunk(self, buf, pos, rec_end):
         try:
-            _t0, _t1, usize = struct.unpack_from('<QQQ', buf, pos + 9)
-            (crc,) = struct.unpack_from('<I', buf, pos + 33)
-            comp, p = self._string(buf, pos + 37)
-            (csize,) = struct.unpack_from('<Q', buf, p)
-            p += 8
-            if p + csize > rec_end or comp not in _DECOMPRESS:
-                raise ValueError('bad chunk header')
-            if comp:
-                raw = _DECOMPRESS[comp](buf[p:p + csize])
-                if len(raw) != usize:
-                    raise ValueError('chunk size mismatch')
-                inner = memoryview(raw)
-                base = 0
-            else:
-                if csize != usize:
-                    raise ValueError('chunk size mismatch')
-                inner = buf
-                base = p
-            if crc and crc32(inner[base:base + usize]) != crc:
-                raise ValueError('chunk checksum mismatch')
-            self.chunks_without_crc += not crc
+            inner, base, usize, has_crc = self._open_chunk(buf, pos, rec_end)
+            self.chunks_without_crc += not has_crc
         except Exception as err:  # any decoding failure means this chunk is unreadable
             self.warnings.append(f'corrupt chunk at byte {pos} skipped ({err})' + self._lost(pos))
             return
@@ -313,6 +407,28 @@ class McapScan:
                                  f'({one_line(err)}): rest of that chunk skipped')
         # everything before this chunk's end is passed (the message indexes between chunks too)
         self._passed.upto(rec_end)
+
+    def _open_chunk(self, buf, pos, rec_end):
+        """
+        :func:`open_chunk` for the chunk at ``pos``, done ahead on threads when possible.
+
+        With the summary's chunk offsets, the next :data:`AHEAD` chunks are decompressed and
+        checked on two threads while this one walks (zlib's CRC and the decompressors release
+        the GIL): the CRC of every byte costs as much as the walk itself.
+        """
+        if self._pool is None:
+            return open_chunk(buf, pos, rec_end)
+        offsets = self.chunk_offsets
+        while len(self._ahead) < AHEAD and self._next < len(offsets):
+            off = offsets[self._next]
+            self._next += 1
+            if off <= pos or buf[off] != 0x06:
+                continue
+            end = off + 9 + struct.unpack_from('<Q', buf, off + 1)[0]
+            if end <= self._size:
+                self._ahead[off] = self._pool.submit(open_chunk, buf, off, end)
+        future = self._ahead.pop(pos, None)
+        return open_chunk(buf, pos, rec_end) if future is None else future.result()
 
     def _partial_chunk(self, buf, pos, end):
         """Read the complete records of an uncompressed chunk cut off by the end of the file."""

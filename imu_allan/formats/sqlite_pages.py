@@ -11,16 +11,16 @@ rows of its intact pages.
 
 Two walks of the leaf pages give the same result: the numpy one here (:meth:`SqlitePages._batch`,
 the reference, about 20 vectorised passes per batch of pages) and a numba-compiled one
-(:mod:`.sqlite_kernel`, one pass, about three times faster), used for large files or once numba
-is loaded (:func:`compiled_walk`); numba is optional, without it the numpy walk reads.
+(:func:`.bag_kernels.sqlite_walk`, one pass, about three times faster), used for large files or
+once numba is loaded (:func:`compiled_walk`); numba is optional, without it the numpy walk
+reads.
 """
 
 import struct
-import sys
 
 import numpy as np
 
-from .imu_cdr import decode_at, map_file, release
+from .imu_cdr import compiled_module, decode_at, map_file, release
 from ..errors import InputError
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
@@ -41,20 +41,8 @@ COMPILED_MIN_PAGES = 50_000
 
 
 def compiled_walk(npages):
-    """
-    Return the compiled page walk's module (:mod:`.sqlite_kernel`) for ``npages``, or None.
-
-    None (the numpy walk) for files too small to repay importing numba, without numba, which
-    is optional (as for the Allan kernel: same numbers, slower), and where the walk could not
-    be cached (it would be compiled in every process).
-    """
-    if npages < COMPILED_MIN_PAGES and 'numba' not in sys.modules:
-        return None
-    try:
-        from . import sqlite_kernel
-    except ImportError:
-        return None
-    return sqlite_kernel if sqlite_kernel.CACHED else None
+    """Return the compiled walks' module (:mod:`.bag_kernels`) for ``npages``, or None."""
+    return compiled_module('bag_kernels', npages >= COMPILED_MIN_PAGES)
 
 
 class Unsupported(Exception):
@@ -368,7 +356,7 @@ class SqlitePages:
         slow = np.empty((cells, 2), dtype=np.int64)
         if self._views is None:
             self._views = kernel.byte_views(u8)
-        kept, nslow, lost = kernel.walk(
+        kept, nslow, lost = kernel.sqlite_walk(
             u8, *self._views, pages, ps, self.usable, wanted, order, stamp, off, length, ok, t,
             data, slow)
         if kept < 0:
@@ -385,9 +373,8 @@ class SqlitePages:
 
         def blob_of(i):
             return bytes(self.mm[int(off[i]):int(off[i] + length[i])])
-        for i in np.flatnonzero(~ok[:kept]).tolist():
-            t[i], data[i] = coll.generic(blob_of(i))
-        coll.add_part(order[:kept].copy(), stamp[:kept].copy(), t, data, blob_of)
+        coll.add_decoded(stamp[:kept].copy(), t, data, ok[:kept], blob_of,
+                         order=order[:kept].copy())
         return True
 
     def _batch(self, pages, wanted, coll):

@@ -169,7 +169,7 @@ print(r.n, float(r.data.sum()))
 
 def test_sqlite_walk_second_process_compiles_nothing(tmp_path):
     """
-    The compiled sqlite3 page walk (imu_allan.formats.sqlite_kernel) is compiled once too.
+    The compiled sqlite3 page walk (imu_allan.formats.bag_kernels) is compiled once too.
 
     Same check as above on the installed module: the first process reading a sqlite3 bag saves
     the walk into a fresh NUMBA_CACHE_DIR, the second loads it and saves nothing.  Budget: one
@@ -180,7 +180,8 @@ def test_sqlite_walk_second_process_compiles_nothing(tmp_path):
     bag = tmp_path / 'bag'
     data = np.random.default_rng(2).normal(size=(300, 6))
     write_imu_bag(bag, Samples(t=1.7e9 + np.arange(300) / 100.0, data=data), storage='sqlite3')
-    first, second = _twice(tmp_path, [_WALK_SCRIPT, str(bag)], 'sqlite_kernel', ['walk'])
+    first, second = _twice(tmp_path, [_WALK_SCRIPT, str(bag)], 'bag_kernels',
+                           ['sqlite_walk'])
     assert second.stdout.splitlines()[-1] == first.stdout.splitlines()[-1] == \
         f'300 {float(data.sum())}'
 

@@ -75,3 +75,17 @@ def test_nominal_interval_leaves_jittery_stamps_alone():
     """Host stamps with +-20 % jitter and no loss: the median, not a sub-multiple."""
     steps = 0.01 * (1 + np.random.default_rng(4).uniform(-0.2, 0.2, 5000))
     assert nominal_interval(steps) == pytest.approx(0.01, rel=0.01)
+
+
+@pytest.mark.parametrize('low, share, expected', [
+    (0.5, 0.20, 0.5),       # a fifth of the steps at median / 2: the interval is half of it
+    (0.5, 0.14, 1.0),       # under the 15 % share: the median
+    (0.549, 0.16, 0.549),   # near the far edge of median / 2's tolerance: still counted
+    (0.5505, 0.30, 1.0),    # just past it (and no other sub-multiple): the median
+])
+def test_nominal_interval_sub_multiples_at_the_edges(low, share, expected):
+    """The one-pass shortcut (too few steps near any sub-multiple) changes no answer."""
+    n = 10_000
+    steps = np.ones(n)
+    steps[:int(share * n)] = low
+    assert nominal_interval(steps) == expected

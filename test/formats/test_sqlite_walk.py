@@ -1,5 +1,5 @@
 """
-The compiled sqlite3 page walk (sqlite_kernel.walk) against the numpy walk it replaces.
+The compiled sqlite3 page walk (bag_kernels.sqlite_walk) against the numpy walk it replaces.
 
 Each bag is read twice through ``read_bag``: once with the numpy walk (``SqlitePages._batch``,
 the readable reference) and once with the compiled walk forced on (its size threshold set to
@@ -282,7 +282,7 @@ def test_small_file_does_not_import_numba(tmp_path):
 
 def test_no_compiled_walk_where_it_cannot_be_cached(monkeypatch):
     """Without a cache folder for numba the walk would compile in every process: numpy walk."""
-    from imu_allan.formats import sqlite_kernel
-    assert sqlite_pages.compiled_walk(10 ** 9) is sqlite_kernel
-    monkeypatch.setattr(sqlite_kernel, 'CACHED', False)
+    from imu_allan.formats import bag_kernels
+    assert sqlite_pages.compiled_walk(10 ** 9) is bag_kernels
+    monkeypatch.setattr(bag_kernels, 'CACHED', False)
     assert sqlite_pages.compiled_walk(10 ** 9) is None
