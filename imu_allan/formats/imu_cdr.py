@@ -483,16 +483,26 @@ def release(mm, start, stop):
 
 
 class Passed:
-    """Release a read-only map's pages behind a scanner that walks it front to back."""
+    """
+    Release a read-only map's pages behind a scanner that walks it front to back.
+
+    In steps of at least :attr:`STEP` bytes: each release is a system call that also makes
+    every other thread of the process drop the pages (the chunk threads of the MCAP scan), so
+    one per chunk of a few hundred kilobytes cost 0.08 s on a 10 h bag.
+    """
+
+    #: Bytes passed before they are released (resident memory grows by at most this much).
+    STEP = 32 << 20
 
     def __init__(self, mm):
         """Nothing released yet."""
         self.mm, self.done = mm, 0
 
     def upto(self, end):
-        """Release everything before byte ``end`` (records between chunks included)."""
-        release(self.mm, self.done, end)
-        self.done = max(self.done, int(end))
+        """Release everything before byte ``end`` once it is STEP past the last release."""
+        if end - self.done >= self.STEP:
+            release(self.mm, self.done, end)
+            self.done = int(end)
 
 
 #: Fewest bytes of a serialized Imu (empty frame_id): a bound for :class:`Collector`'s capacity.
