@@ -18,14 +18,35 @@ of them probes for BLAS with ``import scipy.linalg.cython_blas``: that imports a
 ``scipy.linalg`` (0.2-0.4 s here), which no kernel here uses.  So the registries are loaded
 here, with that one compiled module loaded on its own (:mod:`.scipy_compiled`) for the probe
 to find, and taken out of ``sys.modules`` again: a later ``import scipy.linalg`` loads it as
-usual.
+usual.  numba is imported without ``coverage`` for the same reason (:func:`_import_numba`).
 """
 
 import sys
 
-import numba
-
 from .scipy_compiled import extension
+
+
+def _import_numba():
+    """
+    Import numba without ``coverage`` unless this process already measures coverage.
+
+    numba imports ``coverage`` (60-150 ms here) whenever it is installed, to report the lines
+    of compiled functions to a measurement started later; colcon's pytest-cov installs it on
+    every ROS development machine.  A process measuring coverage imports it before numba, and
+    then numba finds it as usual.
+    """
+    blocked = 'coverage' not in sys.modules
+    if blocked:
+        sys.modules['coverage'] = None  # makes ``import coverage`` raise ImportError
+    try:
+        import numba
+    finally:
+        if blocked and sys.modules.get('coverage', 0) is None:
+            del sys.modules['coverage']
+    return numba
+
+
+numba = _import_numba()
 
 
 def _load_registries():

@@ -6,6 +6,7 @@ import sys
 from imu_allan.core import scipy_compiled
 from imu_allan.core.edf import chi2_interval
 import numpy as np
+import pytest
 import scipy.special
 
 
@@ -50,3 +51,21 @@ def test_numba_kernels_load_without_importing_scipy_linalg():
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ['[1.', '1.]']
+
+
+@pytest.mark.parametrize('measuring', [False, True])
+def test_numba_imported_without_coverage_unless_measuring(measuring):
+    """
+    numba does not import ``coverage`` for nothing; a process measuring coverage keeps it.
+
+    (colcon's pytest-cov installs coverage; this environment has it, the test needs it.)
+    """
+    pytest.importorskip('coverage')
+    code = ('import sys; ' + ('import coverage; ' if measuring else '')
+            + 'from imu_allan.core import jit; '
+            'from numba.misc import coverage_support as c; '
+            'print(c.coverage_available, "coverage" in sys.modules); '
+            'import coverage; print(coverage.Coverage.current())')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [str(measuring), str(measuring), 'None']
