@@ -56,7 +56,7 @@ def test_numba_kernels_load_without_importing_scipy_linalg():
 @pytest.mark.parametrize('measuring', [False, True])
 def test_numba_imported_without_coverage_unless_measuring(measuring):
     """
-    numba does not import ``coverage`` for nothing; a process measuring coverage keeps it.
+    The kernels import numba without ``coverage``; a process measuring coverage keeps it.
 
     (colcon's pytest-cov installs coverage; this environment has it, the test needs it.)
     """
