@@ -127,7 +127,7 @@ class McapScan:
         self.chunks_without_crc = 0  # chunks whose writer stored no CRC: content unverifiable
         self._kernel = None  # the compiled chunk walk, when it is used
         self._kernel_counts = None  # messages per channel id that it walked
-        self._role_cache = (None, None, None)  # channels, role per id, topic (_roles)
+        self._role_cache = (None, None, None)  # channels, role per id, a decoded id (_roles)
         self._pool = None  # threads opening the chunks ahead of the walk
         self._ahead = {}  # chunk offset -> future of open_chunk
         self._next = 0  # index in chunk_offsets of the next chunk to open ahead
@@ -151,6 +151,7 @@ class McapScan:
         self._size, self._passed = size, Passed(mm)
         if self.collect and not self.force_generic:
             self._kernel = compiled_module('bag_kernels', size >= COMPILED_MIN_BYTES)
+        if self._kernel is not None:
             self._kernel_counts = np.zeros(1 << 16, dtype=np.int64)
         try:
             buf = memoryview(mm)
@@ -332,9 +333,9 @@ class McapScan:
     def _compiled_walk(self, u8, views, pos, end):
         """Walk the Message records of u8[pos:end] compiled; return where the walk stopped."""
         kernel = self._kernel
-        role, topic = self._roles()
-        room = (end - pos) // kernel.MESSAGE_HEADER + 1 if topic is not None else 0
-        coll = self.collectors.get(topic)
+        role, cid = self._roles()
+        room = (end - pos) // kernel.MESSAGE_HEADER + 1 if cid is not None else 0
+        coll = self.collectors.get(self.channels[cid][0]) if cid is not None else None
         slots = coll.reserved(room) if coll is not None else None
         t, data = slots if slots is not None else (np.empty(room), np.empty((room, 6)))
         log_time, off, length = np.empty((3, room), dtype=np.int64)
@@ -344,14 +345,13 @@ class McapScan:
         if kept:
             def blob_of(i):
                 return bytes(u8[off[i]:off[i] + length[i]])
-            cid = next(c for c in sorted(self.channels) if role[c] == kernel.DECODE)
             self._collector(cid).add_decoded(log_time[:kept].copy(), t[:kept], data[:kept],
                                              ok[:kept], blob_of)
         return pos
 
     def _roles(self):
         """
-        Return what the compiled walk does per channel id, and the topic it decodes.
+        Return what the compiled walk does per channel id, and one channel of what it decodes.
 
         It decodes the first wanted topic's channels and counts the other channels' messages;
         the channels of other wanted topics are left to :meth:`_walk`.  Kept until a channel
@@ -361,12 +361,13 @@ class McapScan:
         if self._role_cache[0] != key:
             kernel = self._kernel
             role = np.full(1 << 16, kernel.COUNT, dtype=np.int8)
-            topic = None
+            first = None
             for cid in sorted(self.channels):
                 if self._wanted(cid):
-                    topic = topic or self.channels[cid][0]
-                    role[cid] = kernel.DECODE if self.channels[cid][0] == topic else kernel.LEAVE
-            self._role_cache = key, role, topic
+                    first = cid if first is None else first
+                    same = self.channels[cid][0] == self.channels[first][0]
+                    role[cid] = kernel.DECODE if same else kernel.LEAVE
+            self._role_cache = key, role, first
         return self._role_cache[1:]
 
     @staticmethod
@@ -413,11 +414,13 @@ class McapScan:
         :func:`open_chunk` for the chunk at ``pos``, done ahead on threads when possible.
 
         With the summary's chunk offsets, the next :data:`AHEAD` chunks are decompressed and
-        checked on two threads while this one walks (zlib's CRC and the decompressors release
-        the GIL): the CRC of every byte costs as much as the walk itself.
+        checked on two threads while this one walks (the CRC and the decompressors release the
+        GIL): the other core does that work.
         """
         if self._pool is None:
             return open_chunk(buf, pos, rec_end)
+        for off in [o for o in self._ahead if o < pos]:  # skipped by the walk (damage)
+            self._ahead.pop(off).cancel()
         offsets = self.chunk_offsets
         while len(self._ahead) < AHEAD and self._next < len(offsets):
             off = offsets[self._next]
