@@ -6,8 +6,8 @@ Benchmark: ``analyze`` end to end, on a one-minute CSV and on a 10-hour bag.
    run; then where the time goes, measured inside a fresh interpreter: interpreter start and
    the entry script, imports, reading, estimate (Allan deviation, EDF, intervals), fit (term
    selection, Kalibr limits), recording advice and report (JSON).  Goal: under 1 s wall.
-2. A 10-hour, 100 Hz bag (3.6 M Imu messages), MCAP and sqlite3, ``--json`` and ``--out``
-   (with plots).  Goal: MCAP ``--json`` under 2.5 s.
+2. A 10-hour, 100 Hz bag (3.6 M Imu messages), MCAP and sqlite3, ``--json`` (best of 5) and
+   ``--out`` (with plots, once).  Goal: MCAP ``--json`` under 2.5 s.
 
 Usage: ``python bench/bench_analyze.py [HOURS]`` (HOURS 0 skips the bags).
 """
@@ -128,7 +128,9 @@ def bench_bags(tmp, hours):
         print(f'analyze: wrote {n} Imu messages ({hours:g} h at 100 Hz) as {storage} in '
               f'{time.perf_counter() - t0:.1f} s')
         for extra in (['--json'], ['--out', str(Path(tmp) / f'out_{storage}'), '--quiet']):
-            runs = [_run([exe, str(bag), *extra])[:2] for _ in range(2 if extra[0] == '--json'
+            # Best of 5 for --json: this VM reclaims cold page cache (DAMON; about 2.5 GB stay
+            # cached), so a run may read part of the 1.3 GB bag back from disk.
+            runs = [_run([exe, str(bag), *extra])[:2] for _ in range(5 if extra[0] == '--json'
                                                                      else 1)]
             wall, cpu = min(r[0] for r in runs), min(r[1] for r in runs)
             print(f'analyze: {storage} {extra[0]}: {wall:.2f} s wall, {cpu:.2f} s CPU end to '

@@ -301,6 +301,12 @@ class Collector:
             if self._first is None or key < self._first[:2]:
                 self._first = (*key, raw(i))
 
+    def prefault(self):
+        """Write zeros into the reserved arrays, so that filling them later finds their pages."""
+        if self._t is not None:
+            self._t[self._fill:] = 0.0
+            self._data[self._fill:] = 0.0
+
     def reserved(self, k):
         """
         Return views (t, data) of the next ``k`` reserved places, or None if fewer remain.

@@ -218,3 +218,35 @@ def test_chunk_checks_run_ahead_and_find_the_same_damage(tmp_path, monkeypatch):
     assert w_ahead == w_turn and len(w_ahead) == 1
     assert f'corrupt chunk at byte {third} skipped (chunk checksum mismatch)' in w_ahead[0]
     assert np.array_equal(t_ahead, t_turn) and np.array_equal(d_ahead, d_turn)
+
+
+_FRESH = """
+import json, sys
+from imu_allan.formats import imu_cdr, mcap_scan
+from imu_allan.formats.bag_reader import read_bag
+calls = []
+prefault = imu_cdr.Collector.prefault
+imu_cdr.Collector.prefault = lambda self: calls.append(len(self._t)) or prefault(self)
+mcap_scan.COMPILED_MIN_BYTES = 0
+assert 'numba' not in sys.modules
+r = read_bag(sys.argv[1])
+print(json.dumps([calls, r.t.tolist(), r.data.tolist(), r.warnings]))
+"""
+
+
+def test_arrays_written_ahead_while_numba_is_imported(tmp_path):
+    """
+    In a process without numba yet, the topic's arrays are written to on a thread meanwhile.
+
+    The walk then fills them: the same numbers as a read in this process (numba loaded).
+    """
+    path = tmp_path / 'fresh'
+    write_imu_bag(path, _samples(20000), storage='mcap')
+    out = subprocess.run([sys.executable, '-c', _FRESH, str(path)], capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    calls, t, data, warnings = json.loads(out.stdout)
+    assert calls == [20000]                 # the summary's count: exactly the topic's messages
+    r = read_bag(path)
+    assert np.array_equal(np.array(t), r.t) and np.array_equal(np.array(data), r.data)
+    assert warnings == r.warnings == []
