@@ -254,5 +254,5 @@ def mcap_walk(u8, u2, u4, u64, f8, pos, end, role, counts, log_time, off, length
 
 
 #: False where numba found no writable cache folder: compiling the walks (about 5 s) in every
-#: process would cost more than they save, so :func:`.imu_cdr.compiled_module` declines.
+#: process would cost more than they save, so :func:`.imu_cdr.compiled_walks` declines.
 CACHED = not {sqlite_walk.__name__, mcap_walk.__name__} & set(UNCACHED)

@@ -19,7 +19,6 @@ Also holds what the storage scanners (:mod:`.mcap_scan`, :mod:`.sqlite_pages`,
 one-line error text.
 """
 
-import importlib
 import mmap
 import struct
 import sys
@@ -266,7 +265,10 @@ class Collector:
         self.ros1 = ros1
         self.deserialize = deserialize
         self.force_generic = force_generic  # reference path: every message deserialized
-        self.parts = []  # (order, log_time, t, data) arrays
+        # (order, log_time, t, data) arrays; order is a range for consecutive numbers (most
+        # parts): at 10 h the numbers would take 29 MB, kept until the end and then left to
+        # the allocator as scattered free blocks
+        self.parts = []
         self.single_order = []
         self.single_time = []
         self.single_blob = []
@@ -341,7 +343,7 @@ class Collector:
         order numbers (default: the next k).
         """
         if order is None:
-            order = np.arange(self.count, self.count + len(t))
+            order = range(self.count, self.count + len(t))
             self.count += len(t)
         for i in np.flatnonzero(~ok).tolist():
             t[i], data[i] = self.generic(blob_of(i))
@@ -350,7 +352,7 @@ class Collector:
     def add_rows(self, log_time, rows):
         """Add k messages given as a (k, L) uint8 array with their receive times (ns)."""
         k = rows.shape[0]
-        order = np.arange(self.count, self.count + k)
+        order = range(self.count, self.count + k)
         self.count += k
 
         def blob_of(i):
@@ -418,7 +420,7 @@ class Collector:
             t = np.concatenate([p[2] for p in self.parts])
             data = np.concatenate([p[3] for p in self.parts])
         if not self._in_order():
-            order = np.concatenate([p[0] for p in self.parts])
+            order = np.concatenate([np.asarray(p[0], dtype=np.int64) for p in self.parts])
             log_time = np.concatenate([p[1] for p in self.parts])
             idx = np.lexsort((order, log_time))
             t, data = t[idx], data[idx]
@@ -428,9 +430,10 @@ class Collector:
         """Return True if the parts are already in (receive time, file order) order (usual)."""
         last = None
         for order, log_time, *_ in self.parts:
-            if order.size == 0:
+            if len(order) == 0:
                 continue
-            if not (np.all(order[1:] > order[:-1]) and np.all(log_time[1:] >= log_time[:-1])):
+            rising = isinstance(order, range) or np.all(order[1:] > order[:-1])
+            if not (rising and np.all(log_time[1:] >= log_time[:-1])):
                 return False
             if last is not None and not (order[0] > last[0] and log_time[0] >= last[1]):
                 return False
@@ -450,9 +453,9 @@ def _same_place(a, b):
             and a.strides == b.strides)
 
 
-def compiled_module(name, large):
+def compiled_walks(large):
     """
-    Return the compiled walk module ``name`` of this package (numba), or None.
+    Return the compiled walks' module (:mod:`.bag_kernels`, numba), or None.
 
     None (the numpy walk) for inputs too small to repay importing numba (``large`` False and
     numba not imported yet: about 1 s and 130-160 MB once per process), without numba, which
@@ -462,10 +465,10 @@ def compiled_module(name, large):
     if not large and 'numba' not in sys.modules:
         return None
     try:
-        module = importlib.import_module(f'.{name}', __package__)
+        from . import bag_kernels
     except ImportError:
         return None
-    return module if module.CACHED else None
+    return bag_kernels if bag_kernels.CACHED else None
 
 
 def map_file(f):
@@ -498,7 +501,7 @@ class Passed:
     """
 
     #: Bytes passed before they are released (resident memory grows by at most this much).
-    STEP = 32 << 20
+    STEP = 8 << 20
 
     def __init__(self, mm):
         """Nothing released yet."""

@@ -25,7 +25,7 @@ import numpy as np
 
 from .imu_cdr import (
     Collector,
-    compiled_module,
+    compiled_walks,
     deserialize,
     IMU_TYPES,
     map_file,
@@ -130,6 +130,7 @@ class McapScan:
         self._kernel = None  # the compiled chunk walk, when it is used
         self._kernel_counts = None  # messages per channel id that it walked
         self._role_cache = (None, None, None)  # channels, role per id, a decoded id (_roles)
+        self._scratch = (np.empty((3, 0), dtype=np.int64), np.empty(0, dtype=bool))
         self._pool = None  # threads opening the chunks ahead of the walk
         self._ahead = {}  # chunk offset -> future of open_chunk
         self._next = 0  # index in chunk_offsets of the next chunk to open ahead
@@ -332,12 +333,13 @@ class McapScan:
 
     def _load_kernel(self):
         """
-        Load the compiled walk (:func:`.imu_cdr.compiled_module`), if it is used for this file.
+        Load the compiled walk (:func:`.imu_cdr.compiled_walks`), if it is used for this file.
 
         Importing numba holds the GIL for 0.3-0.5 s and leaves the other core idle; when the
         summary names the one topic to read, its arrays are written to meanwhile on a thread
         (``Collector.prefault``): the first write to each page is the operating system's work
-        (0.05 s for 10 h on a workstation, up to 0.7 s on this project's VM).
+        (0.03-0.05 s for the 200 MB of 10 h where fresh memory is quick to map, up to 0.7 s
+        measured on this project's VM).
         """
         large = self._size >= COMPILED_MIN_BYTES
         warm = None
@@ -349,7 +351,7 @@ class McapScan:
                 warm = threading.Thread(target=self._collector(wanted[0]).prefault)
                 warm.start()
         try:
-            self._kernel = compiled_module('bag_kernels', large)
+            self._kernel = compiled_walks(large)
         finally:
             if warm is not None:
                 warm.join()   # before the walk writes there
@@ -364,8 +366,10 @@ class McapScan:
         coll = self.collectors.get(self.channels[cid][0]) if cid is not None else None
         slots = coll.reserved(room) if coll is not None else None
         t, data = slots if slots is not None else (np.empty(room), np.empty((room, 6)))
-        log_time, off, length = np.empty((3, room), dtype=np.int64)
-        ok = np.empty(room, dtype=bool)
+        if self._scratch[1].size < room:  # kept between chunks: no allocation churn per chunk
+            self._scratch = np.empty((3, room), dtype=np.int64), np.empty(room, dtype=bool)
+        log_time, off, length = self._scratch[0][:, :room]
+        ok = self._scratch[1][:room]
         pos, kept = kernel.mcap_walk(u8, *views, pos, end, role, self._kernel_counts, log_time,
                                      off, length, ok, t, data)
         if kept:

@@ -20,7 +20,7 @@ import struct
 
 import numpy as np
 
-from .imu_cdr import compiled_module, decode_at, map_file, release
+from .imu_cdr import compiled_walks, decode_at, map_file, release
 from ..errors import InputError
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
@@ -42,7 +42,7 @@ COMPILED_MIN_PAGES = 50_000
 
 def compiled_walk(npages):
     """Return the compiled walks' module (:mod:`.bag_kernels`) for ``npages``, or None."""
-    return compiled_module('bag_kernels', npages >= COMPILED_MIN_PAGES)
+    return compiled_walks(npages >= COMPILED_MIN_PAGES)
 
 
 class Unsupported(Exception):

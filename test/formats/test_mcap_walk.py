@@ -47,7 +47,7 @@ def both(monkeypatch):
 
     def read(path, topic=None):
         with monkeypatch.context() as m:
-            m.setattr(mcap_scan, 'compiled_module', lambda name, large: None)
+            m.setattr(mcap_scan, 'compiled_walks', lambda large: None)
             ref = _outcome(path, topic)
         assert not decoded
         with monkeypatch.context() as m:
@@ -82,7 +82,7 @@ def test_two_wanted_topics_in_one_scan(tmp_path, monkeypatch):
             if compiled:
                 m.setattr(mcap_scan, 'COMPILED_MIN_BYTES', 0)
             else:
-                m.setattr(mcap_scan, 'compiled_module', lambda name, large: None)
+                m.setattr(mcap_scan, 'compiled_walks', lambda large: None)
             scan = McapScan(path)
             scan.run()
         assert (scan._kernel is not None) == compiled
