@@ -143,7 +143,7 @@ def analyze_samples(samples, options=None):
 
     The checks that do not feed the estimate (the outlier count, unless the outliers are
     replaced, and the motion verdict: several passes over the samples) run on a thread beside
-    the estimate and the fit, which leave a core free for much of their time (0.2 s of a
+    the estimate and the fit, which leave a core free for much of their time (0.2 s less on a
     10 h record).
     """
     options = options or AnalysisOptions()
