@@ -16,13 +16,12 @@ into (axis, range of k) jobs run on threads (the kernels release the GIL), which
 better than a static split when other processes share the cores.
 """
 
-from concurrent.futures import ThreadPoolExecutor
 import logging
 import os
 
 import numpy as np
 
-from .jit import jit, UNCACHED
+from .jit import jit, map_threads, UNCACHED
 
 #: Phase points per block (32 KiB of float64: the L1 data cache of current x86 cores).
 BLOCK = 4096
@@ -116,19 +115,6 @@ def _integrate(y, a_lo, a_hi, mean, k_lo, k_hi, x):  # pragma: no cover - compil
             x[a - a_lo, k + 1] = run[a - a_lo]
 
 
-_POOL = []
-
-
-def _map(fn, jobs):
-    """Run ``fn`` over ``jobs`` on one thread per core (inline on a single core)."""
-    workers = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else 1
-    if workers < 2 or len(jobs) < 2:
-        return [fn(job) for job in jobs]
-    if not _POOL:
-        _POOL.append(ThreadPoolExecutor(workers, thread_name_prefix='imu_allan_avar'))
-    return list(_POOL[0].map(fn, jobs))
-
-
 def _cuts(n, parts):
     return [n * c // parts for c in range(parts + 1)]
 
@@ -136,7 +122,7 @@ def _cuts(n, parts):
 def column_means(y):
     """Mean of every column of ``y`` (n, A), float64 C-contiguous: one row-major pass."""
     cut = _cuts(y.shape[0], 2)
-    sums = _map(lambda c: _column_sums(y, 0, y.shape[1], cut[c], cut[c + 1]), [0, 1])
+    sums = map_threads(lambda c: _column_sums(y, 0, y.shape[1], cut[c], cut[c + 1]), [0, 1])
     return (sums[0] + sums[1]) / y.shape[0]
 
 
@@ -158,7 +144,7 @@ def phase(data, a_lo=0, a_hi=None, means=None):
     mean = np.ascontiguousarray((column_means(y) if means is None else means)[a_lo:a_hi])
     x = np.empty((a_hi - a_lo, n + 1))
     x[:, 0] = 0.0
-    _map(lambda c: _integrate(y, a_lo, a_hi, mean, cut[c], cut[c + 1], x), [0, 1])
+    map_threads(lambda c: _integrate(y, a_lo, a_hi, mean, cut[c], cut[c + 1], x), [0, 1])
     x[:, cut[1] + 1:] += x[:, cut[1]:cut[1] + 1]
     return x
 
@@ -197,7 +183,7 @@ def avar(data, ms):
         def job(index, x=x, a_lo=a_lo):
             a, c = divmod(index, chunks)
             _axis_range(x[a], sms, cut[c], cut[c + 1], part[a_lo + a, c])
-        _map(job, list(range((a_hi - a_lo) * chunks)))
+        map_threads(job, list(range((a_hi - a_lo) * chunks)))
         del job, x  # before the next group's phase is allocated
     _note_compilation()
     out = np.empty((sms.size, n_axes))

@@ -21,6 +21,8 @@ to find, and taken out of ``sys.modules`` again: a later ``import scipy.linalg``
 usual.  numba is imported without ``coverage`` for the same reason (:func:`_import_numba`).
 """
 
+from concurrent.futures import ThreadPoolExecutor
+import os
 import sys
 
 from .scipy_compiled import extension
@@ -65,6 +67,24 @@ _load_registries()
 
 #: Names of the kernels compiled without a disk cache (no writable cache directory).
 UNCACHED = []
+
+
+_POOL = []
+
+
+def map_threads(fn, jobs):
+    """
+    Run ``fn`` over ``jobs`` on one thread per core (inline on a single core); return results.
+
+    For kernels compiled with ``nogil=True``: one pool for the whole process, so kernels
+    called from several threads at once share the cores instead of each starting its own.
+    """
+    workers = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else 1
+    if workers < 2 or len(jobs) < 2:
+        return [fn(job) for job in jobs]
+    if not _POOL:
+        _POOL.append(ThreadPoolExecutor(workers, thread_name_prefix='imu_allan_kernel'))
+    return list(_POOL[0].map(fn, jobs))
 
 
 def jit(**options):
