@@ -91,6 +91,8 @@ def _options(args):
         terms = [t.strip() for t in args.terms.split(',') if t.strip()]
     if args.export and not args.out:
         raise InputError('--export', 'needs --out DIR (the files go into DIR/export/)')
+    from ..report.exporters import check_overbound_args
+    check_overbound_args(args)
     from ..core.analysis import AnalysisOptions
     for term in terms or []:
         if term not in ALL_TERMS:
@@ -169,8 +171,9 @@ def run_one(path, args, options, progress=None, out_dir=None):
             def write_bag(staging):
                 _write_denoised_bag(path, real_fmt, samples, den_samples, staging)
             extra = write_bag
+        exports = (args.export, args.inflate, args.overbound, args.overbound_horizon)
         report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
-                                            extra=extra, exports=(args.export, args.inflate))
+                                            extra=extra, exports=exports)
     return report, console_summary(analysis) + '\n' + advice_sentence(advice)
 
 
