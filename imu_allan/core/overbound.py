@@ -189,3 +189,25 @@ def overbound_axes(result, axes, shapes, horizon_s=None, level=OVERBOUND_LEVEL):
     tau, bound, horizon = upper_bound(result, axes, horizon_s, level)
     names = (axes,) if isinstance(axes, str) else tuple(axes)
     return overbound(tau, bound, shapes, result.rate_hz, horizon, level, names)
+
+
+def white_overbound(result, axes=None, horizon_s=None, level=OVERBOUND_LEVEL):
+    """
+    Per axis (``axes``, default the result's), the white noise N whose AVAR N^2/tau overbounds.
+
+    The model of a filter without bias states (robot_localization reads one variance per
+    message, N^2 f): :func:`overbound` with the single term ``white_noise`` up to the horizon
+    (default: the longest measured tau).  Returns an array (len(axes),), SI (continuous
+    density), NaN for an axis missing from ``result`` or without a usable bound.
+    """
+    axes = list(result.axes if axes is None else axes)
+    out = np.full(len(axes), math.nan)
+    for j, axis in enumerate(axes):
+        if axis not in result.axes:
+            continue
+        try:
+            out[j] = overbound_axes(result, axis, ('white_noise',), horizon_s,
+                                    level).value('white_noise')
+        except ValueError:  # no finite EDF yet on this axis (absent, or too few samples)
+            pass
+    return out

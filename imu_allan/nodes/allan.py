@@ -20,7 +20,11 @@ and publishes every ``publish_period`` seconds:
 With ``covariance_topic`` set, every ``imu/data_raw`` message is also republished there as it
 is drained, its angular-velocity and linear-acceleration covariance diagonals set to the live
 per-sample variance N^2 rate_hz of the latest coefficients (robot_localization reads these),
-patched in the serialized bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`).
+patched in the serialized bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`);
+with ``covariance_mode`` ``overbound``, N is the white noise whose Allan variance lies at or
+above the measured upper 95 % bound at every published averaging time
+(:func:`imu_allan.core.overbound.white_overbound`): conservative for a filter without bias
+states.
 
 The numerics are :class:`imu_allan.core.online.OnlineAllan` (stamp checks, stationarity
 gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
@@ -112,6 +116,11 @@ PARAMETERS = [
                                   'the live per-sample variance N^2 rate_hz (the driver values '
                                   'until the first estimate; empty: off; read-only)',
           read_only=True),
+    Param('covariance_mode', 'raw', 'covariance_topic variances: raw (N^2 rate_hz of the fitted '
+                                    'white noise) or overbound (the white noise whose Allan '
+                                    'variance is at or above the measured upper 95 % bound at '
+                                    'every published averaging time; docs/exports.md)',
+          choices=('raw', 'overbound')),
     Param('targets', '', 'recording advice targets TERM=REL,...: relative 68.3 % half-widths '
                          'over the defaults (white_noise=0.02, bias_instability=0.10, others '
                          '0.25)'),
@@ -301,8 +310,11 @@ class AllanNode(Node):
             if table is not None:
                 self._pub_coeffs.publish(multiarray(table, COEFF_LABELS))
                 # robot_localization reads per-message variances: N^2 f (NaN: keep the driver's)
-                self._cov_variance = discrete_white_std(
-                    table[:, IEEE_TERMS.index('white_noise'), 0], self.pipeline.rate_hz) ** 2
+                white = table[:, IEEE_TERMS.index('white_noise'), 0]
+                if self.params['covariance_mode'] == 'overbound' and result is not None:
+                    from ..core.overbound import white_overbound
+                    white = white_overbound(result, AXES)
+                self._cov_variance = discrete_white_std(white, self.pipeline.rate_hz) ** 2
             self._plot.offer(result, fitted)  # rendered off this thread, only if subscribed
             self._cycle = None
             self._cycle_cpu += time.perf_counter() - start

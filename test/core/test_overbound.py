@@ -21,7 +21,7 @@ import math
 import imu_allan
 from imu_allan.core.edf import chi2_interval
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.overbound import overbound, overbound_axes, upper_bound
+from imu_allan.core.overbound import overbound, overbound_axes, upper_bound, white_overbound
 from imu_allan.core.terms import model_avar
 import numpy as np
 import pytest
@@ -112,3 +112,12 @@ def test_refuses_what_it_cannot_profile(result):
     tau, bound, _ = upper_bound(result, 'gyro_x')
     with pytest.raises(ValueError, match='sinusoid'):
         overbound(tau, bound, ('white_noise', 'sinusoid'), RATE)
+
+
+def test_white_overbound_is_the_largest_tau_times_bound(result):
+    n = white_overbound(result, ['gyro_x', 'accel_q', 'gyro_z'])
+    assert math.isnan(n[1])
+    for value, axis in ((n[0], 'gyro_x'), (n[2], 'gyro_z')):
+        tau, bound = _bound(result, axis)
+        # one term: the LP's optimum is the smallest N^2 with N^2 / tau >= bound everywhere
+        assert value ** 2 == pytest.approx(float(np.max(bound * tau)), rel=1e-6)

@@ -488,7 +488,8 @@ def test_consumer_keeps_the_overbound(name, fitted, overbound_files):
     if name == 'matlab':
         data = _matlab_flicker(files, axes, data)
     assert not _below_bound(fitted, name, axes, data)
-    assert summary['exports'][name] and summary['horizon_s'] == pytest.approx(fitted.result.tau[-1])
+    assert summary['exports'][name]
+    assert summary['horizon_s'] == pytest.approx(fitted.result.tau[-1])
     for key, entry in summary['exports'][name].items():
         assert all(f > 0 for f in entry['factor'].values()), (key, entry)
         assert all(entry['tight_tau_s'].values()), (key, entry)
