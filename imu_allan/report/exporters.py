@@ -185,7 +185,8 @@ def overbound_lines(exporter, values):
              f'give an Allan variance at or above the upper {100 * OVERBOUND_LEVEL:g} % bound of '
              f'the measured one at every averaging time from tau0 to the horizon '
              f'{values.horizon_s:.6g} s (imu_allan.core.overbound; Lethander & Taylor 2023); '
-             'factors are against the raw fit (its 95 % upper limit where not detected)']
+             'factors are against the raw fit (its 95 % upper limit where not detected), on '
+             'the standard deviations N, K, B (variance keys grow by the square)']
     for key, entry in values.overbound_used.items():
         parts = [f'{axis} x{factor:.3g}' + (
             f' (bound tight at {", ".join(f"{t:.3g}" for t in entry["tight_tau_s"][axis])} s)'
