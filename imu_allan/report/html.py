@@ -345,3 +345,157 @@ def write_batch_index(out_dir, outcomes, out_dirs):
     out_dir.mkdir(parents=True, exist_ok=True)
     return write_page(out_dir / 'index.html', 'batch_index.html.j2', rows=rows,
                       failed=sum(not r['ok'] for r in rows))
+
+
+# ---------------------------------------------------------------- the fleet page
+
+#: The fleet flags in words (what each kind means; the thresholds from history/trends.py).
+FLAG_MEANINGS = {
+    'history': 'its latest value left its own history: the 68.3 % interval of the latest '
+               'record lies wholly outside the band median ± {k} spreads of its earlier records '
+               '(spread: the larger of their robust standard deviation and their typical '
+               'interval half-width)',
+    'fleet': "its latest worst-axis value is above the fleet's {p}th percentile (every other "
+             'record of every IMU, same sensor and term) by more than its own uncertainty',
+}
+
+
+def _source_href(path, out_dir):
+    """A link to a measurement's source, relative to the page (as the file manager opens it)."""
+    try:
+        return os.path.relpath(path, out_dir)
+    except ValueError:  # another drive (Windows): an absolute file: URI
+        return Path(path).as_uri()
+
+
+def fleet_imus(report, imus, out_dir):
+    """
+    The IMUs of a fleet report, flagged ones first, each with its records newest first.
+
+    Per record the worst-axis N and B of each sensor with their 68.3 % intervals, in
+    conventional units (as printed by :func:`fmt`), and a link to the record's source.
+    """
+    from ..history.trends import FLEET_PERCENTILE, K_SPREAD, SENSORS, TREND_TERMS, WORST
+    columns = [{'sensor': s, 'term': t, 'letter': TREND_TERMS[t],
+                'unit': conventional(f'{s}_x', t, 1.0)[1]} for s in SENSORS for t in TREND_TERMS]
+    out = []
+    for entry in report['imus']:
+        imu = imus[entry['imu_id']]
+        points = {}
+        for c in columns:
+            s = imu.series.get((c['sensor'], c['term'], WORST))
+            for k in range(len(s.value) if s else 0):
+                factor = conventional(s.axes[k], c['term'], 1.0)[0]
+                points[(c['sensor'], c['term'], s.start[k], s.inputs[k])] = {
+                    'axis': s.axes[k], 'value': fmt(s.value[k] * factor),
+                    'ci': [fmt(s.low[k] * factor), fmt(s.high[k] * factor)]}
+        flagged_inputs = {f['input'] for f in imu.flags}
+        rows = [{'start': f'{start:%Y-%m-%d %H:%M}', 'input': inp,
+                 'href': _source_href(inp, out_dir), 'flagged': inp in flagged_inputs,
+                 'cells': [points.get((c['sensor'], c['term'], start, inp)) for c in columns]}
+                for start, inp in reversed(imu.records)]
+        flags = [{'why': f['why'], 'kind': f['kind'],
+                  'meaning': FLAG_MEANINGS.get(f['kind'], '').format(k=f'{K_SPREAD:g}',
+                                                                    p=f'{FLEET_PERCENTILE:g}')}
+                 for f in imu.flags]
+        plot = Path(entry['plot'])
+        out.append({'imu_id': entry['imu_id'], 'records': entry['records'],
+                    'first': entry['first_utc'][:16].replace('T', ' '),
+                    'latest': entry['latest_utc'][:16].replace('T', ' '),
+                    'flagged': entry['flagged'], 'flags': flags, 'rows': rows,
+                    'plot_uri': png_data_uri(plot) if plot.is_file() else None,
+                    'plot_file': plot.name, 'anchor': re.sub(r'[^A-Za-z0-9_-]', '_',
+                                                             entry['imu_id'])})
+    out.sort(key=lambda e: (not e['flagged'], e['imu_id']))
+    return columns, out
+
+
+def write_fleet_page(out_dir, report, imus):
+    """Write ``out_dir/index.html`` of a fleet report (after its PNGs and fleet.json)."""
+    columns, entries = fleet_imus(report, imus, out_dir)
+    return write_page(Path(out_dir) / 'index.html', 'fleet.html.j2', report=report,
+                      columns=columns, imus=entries,
+                      n_flagged=sum(e['flagged'] for e in entries))
+
+
+# ---------------------------------------------------------------- the discrepancy page
+
+#: What each discrepancy file is for.
+DISCREPANCY_FILES = {
+    'report.json': 'the whole report, machine-readable (SI units, continuous-time)',
+    'final_model.yaml': 'the corrected noise model (SI, continuous-time): give it to '
+                        'imu_allan.simulate or discrepancy --model',
+    'corrected.sdf': 'the Gazebo / PX4 simulator file given as --model, with the missing '
+                     'effects added: drop it in place of the original',
+    'gap_per_step.png': 'the gap per step, as an image',
+    'overview.png': 'every axis, initial and final model bands, as an image',
+}
+
+
+def _param_rows(parameters, prefix=''):
+    rows = []
+    for name, entry in (parameters or {}).items():
+        if isinstance(entry, dict) and 'value' in entry:
+            ci = entry.get('ci') or [None, None]
+            rows.append({'name': prefix + str(name).replace('_', ' '),
+                         'value': fmt(entry['value']), 'ci': [fmt(ci[0]), fmt(ci[1])],
+                         'unit': entry.get('unit', '')})
+        elif isinstance(entry, dict):
+            rows += _param_rows(entry, f'{prefix}{_words(name)}: ')
+        else:
+            rows.append({'name': prefix + str(name).replace('_', ' '), 'value': fmt(entry),
+                         'ci': None, 'unit': ''})
+    return rows
+
+
+def _model_cell(axis, term, value):
+    """One term of one axis of a model: a number with its SI unit, or its parameters."""
+    if value is None:
+        return None
+    if isinstance(value, (int, float)):
+        try:
+            unit = si_unit(axis, term)
+        except (KeyError, ValueError):
+            unit = ''
+        return {'text': fmt(value), 'unit': unit}
+    return {'value': value}
+
+
+def discrepancy_context(report, out_dir):
+    """Everything the discrepancy page shows, from its report dict and the files in ``out_dir``."""
+    out_dir = Path(out_dir)
+    steps = [{**s, 'number': k + 1, 'params': _param_rows(s.get('parameters')),
+              'plot': next((p for p in sorted(os.listdir(out_dir))
+                            if p.startswith(f'step{k + 1:02d}_') and p.endswith('.png')), None)}
+             for k, s in enumerate(report.get('steps', []))]
+    for s in steps:
+        s['plot_uri'] = png_data_uri(out_dir / s['plot']) if s['plot'] else None
+    pngs = [{'title': title, 'uri': png_data_uri(out_dir / name), 'file': name,
+             'caption': caption}
+            for name, title, caption in (
+                ('overview.png', 'Every axis', 'Measured Allan deviation (black, 68 % interval) '
+                 'with the initial model (red) and the final model (blue), each a 95 % band of '
+                 'simulated runs through the same estimator.'),
+                ('gap_per_step.png', 'The gap per step', 'The gap of each axis after each '
+                 'effect added; below the green line the model and the data agree.'))
+            if (out_dir / name).is_file()]
+    sdf = out_dir / 'corrected.sdf'
+    files = [{'name': n, 'what': w} for n, w in DISCREPANCY_FILES.items()
+             if (out_dir / n).is_file()]
+    files += [{'name': s['plot'], 'what': f'step {s["number"]} ({s["axis"]} + '
+                                          f'{_words(s["effect"])}), as an image'}
+              for s in steps if s['plot']]
+    model_terms = sorted({t for terms in report.get('final_model', {}).values() for t in terms},
+                         key=lambda t: list(TERM_LETTERS).index(t) if t in TERM_LETTERS else 99)
+    model_rows = [{'axis': axis, 'cells': [_model_cell(axis, t, terms.get(t))
+                                           for t in model_terms]}
+                  for axis, terms in report.get('final_model', {}).items()]
+    return {'report': report, 'steps': steps, 'pngs': pngs, 'files': files,
+            'model_terms': model_terms, 'model_rows': model_rows,
+            'sdf_text': sdf.read_text(encoding='utf-8') if sdf.is_file() else None}
+
+
+def write_discrepancy_page(out_dir, report):
+    """Write ``out_dir/report.html`` of a discrepancy run (after its other files)."""
+    return write_page(Path(out_dir) / 'report.html', 'discrepancy.html.j2',
+                      **discrepancy_context(report, out_dir))
