@@ -2,8 +2,9 @@
 ``fleet``: which IMU is getting worse?  Trends and flags from the ``analyze --db`` history.
 
 Usage: ``fleet DB --out DIR [--json] [--since DATE]``.  Writes one trend plot per ``imu_id``
-(``DIR/<imu_id>.png``), ``DIR/fleet.json`` and the page ``DIR/index.html``; prints a table of the IMUs and one line per flag
-(``--json``: the JSON instead).  The flags are defined in :mod:`imu_allan.history.trends`.
+(``DIR/<imu_id>.png``), ``DIR/fleet.json`` and the page ``DIR/index.html``; prints a table of
+the IMUs and one line per flag (``--json``: the JSON instead).  The flags are defined in
+:mod:`imu_allan.history.trends`.
 """
 
 from datetime import datetime

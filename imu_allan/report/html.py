@@ -361,7 +361,7 @@ FLAG_MEANINGS = {
 
 
 def _source_href(path, out_dir):
-    """A link to a measurement's source, relative to the page (as the file manager opens it)."""
+    """Return a link to a measurement's source, relative to the page (opened from a folder)."""
     try:
         return os.path.relpath(path, out_dir)
     except ValueError:  # another drive (Windows): an absolute file: URI
@@ -370,7 +370,7 @@ def _source_href(path, out_dir):
 
 def fleet_imus(report, imus, out_dir):
     """
-    The IMUs of a fleet report, flagged ones first, each with its records newest first.
+    Return the IMUs of a fleet report, flagged ones first, each with its records newest first.
 
     Per record the worst-axis N and B of each sensor with their 68.3 % intervals, in
     conventional units (as printed by :func:`fmt`), and a link to the record's source.

@@ -222,7 +222,7 @@ def test_discrepancy_page(browser, tmp_path):
     report = json.loads((out / 'report.json').read_text())
     assert [s['effect'] for s in report['steps']] == ['rate_random_walk']
     text = _check_page(browser, out / 'report.html')
-    for axis, gap in report['gap'].items():
+    for gap in report['gap'].values():
         assert fmt(gap['initial'], 3) in text and fmt(gap['final'], 3) in text
     assert 'gyro_x + rate random walk' in text
     value = report['steps'][0]['parameters']
