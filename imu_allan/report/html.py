@@ -394,9 +394,9 @@ def fleet_imus(report, imus, out_dir):
                  'href': _source_href(inp, out_dir), 'flagged': inp in flagged_inputs,
                  'cells': [points.get((c['sensor'], c['term'], start, inp)) for c in columns]}
                 for start, inp in reversed(imu.records)]
-        flags = [{'why': f['why'], 'kind': f['kind'],
-                  'meaning': FLAG_MEANINGS.get(f['kind'], '').format(k=f'{K_SPREAD:g}',
-                                                                    p=f'{FLEET_PERCENTILE:g}')}
+        words = {k: text.format(k=f'{K_SPREAD:g}', p=f'{FLEET_PERCENTILE:g}')
+                 for k, text in FLAG_MEANINGS.items()}
+        flags = [{'why': f['why'], 'kind': f['kind'], 'meaning': words.get(f['kind'], '')}
                  for f in imu.flags]
         plot = Path(entry['plot'])
         out.append({'imu_id': entry['imu_id'], 'records': entry['records'],

@@ -202,8 +202,8 @@ def test_fleet_page(browser, fleet_out):
     finally:
         page.close()
     assert len(sources) == 18 and all(s.endswith('.mcap') for s in sources)
-    assert {s.rsplit('/', 1)[1] for s in sources} == {f'robot{r}_week{k}.mcap'
-                                                     for r in range(3) for k in range(6)}
+    expected = {f'robot{r}_week{k}.mcap' for r in range(3) for k in range(6)}
+    assert {s.rsplit('/', 1)[1] for s in sources} == expected
 
 
 def test_discrepancy_page(browser, tmp_path):
