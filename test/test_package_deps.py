@@ -27,6 +27,7 @@ MODULE_KEYS = {
     'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'numba': 'python3-numba',
     'serial': 'python3-serial', 'pywt': 'python3-pywt', 'yaml': 'python3-yaml',
     'matplotlib': 'python3-matplotlib', 'rosbags': 'python3-rosbags-pip',
+    'jinja2': 'python3-jinja2', 'markupsafe': 'python3-jinja2',
     'lz4': 'python3-rosbags-pip', 'backports': 'python3-rosbags-pip',
     'setuptools': 'python3-setuptools', 'gtsam': 'python3-gtsam-pip',
 }

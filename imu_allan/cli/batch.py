@@ -297,6 +297,13 @@ def run_batch(args, options):
         progress.close()
     results = [outcomes[p] for p in work]
     failed = [o for o in results if not o['ok']]
+    if args.out and results:  # one page per input is in its sub-folder; the index links them
+        from ..report.html import write_batch_index
+        try:
+            write_batch_index(args.out, results, out_dirs)
+        except OSError as exc:
+            raise InputError(args.out, f'cannot write index.html ({exc.strerror or exc})') \
+                from None
     for o in failed:
         sys.stderr.write(f'analyze: {o["error"]}\n')
     if args.json:

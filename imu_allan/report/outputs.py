@@ -1,5 +1,7 @@
 """
-The ``--out DIR`` files: report.json, Kalibr imu.yaml, allan_results.csv and PNG plots.
+The ``--out DIR`` files: report.json, Kalibr imu.yaml, allan_results.csv, plots, report.html.
+
+report.html (:mod:`imu_allan.report.html`) shows the others; it is written last.
 
 Files are first written into a staging folder next to DIR and moved in only when all of them
 succeeded, so a failed run never leaves a half-written report behind.
@@ -79,9 +81,11 @@ def _write_out_dir(out_dir, analysis, raw, denoised, report, topic, extra, expor
         (staging / 'report.json').write_text(json.dumps(report, indent=1), encoding='utf-8')
         write_kalibr_yaml(staging / 'imu.yaml', analysis, topic)
         write_results_csv(staging / 'allan_results.csv', analysis, denoised)
-        for sensor in ('gyro', 'accel'):
-            plots.plot_adev(staging / f'adev_{sensor}.png', analysis, sensor, denoised)
+        figures = {sensor: plots.plot_adev(staging / f'adev_{sensor}.png', analysis, sensor,
+                                           denoised) for sensor in ('gyro', 'accel')}
         plots.plot_timeseries(staging / 'timeseries.png', analysis, raw)
+        from .html import write_analysis_page  # last: it lists and shows the files above
+        write_analysis_page(staging, report, figures)
         out_dir.mkdir(exist_ok=True)
         names = sorted(os.listdir(staging))
         for name in names:
