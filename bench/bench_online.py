@@ -20,10 +20,11 @@ Sections (each prints its numbers):
 6. ``kinds``: streaming MDEV and OHDEV (``estimators``) on 10^7 samples at 1 kHz with a 1 g
    offset against a long-double batch reference (relative difference) and their cost.
 
-The ``estimator`` and ``node`` sections also run with ``estimators`` oadev,mdev,ohdev.
+The ``estimator`` and ``node`` sections also run with ``estimators`` oadev,mdev,ohdev;
+``node_estimators`` runs the node without and with them, alternately, twice.
 
-Usage: ``python bench/bench_online.py [estimator|accuracy|node|covariance|plot|kinds ...]``
-(default: all).
+Usage: ``python bench/bench_online.py [estimator|accuracy|node|covariance|plot|kinds|
+node_estimators ...]`` (default: all but node_estimators).
 """
 
 import os
@@ -195,8 +196,13 @@ def _cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def bench_node(seconds=35.0, rate=1000.0):
-    """CPU share of the allan node vs an empty subscriber at 1 kHz, and its cycle time."""
+def bench_node(seconds=35.0, rate=1000.0, cases=None):
+    """
+    CPU share of the allan node vs an empty subscriber at 1 kHz, and its cycle time.
+
+    ``cases``: labels of the configurations to run, in that order (repeats allowed); default
+    all once.
+    """
     try:
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
@@ -226,7 +232,7 @@ def bench_node(seconds=35.0, rate=1000.0):
                                    float(values['cycle_wall_s'])))
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     print(f'node: {seconds:g} s of 6-axis Imu at {rate:g} Hz (best effort) per subscriber')
-    for label, cmd in (('empty rclpy subscriber', [sys.executable, '-c', _EMPTY_SUBSCRIBER]),
+    configs = (('empty rclpy subscriber', [sys.executable, '-c', _EMPTY_SUBSCRIBER]),
                        ('allan node (publish_period 10 s)',
                         [exe, '--ros-args', '-p', f'rate_hz:={rate}',
                          '-p', 'publish_period:=10.0']),
@@ -235,7 +241,10 @@ def bench_node(seconds=35.0, rate=1000.0):
                          '-p', 'publish_period:=10.0', '-p', 'covariance_topic:=imu/data_cov']),
                        ('allan node estimators=oadev,mdev,ohdev',
                         [exe, '--ros-args', '-p', f'rate_hz:={rate}',
-                         '-p', 'publish_period:=10.0', '-p', 'estimators:=oadev,mdev,ohdev'])):
+                         '-p', 'publish_period:=10.0', '-p', 'estimators:=oadev,mdev,ohdev']))
+    if cases is not None:
+        configs = [c for label in cases for c in configs if c[0] == label]
+    for label, cmd in configs:
         cycles.clear()
         # the republished stream goes to a subscriber in its own process (as an estimator)
         reader = subprocess.Popen(
@@ -335,13 +344,20 @@ def bench_plot(cycles=10):
           f'{np.median(cpus) * 1e3:.0f} ms CPU (min {min(cpus) * 1e3:.0f}); goal < 150 ms')
 
 
+def bench_node_estimators():
+    """Run the allan node without and with estimators=oadev,mdev,ohdev, alternately, twice."""
+    plain, kinds = 'allan node (publish_period 10 s)', 'allan node estimators=oadev,mdev,ohdev'
+    bench_node(cases=(plain, kinds, plain, kinds))
+
+
 def main():
     """Run the selected sections (all by default)."""
     header('bench_online')
     sections = sys.argv[1:] or ['estimator', 'accuracy', 'node', 'covariance', 'plot', 'kinds']
     for section in sections:
         {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node,
-         'covariance': bench_covariance, 'plot': bench_plot, 'kinds': bench_kinds}[section]()
+         'covariance': bench_covariance, 'plot': bench_plot, 'kinds': bench_kinds,
+         'node_estimators': bench_node_estimators}[section]()
 
 
 if __name__ == '__main__':
