@@ -240,6 +240,9 @@ class StreamingAllan:
             qs = [int(q) for q in self.ms[idx] // s]
             self._levels.append((int(s), int(idx[0]), qs, (3 if self._ohdev else 2) * max(qs)))
         self._s_caps = [3 * max(qs) for _, _, qs, _ in self._levels] if self._mdev else []
+        # s x (cap - 1, ..., 1, 0): index offsets of a full S history from its newest point
+        self._s_lags = [s * np.arange(cap - 1, -1, -1)[:, None]
+                        for (s, _, _, _), cap in zip(self._levels, self._s_caps)]
         self.window_s = float(window_s)
         n_buckets = int(window_buckets) if window_s > 0 else 1
         self._bucket_len = (max(1, int(math.ceil(window_s * rate_hz / n_buckets)))
@@ -445,34 +448,87 @@ class StreamingAllan:
             first = (seg // s + 1) * s
             if first <= seg + r:
                 x = np.concatenate((st.hist[li][:h], phase[first - seg - 1:r:s]))
-                self._book(x, h, qs, f0, 2, oadev, cols, slot, windowed)
                 if self._ohdev:
-                    self._book(x, h, qs, f0, 3, st.more['ohdev'], cols, slot, windowed)
+                    self._book_2_3(x, h, qs, f0, oadev, st.more['ohdev'], cols, slot, windowed)
+                else:
+                    self._book(x, h, qs, f0, 2, oadev, cols, slot, windowed)
                 keep = min(x.shape[0], cap)
                 st.hist[li][:keep, cols] = x[x.shape[0] - keep:, cols]
             if self._mdev:
-                s_cap = self._s_caps[li]
-                h = min((seg + 1) // s + 1, s_cap)  # stored S points of this level
-                first = ((seg + 1) // s + 1) * s
-                if first <= seg + r + 1:
-                    y = np.concatenate((st.shist[li][:h], cum[first - seg - 2:r:s]))
-                    self._book(y, h, qs, f0, 3, st.more['mdev'], cols, slot, windowed)
-                    keep = min(y.shape[0], s_cap)
-                    st.shist[li][:keep, cols] = y[y.shape[0] - keep:, cols]
+                self._feed_s(st, li, seg, r, cum, phase[-1, cols], cols, slot, windowed)
         # Rebase: second differences ignore a constant, so shift every stored phase by the
         # newest one; the phase then never grows with run time (no loss of float precision).
         shift = phase[-1, cols]
         for li, (s, _, _, cap) in enumerate(self._levels):
             st.hist[li][:min((seg + r) // s + 1, cap), cols] -= shift
-        if self._mdev:
-            # S: minus its newest value and the line of slope `shift` through it (a third
-            # difference ignores both), which keeps S_{n+1} = S_n + x_n on the shifted phase.
-            newest = seg + r + 1
-            for li, (s, _, _, _) in enumerate(self._levels):
-                stored = min(newest // s + 1, self._s_caps[li])
-                lag = (newest // s * s - newest) - s * np.arange(stored - 1, -1, -1)
-                st.shist[li][:stored, cols] -= cum[-1, cols] + lag[:, None] * shift
         st.seg[cols] = seg + r
+
+    def _feed_s(self, st, li, seg, r, cum, shift, cols, slot, windowed):
+        """
+        MVAR terms of one level from the new S points ``cum`` (indices seg+2 .. seg+r+1).
+
+        Then the level's S history is rebased: minus the newest S and the line of slope
+        ``shift`` (the phase shift of this run) through it; a third difference ignores both,
+        and this keeps S_{n+1} = S_n + x_n on the shifted phase (module docstring).
+        """
+        s, f0, qs, _ = self._levels[li]
+        s_cap = self._s_caps[li]
+        newest = seg + r + 1
+        stored = min(newest // s + 1, s_cap)  # after this run
+        # offsets of the stored points from the newest S index, oldest first
+        lag = (newest // s * s - newest) - self._s_lags[li][s_cap - stored:]
+        rebase = cum[-1, cols] + lag * shift
+        h = min((seg + 1) // s + 1, s_cap)  # stored S points of this level
+        first = ((seg + 1) // s + 1) * s
+        if first > newest:  # no new point at this stride
+            st.shist[li][:stored, cols] -= rebase
+            return
+        y = np.concatenate((st.shist[li][:h], cum[first - seg - 2:r:s]))
+        self._book(y, h, qs, f0, 3, st.more['mdev'], cols, slot, windowed)
+        st.shist[li][:stored, cols] = y[y.shape[0] - stored:, cols] - rebase
+
+    @staticmethod
+    def _book_2_3(x, h, qs, f0, sums2, sums3, cols, slot, windowed):
+        """
+        :meth:`_book` of orders 2 (AVAR) and 3 (OHVAR) on the same phase history, at once.
+
+        A third difference at lag q is the difference of two second differences q apart
+        (D3_k = D2_{k+q} - D2_k), so the second differences are formed once, from the oldest
+        new OHVAR term's k on, and the AVAR terms are the same numbers as in :meth:`_book`.
+        """
+        length = x.shape[0]
+        nv = bisect.bisect_right(qs, (length - 1) // 2)
+        if not nv:
+            return
+        nv3 = bisect.bisect_right(qs, (length - 1) // 3)
+        ss = np.empty((nv, x.shape[1]))
+        kk = np.empty((nv, 1), np.int64)
+        ss3 = np.empty((nv3, x.shape[1]))
+        kk3 = np.empty((nv3, 1), np.int64)
+        for i in range(nv):
+            q = qs[i]
+            k0 = max(0, h - 2 * q)
+            k1 = length - 2 * q
+            e0 = max(0, h - 3 * q) if i < nv3 else k0
+            d2 = x[e0 + 2 * q:k1 + 2 * q] - 2.0 * x[e0 + q:k1 + q] + x[e0:k1]
+            d = d2[k0 - e0:]
+            np.einsum('ij,ij->j', d, d, out=ss[i])
+            kk[i] = k1 - k0
+            if i < nv3:
+                d = d2[q:] - d2[:d2.shape[0] - q]
+                np.einsum('ij,ij->j', d, d, out=ss3[i])
+                kk3[i] = d.shape[0]
+        for sums, sq, counts, n in ((sums2, ss, kk, nv), (sums3, ss3, kk3, nv3)):
+            if not n:
+                continue
+            fs = slice(f0, f0 + n)
+            sq = sq[:, cols]
+            acc, cnt, wacc, wcnt = sums
+            acc[fs, cols] += sq
+            cnt[fs, cols] += counts
+            if windowed:
+                wacc[slot][fs, cols] += sq
+                wcnt[slot][fs, cols] += counts
 
     @staticmethod
     def _book(x, h, qs, f0, order, sums, cols, slot, windowed):
