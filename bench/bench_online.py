@@ -17,9 +17,14 @@ Sections (each prints its numbers):
 4. ``covariance``: cost of patching the covariance diagonals in 50-message batches of CDR
    bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`).
 5. ``plot``: render time per publish cycle of the live figure (``imu/allan_plot/compressed``).
+6. ``kinds``: streaming MDEV and OHDEV (``estimators``) on 10^7 samples at 1 kHz with a 1 g
+   offset against a long-double batch reference (relative difference) and their cost.
 
-Usage: ``python bench/bench_online.py [estimator|accuracy|node|covariance|plot ...]``
-(default: all).
+The ``estimator`` and ``node`` sections also run with ``estimators`` oadev,mdev,ohdev;
+``node_estimators`` runs the node without and with them, alternately, twice.
+
+Usage: ``python bench/bench_online.py [estimator|accuracy|node|covariance|plot|kinds|
+node_estimators ...]`` (default: all but node_estimators).
 """
 
 import os
@@ -74,6 +79,64 @@ def bench_estimator():
     dt_f = time.perf_counter() - start
     print(f'  result(): {dt_r * 1e3:.1f} ms ({result.tau.size} taus x 6 axes, EDF + intervals);'
           f' fit: {dt_f * 1e3:.0f} ms (automatic term selection, 6 axes)')
+    kinds = 'oadev,mdev,ohdev'
+    est = StreamingAllan(rate, max_tau=10000.0, estimators=kinds)
+    start = time.perf_counter()
+    for i in range(0, n, batch):
+        est.update(data[i:i + batch])
+    dt = time.perf_counter() - start
+    print(f'  StreamingAllan estimators={kinds}: {dt / n * 1e6:6.2f} us per 6-axis sample '
+          f'({100 * dt / (n / rate):.2f} % of one core); memory '
+          f'{est.memory_bytes() / 1024:.0f} KiB (fixed)')
+    pipe = OnlineAllan(rate, max_tau=10000.0, estimators=kinds)
+    start = time.perf_counter()
+    for i in range(0, n, batch):
+        pipe.feed(t[i:i + batch], data[i:i + batch])
+    dt = time.perf_counter() - start
+    print(f'  OnlineAllan estimators={kinds}: {dt / n * 1e6:6.2f} us per sample '
+          f'({100 * dt / (n / rate):.2f} % of one core); memory '
+          f'{pipe.memory_bytes() / 1024:.0f} KiB (fixed)')
+
+
+def _kind_reference(y, m, kind):
+    """MVAR / OHVAR sum of squares and count (SP1065 eq. 14 / 18), long double, de-meaned."""
+    y = y.astype(np.longdouble)
+    y = y - y.mean()
+    x = np.zeros(y.size + 1, np.longdouble)
+    x[1:] = np.cumsum(y)
+    if kind == 'ohdev':
+        d = x[3 * m:] - 3 * x[2 * m:-m] + 3 * x[m:-2 * m] - x[:-3 * m]
+    else:
+        d2 = x[2 * m:] - 2 * x[m:-m] + x[:-2 * m]
+        c = np.zeros(d2.size + 1, np.longdouble)
+        c[1:] = np.cumsum(d2)
+        d = c[m:] - c[:-m]
+    return float((d * d).sum()), d.size
+
+
+def bench_kinds(n=10_000_000, rate=1000.0):
+    """Streaming MDEV / OHDEV on 10^7 samples with a 1 g offset: precision and cost."""
+    rng = np.random.default_rng(3)
+    # accelerometer-like: 1 g, white noise, a slow rate random walk (curvature in S)
+    y = 9.80665 + 0.025 * rng.standard_normal(n) + np.cumsum(1e-6 * rng.standard_normal(n))
+    taus = [0.001, 0.01, 0.1, 1.0, 10.0, 100.0]
+    est = StreamingAllan(rate, axes=('accel_z',), taus=taus, exact=True,
+                         estimators='mdev,ohdev', frame=65536)
+    start = time.process_time()
+    for i in range(0, n, 1_000_000):
+        est.update(y[i:i + 1_000_000, None])
+    dt = time.process_time() - start
+    print(f'kinds: {n} samples at {rate:g} Hz, 1 g offset, exact at tau {taus} s: streaming '
+          f'{dt:.1f} s CPU (1 axis, 3 kinds); raw phase sum reaches {n * n * 9.8 / 2:.1e}')
+    for kind in ('mdev', 'ohdev'):
+        ms, _, acc, cnt = est.sums(kind=kind)
+        worst = 0.0
+        for f, m in enumerate(ms):
+            ref, count = _kind_reference(y, int(m), kind)
+            assert cnt[f, 0] == count
+            worst = max(worst, abs(acc[f, 0] / ref - 1))
+        print(f'  {kind}: largest relative difference to the long-double reference '
+              f'{worst:.1e}')
 
 
 def bench_accuracy(runs=100):
@@ -133,8 +196,13 @@ def _cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def bench_node(seconds=35.0, rate=1000.0):
-    """CPU share of the allan node vs an empty subscriber at 1 kHz, and its cycle time."""
+def bench_node(seconds=35.0, rate=1000.0, cases=None):
+    """
+    CPU share of the allan node vs an empty subscriber at 1 kHz, and its cycle time.
+
+    ``cases``: labels of the configurations to run, in that order (repeats allowed); default
+    all once.
+    """
     try:
         from diagnostic_msgs.msg import DiagnosticArray
         import rclpy
@@ -164,13 +232,19 @@ def bench_node(seconds=35.0, rate=1000.0):
                                    float(values['cycle_wall_s'])))
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     print(f'node: {seconds:g} s of 6-axis Imu at {rate:g} Hz (best effort) per subscriber')
-    for label, cmd in (('empty rclpy subscriber', [sys.executable, '-c', _EMPTY_SUBSCRIBER]),
+    configs = (('empty rclpy subscriber', [sys.executable, '-c', _EMPTY_SUBSCRIBER]),
                        ('allan node (publish_period 10 s)',
                         [exe, '--ros-args', '-p', f'rate_hz:={rate}',
                          '-p', 'publish_period:=10.0']),
                        ('allan node + covariance_topic',
                         [exe, '--ros-args', '-p', f'rate_hz:={rate}',
-                         '-p', 'publish_period:=10.0', '-p', 'covariance_topic:=imu/data_cov'])):
+                         '-p', 'publish_period:=10.0', '-p', 'covariance_topic:=imu/data_cov']),
+                       ('allan node estimators=oadev,mdev,ohdev',
+                        [exe, '--ros-args', '-p', f'rate_hz:={rate}',
+                         '-p', 'publish_period:=10.0', '-p', 'estimators:=oadev,mdev,ohdev']))
+    if cases is not None:
+        configs = [c for label in cases for c in configs if c[0] == label]
+    for label, cmd in configs:
         cycles.clear()
         # the republished stream goes to a subscriber in its own process (as an estimator)
         reader = subprocess.Popen(
@@ -213,7 +287,7 @@ def bench_node(seconds=35.0, rate=1000.0):
                 extra = (f'; publish cycle ({len(cycles)} cycles, median / worst): work '
                          f'{med[0]:.0f} / {worst[0]:.0f} ms in steps of at most {med[1]:.0f} / '
                          f'{worst[1]:.0f} ms, spread over {med[2]:.0f} / {worst[2]:.0f} ms')
-            print(f'  {label:34s}: {share:5.1f} % of one core ({i / (wall1 - wall0):.0f} msg/s '
+            print(f'  {label:40s}: {share:5.1f} % of one core ({i / (wall1 - wall0):.0f} msg/s '
                   f'sent){extra}')
         finally:
             for p in (proc, reader):
@@ -270,13 +344,20 @@ def bench_plot(cycles=10):
           f'{np.median(cpus) * 1e3:.0f} ms CPU (min {min(cpus) * 1e3:.0f}); goal < 150 ms')
 
 
+def bench_node_estimators():
+    """Run the allan node without and with estimators=oadev,mdev,ohdev, alternately, twice."""
+    plain, kinds = 'allan node (publish_period 10 s)', 'allan node estimators=oadev,mdev,ohdev'
+    bench_node(cases=(plain, kinds, plain, kinds))
+
+
 def main():
     """Run the selected sections (all by default)."""
     header('bench_online')
-    sections = sys.argv[1:] or ['estimator', 'accuracy', 'node', 'covariance', 'plot']
+    sections = sys.argv[1:] or ['estimator', 'accuracy', 'node', 'covariance', 'plot', 'kinds']
     for section in sections:
         {'estimator': bench_estimator, 'accuracy': bench_accuracy, 'node': bench_node,
-         'covariance': bench_covariance, 'plot': bench_plot}[section]()
+         'covariance': bench_covariance, 'plot': bench_plot, 'kinds': bench_kinds,
+         'node_estimators': bench_node_estimators}[section]()
 
 
 if __name__ == '__main__':

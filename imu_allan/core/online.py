@@ -231,6 +231,18 @@ class OnlineAllan:
             health.values['samples_dropped_before_rate'] = self.finder.n_dropped
         return health
 
+    def deviations(self, window=False):
+        """
+        Return the extra streaming deviations, ``{kind: StreamingDeviation or None}``.
+
+        One entry per kind of the ``estimators`` option other than oadev (mdev, ohdev);
+        :meth:`result` is the OADEV with intervals.
+        """
+        est = self.estimator
+        if est is None:
+            return {}
+        return {kind: est.deviation(kind, window) for kind in est.kinds if kind != 'oadev'}
+
     def fit(self, result):
         """Fit the noise terms to a result; None when it has too few averaging times."""
         if result is None or result.tau.size < 2:
@@ -266,13 +278,17 @@ class StagedEstimate:
     intervals or one axis's fit (a few tens of ms), so a node can interleave them with taking
     messages instead of blocking for the whole cycle.  Axes are independent in both, so the
     final :attr:`result` and :attr:`fitted` equal ``pipeline.result()`` and
-    ``pipeline.fit(...)`` on the frozen data.
+    ``pipeline.fit(...)`` on the frozen data.  :attr:`deviations` holds the extra kinds'
+    curves (``estimators``: mdev, ohdev) of the same frozen data, ready at once.
     """
 
     def __init__(self, pipeline, window=False):
         self.pipeline = pipeline
         est = pipeline.estimator
-        self.snapshot = est.snapshot(window) if est is not None else None
+        snapshots = est.snapshots(window) if est is not None else {}
+        self.snapshot = snapshots.get('oadev')
+        self.deviations = {kind: est.deviation_from(kind, snap)
+                           for kind, snap in snapshots.items() if kind != 'oadev'}
         self.result = None
         self.fitted = None
         self._parts = {}

@@ -44,6 +44,29 @@ computed on every column (the others' results are discarded), because numpy roun
 column's sum differently for different numbers of columns: so an axis's numbers are
 bit-identical whatever the other axes left out.
 
+Modified and Hadamard variances (``estimators``): beside AVAR the same pass can form
+
+    OHVAR(m) = sum_k (x_{k+3m} - 3 x_{k+2m} + 3 x_{k+m} - x_k)^2 / (6 m^2 K)
+        (NIST SP1065 eq. 18, overlapping Hadamard: third differences of the phase, 3m back)
+    MVAR(m) = sum_j (sum_{i=j}^{j+m-1} (x_{i+2m} - 2 x_{i+m} + x_i))^2 / (2 m^4 K')
+        (SP1065 eq. 14 with tau = m tau0, phase in sample units)
+
+The inner sum of MVAR is the third difference at lag m of S, the cumulative sum of the phase
+(S_0 = 0, S_{n+1} = S_n + x_n): S_{j+3m} - 3 S_{j+2m} + 3 S_{j+m} - S_j, so MVAR streams like
+OHVAR on S, with its own history of S per stride level (sub-sampling S is exact as well).  K
+is N + 1 - 3m and K' = N + 2 - 3m for N samples (allantools' counts); strided factors form
+the terms with k (j) a multiple of the stride.  Precision: S grows like n^2 on a raw stream
+(a 1 g offset, 10^7 samples: 5e14); here it never does.  The phase is kept relative to its
+newest value (above), and S relative to its newest value *and* to the line of slope equal to
+the phase shifts removed so far; a third difference ignores any polynomial of degree 2, and
+with that choice S keeps the recurrence S_{n+1} = S_n + x_n on the shifted phase, so each
+stored S is minus the sum of the (shifted) phase from it to the newest point: bounded by 3m
+times the phase excursion over 3m samples, whatever the run time.  Equal to a batch reference
+to 1e-12 relative on 10^7 samples with a 1 g offset (``test/core/test_streaming_kinds.py``).
+Memory: the phase history is 3 (not 2) x (largest m / s) points per level with ``ohdev``, the
+S history 3 x (largest m / s) points per level with ``mdev``, plus one running sum (and
+window buckets) per factor and kind.
+
 Sliding window: with ``window_s`` > 0 the sums are also kept in ``window_buckets`` buckets of
 equal length (in stream samples); a term is booked to the bucket of its newest sample, and the
 windowed result pools the newest ``window_buckets`` buckets, i.e. the terms that end within the
@@ -52,16 +75,45 @@ last (1 - 1/buckets) W to W seconds.
 
 import bisect
 import copy
+from dataclasses import dataclass
 import math
 
 import numpy as np
 
 from .allan import AllanResult, DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, log_grid
 from .units import AXES
+from ..errors import InputError
 
 DEFAULT_STRIDE_BASE = 256
 DEFAULT_MAX_TAU = 10000.0
 DEFAULT_FRAME = 1024
+
+#: The deviations the streaming estimator computes (``estimators``); ``oadev`` is always on.
+KINDS = ('oadev', 'mdev', 'ohdev')
+# Per kind: (difference order, variance divisor c, power p: var = sum / (c m^p K), samples
+# spanned by K stride-1 terms minus K and the span of one term: n_eff = K s + order m + lead).
+_SPEC = {'oadev': (2, 2.0, 2, -1), 'ohdev': (3, 6.0, 2, -1), 'mdev': (3, 2.0, 4, -2)}
+
+
+def parse_estimators(value, where='estimators'):
+    """
+    Return the kinds of a list or comma-separated string, ``oadev`` first, without repeats.
+
+    Raises InputError naming ``where`` for an unknown kind or a value that is no text.
+    """
+    if isinstance(value, str):
+        names = value.split(',')
+    elif isinstance(value, (list, tuple)) and all(isinstance(v, str) for v in value):
+        names = list(value)
+    else:
+        raise InputError(where, f'expected a list of names or a comma-separated string, '
+                                f'got {value!r}')
+    names = [n.strip().lower() for n in names if n.strip()]
+    unknown = [n for n in names if n not in KINDS]
+    if unknown:
+        raise InputError(where, f'unknown estimator(s) {", ".join(unknown)} '
+                                f'(streaming: {", ".join(KINDS)})')
+    return tuple(k for k in KINDS if k == 'oadev' or k in names)
 
 
 def factor_grid(rate_hz, max_tau=DEFAULT_MAX_TAU, points_per_decade=DEFAULT_POINTS_PER_DECADE,
@@ -96,8 +148,16 @@ def factor_grid(rate_hz, max_tau=DEFAULT_MAX_TAU, points_per_decade=DEFAULT_POIN
 class _State:
     """Everything :class:`StreamingAllan` mutates (copied for previews)."""
 
-    def __init__(self, levels, n_factors, n_axes, n_buckets):
+    def __init__(self, levels, n_factors, n_axes, n_buckets, kinds=('oadev',), s_caps=()):
         self.hist = [np.zeros((cap, n_axes)) for _, _, _, cap in levels]
+        # MVAR: per level the history of S (cumulative sum of the phase), see the docstring.
+        self.shist = [np.zeros((cap, n_axes)) for cap in s_caps]
+        # Other kinds than oadev: [acc, cnt, wacc, wcnt] as the four below.
+        self.more = {kind: [np.zeros((n_factors, n_axes)),
+                            np.zeros((n_factors, n_axes), dtype=np.int64),
+                            np.zeros((n_buckets, n_factors, n_axes)),
+                            np.zeros((n_buckets, n_factors, n_axes), dtype=np.int64)]
+                     for kind in kinds if kind != 'oadev'}
         self.acc = np.zeros((n_factors, n_axes))
         self.cnt = np.zeros((n_factors, n_axes), dtype=np.int64)
         self.wacc = np.zeros((n_buckets, n_factors, n_axes))
@@ -114,8 +174,9 @@ class _State:
         self.n_segments = np.zeros(n_axes, dtype=np.int64)   # per axis
 
     def arrays(self):
-        return self.hist + [self.acc, self.cnt, self.wacc, self.wcnt, self.seg, self.offset,
-                            self.has_offset, self.n_used_axes, self.n_segments]
+        return self.hist + self.shist + [a for sums in self.more.values() for a in sums] + [
+            self.acc, self.cnt, self.wacc, self.wcnt, self.seg, self.offset, self.has_offset,
+            self.n_used_axes, self.n_segments]
 
 
 class StreamingAllan:
@@ -147,13 +208,17 @@ class StreamingAllan:
     min_clusters : int
         A factor is reported once its data span at least ``min_clusters`` x m samples (the
         batch estimator's tau_max = T / 10 rule).
+    estimators : sequence of str or str
+        Deviations to compute (:data:`KINDS`: oadev, mdev, ohdev; a comma list is taken);
+        ``oadev`` is always computed.
 
     """
 
     def __init__(self, rate_hz, axes=AXES, max_tau=DEFAULT_MAX_TAU,
                  points_per_decade=DEFAULT_POINTS_PER_DECADE, taus=None,
                  stride_base=DEFAULT_STRIDE_BASE, exact=False, window_s=0.0, window_buckets=16,
-                 frame=DEFAULT_FRAME, min_clusters=DEFAULT_MIN_CLUSTERS):
+                 frame=DEFAULT_FRAME, min_clusters=DEFAULT_MIN_CLUSTERS,
+                 estimators=('oadev',)):
         if not rate_hz or not math.isfinite(rate_hz) or rate_hz <= 0:
             raise ValueError('rate_hz must be a positive number')
         if stride_base < 1 or frame < 1 or window_buckets < 1 or window_s < 0:
@@ -164,6 +229,8 @@ class StreamingAllan:
         self.ms, self.strides = factor_grid(self.rate_hz, max_tau, points_per_decade, taus,
                                             stride_base, exact)
         self.min_clusters = int(min_clusters)
+        self.kinds = parse_estimators(estimators)
+        self._ohdev, self._mdev = 'ohdev' in self.kinds, 'mdev' in self.kinds
         # Levels: (stride, index of its first factor, m / stride ascending, history capacity).
         # The strides grow with m, so each level's factors are consecutive.
         self._levels = []
@@ -171,12 +238,17 @@ class StreamingAllan:
             idx = np.flatnonzero(self.strides == s)
             assert np.all(np.diff(idx) == 1)
             qs = [int(q) for q in self.ms[idx] // s]
-            self._levels.append((int(s), int(idx[0]), qs, 2 * max(qs)))
+            self._levels.append((int(s), int(idx[0]), qs, (3 if self._ohdev else 2) * max(qs)))
+        self._s_caps = [3 * max(qs) for _, _, qs, _ in self._levels] if self._mdev else []
+        # s x (cap - 1, ..., 1, 0): index offsets of a full S history from its newest point
+        self._s_lags = [s * np.arange(cap - 1, -1, -1)[:, None]
+                        for (s, _, _, _), cap in zip(self._levels, self._s_caps)]
         self.window_s = float(window_s)
         n_buckets = int(window_buckets) if window_s > 0 else 1
         self._bucket_len = (max(1, int(math.ceil(window_s * rate_hz / n_buckets)))
                             if window_s > 0 else None)
-        self._st = _State(self._levels, self.ms.size, n_axes, n_buckets)
+        self._st = _State(self._levels, self.ms.size, n_axes, n_buckets, self.kinds,
+                          self._s_caps)
         self.frame = int(frame)
         self._pend = np.zeros((self.frame, n_axes))
         self._pend_use = np.zeros((self.frame, n_axes), bool)
@@ -261,6 +333,9 @@ class StreamingAllan:
         for b in range(st.bucket + 1, min(target, st.bucket + n_b) + 1):
             st.wacc[b % n_b] = 0.0
             st.wcnt[b % n_b] = 0
+            for _, _, wacc, wcnt in st.more.values():
+                wacc[b % n_b] = 0.0
+                wcnt[b % n_b] = 0
         st.bucket = target
 
     @staticmethod
@@ -359,44 +434,136 @@ class StreamingAllan:
             st.n_segments[cols] += 1
             for li in range(len(self._levels)):
                 st.hist[li][0, cols] = 0.0  # x_0 = 0: phase index 0 is a multiple of any stride
+            for hist in st.shist:
+                hist[:2, cols] = 0.0  # S_0 = S_1 = 0 (index 1 is stored at stride 1 only)
         r = samples.shape[0]
         phase = np.cumsum(samples - st.offset, axis=0)  # indices seg+1 .. seg+r
+        # S indices seg+2 .. seg+r+1 (S_{n+1} = S_n + x_n; the newest S, index seg+1, is 0).
+        cum = np.cumsum(phase, axis=0) if self._mdev else None
         slot = st.bucket % st.wcnt.shape[0]
         windowed = self._bucket_len is not None
+        oadev = [st.acc, st.cnt, st.wacc, st.wcnt]
         for li, (s, f0, qs, cap) in enumerate(self._levels):
             h = min(seg // s + 1, cap)  # stored phase points of this level
             first = (seg // s + 1) * s
-            if first > seg + r:
-                continue
-            x = np.concatenate((st.hist[li][:h], phase[first - seg - 1:r:s]))
-            length = x.shape[0]
-            # Factors with new terms: 2q < length, a prefix of the level's (q ascending).
-            nv = bisect.bisect_right(qs, (length - 1) // 2)
-            if nv:
-                ss = np.empty((nv, x.shape[1]))
-                kk = np.empty((nv, 1), np.int64)
-                for i in range(nv):
-                    q = qs[i]
-                    k0 = max(0, h - 2 * q)
-                    k1 = length - 2 * q
-                    d = x[k0 + 2 * q:k1 + 2 * q] - 2.0 * x[k0 + q:k1 + q] + x[k0:k1]
-                    np.einsum('ij,ij->j', d, d, out=ss[i])
-                    kk[i] = k1 - k0
-                fs = slice(f0, f0 + nv)
-                ss = ss[:, cols]
-                st.acc[fs, cols] += ss
-                st.cnt[fs, cols] += kk
-                if windowed:
-                    st.wacc[slot][fs, cols] += ss
-                    st.wcnt[slot][fs, cols] += kk
-            keep = min(length, cap)
-            st.hist[li][:keep, cols] = x[length - keep:, cols]
+            if first <= seg + r:
+                x = np.concatenate((st.hist[li][:h], phase[first - seg - 1:r:s]))
+                if self._ohdev:
+                    self._book_2_3(x, h, qs, f0, oadev, st.more['ohdev'], cols, slot, windowed)
+                else:
+                    self._book(x, h, qs, f0, 2, oadev, cols, slot, windowed)
+                keep = min(x.shape[0], cap)
+                st.hist[li][:keep, cols] = x[x.shape[0] - keep:, cols]
+            if self._mdev:
+                self._feed_s(st, li, seg, r, cum, phase[-1, cols], cols, slot, windowed)
         # Rebase: second differences ignore a constant, so shift every stored phase by the
         # newest one; the phase then never grows with run time (no loss of float precision).
         shift = phase[-1, cols]
         for li, (s, _, _, cap) in enumerate(self._levels):
             st.hist[li][:min((seg + r) // s + 1, cap), cols] -= shift
         st.seg[cols] = seg + r
+
+    def _feed_s(self, st, li, seg, r, cum, shift, cols, slot, windowed):
+        """
+        MVAR terms of one level from the new S points ``cum`` (indices seg+2 .. seg+r+1).
+
+        Then the level's S history is rebased: minus the newest S and the line of slope
+        ``shift`` (the phase shift of this run) through it; a third difference ignores both,
+        and this keeps S_{n+1} = S_n + x_n on the shifted phase (module docstring).
+        """
+        s, f0, qs, _ = self._levels[li]
+        s_cap = self._s_caps[li]
+        newest = seg + r + 1
+        stored = min(newest // s + 1, s_cap)  # after this run
+        # offsets of the stored points from the newest S index, oldest first
+        lag = (newest // s * s - newest) - self._s_lags[li][s_cap - stored:]
+        rebase = cum[-1, cols] + lag * shift
+        h = min((seg + 1) // s + 1, s_cap)  # stored S points of this level
+        first = ((seg + 1) // s + 1) * s
+        if first > newest:  # no new point at this stride
+            st.shist[li][:stored, cols] -= rebase
+            return
+        y = np.concatenate((st.shist[li][:h], cum[first - seg - 2:r:s]))
+        self._book(y, h, qs, f0, 3, st.more['mdev'], cols, slot, windowed)
+        st.shist[li][:stored, cols] = y[y.shape[0] - stored:, cols] - rebase
+
+    @staticmethod
+    def _book_2_3(x, h, qs, f0, sums2, sums3, cols, slot, windowed):
+        """
+        :meth:`_book` of orders 2 (AVAR) and 3 (OHVAR) on the same phase history, at once.
+
+        A third difference at lag q is the difference of two second differences q apart
+        (D3_k = D2_{k+q} - D2_k), so the second differences are formed once, from the oldest
+        new OHVAR term's k on, and the AVAR terms are the same numbers as in :meth:`_book`.
+        """
+        length = x.shape[0]
+        nv = bisect.bisect_right(qs, (length - 1) // 2)
+        if not nv:
+            return
+        nv3 = bisect.bisect_right(qs, (length - 1) // 3)
+        ss = np.empty((nv, x.shape[1]))
+        kk = np.empty((nv, 1), np.int64)
+        ss3 = np.empty((nv3, x.shape[1]))
+        kk3 = np.empty((nv3, 1), np.int64)
+        for i in range(nv):
+            q = qs[i]
+            k0 = max(0, h - 2 * q)
+            k1 = length - 2 * q
+            e0 = max(0, h - 3 * q) if i < nv3 else k0
+            d2 = x[e0 + 2 * q:k1 + 2 * q] - 2.0 * x[e0 + q:k1 + q] + x[e0:k1]
+            d = d2[k0 - e0:]
+            np.einsum('ij,ij->j', d, d, out=ss[i])
+            kk[i] = k1 - k0
+            if i < nv3:
+                d = d2[q:] - d2[:d2.shape[0] - q]
+                np.einsum('ij,ij->j', d, d, out=ss3[i])
+                kk3[i] = d.shape[0]
+        for sums, sq, counts, n in ((sums2, ss, kk, nv), (sums3, ss3, kk3, nv3)):
+            if not n:
+                continue
+            fs = slice(f0, f0 + n)
+            sq = sq[:, cols]
+            acc, cnt, wacc, wcnt = sums
+            acc[fs, cols] += sq
+            cnt[fs, cols] += counts
+            if windowed:
+                wacc[slot][fs, cols] += sq
+                wcnt[slot][fs, cols] += counts
+
+    @staticmethod
+    def _book(x, h, qs, f0, order, sums, cols, slot, windowed):
+        """
+        Add the new terms of one level's history ``x`` (its first ``h`` points stored before).
+
+        Second (``order`` 2, AVAR) or third (3: OHVAR on the phase, MVAR on S) differences at
+        lags q (the level's factors / stride); ``sums`` is [acc, cnt, wacc, wcnt] of the kind.
+        """
+        length = x.shape[0]
+        # Factors with new terms: order q < length, a prefix of the level's (q ascending).
+        nv = bisect.bisect_right(qs, (length - 1) // order)
+        if not nv:
+            return
+        ss = np.empty((nv, x.shape[1]))
+        kk = np.empty((nv, 1), np.int64)
+        for i in range(nv):
+            q = qs[i]
+            k0 = max(0, h - order * q)
+            k1 = length - order * q
+            if order == 2:
+                d = x[k0 + 2 * q:k1 + 2 * q] - 2.0 * x[k0 + q:k1 + q] + x[k0:k1]
+            else:
+                d = (x[k0 + 3 * q:k1 + 3 * q] - x[k0:k1]
+                     - 3.0 * (x[k0 + 2 * q:k1 + 2 * q] - x[k0 + q:k1 + q]))
+            np.einsum('ij,ij->j', d, d, out=ss[i])
+            kk[i] = k1 - k0
+        fs = slice(f0, f0 + nv)
+        ss = ss[:, cols]
+        acc, cnt, wacc, wcnt = sums
+        acc[fs, cols] += ss
+        cnt[fs, cols] += kk
+        if windowed:
+            wacc[slot][fs, cols] += ss
+            wcnt[slot][fs, cols] += kk
 
     # -- output ------------------------------------------------------------------------------
 
@@ -410,41 +577,61 @@ class StreamingAllan:
                       self._pend_mixed)
         return st
 
-    def sums(self, window=False):
+    def sums(self, window=False, kind='oadev'):
         """
         Raw running sums: ``(m, stride, sum_sq (F, A), count (F, A))`` in sample units.
 
         ``sum_sq[f, a] / (2 m^2 count[f, a])`` is the Allan variance of axis ``a`` in the
-        samples' unit squared; the counts differ between axes when values were left out on
-        some axes only.
+        samples' unit squared (``kind`` ohdev: / (6 m^2 count), mdev: / (2 m^4 count)); the
+        counts differ between axes when values were left out on some axes only.
         """
-        st = self._current_state()
+        return self._sums_of(self._current_state(), window, kind)
+
+    def _sums_of(self, st, window, kind):
+        if kind not in self.kinds:
+            raise ValueError(f'{kind!r} is not computed (estimators: {", ".join(self.kinds)})')
+        acc, cnt, wacc, wcnt = ((st.acc, st.cnt, st.wacc, st.wcnt) if kind == 'oadev'
+                                else st.more[kind])
         if window:
             if self._bucket_len is None:
                 raise ValueError('no sliding window configured (window_s = 0)')
-            return self.ms, self.strides, st.wacc.sum(axis=0), st.wcnt.sum(axis=0)
-        return self.ms, self.strides, st.acc.copy(), st.cnt.copy()
+            return self.ms, self.strides, wacc.sum(axis=0), wcnt.sum(axis=0)
+        return self.ms, self.strides, acc.copy(), cnt.copy()
 
-    def snapshot(self, window=False, min_clusters=None):
+    def snapshot(self, window=False, min_clusters=None, kind='oadev'):
         """
         Return the reportable factors now: ``(m, avar (T, A), n_eff (T, A))``, or None.
 
         A factor is reportable on an axis once that axis's terms span ``min_clusters`` x m
         samples; the factors reportable on at least one axis are returned, with NaN AVAR (and
         ``n_eff`` 0) on the axes where it is not.  ``n_eff`` is the span each factor's terms
-        cover on each axis (count x stride + 2m - 1 samples), used as the record length for
-        the EDF.  AVAR in the samples' unit squared.
+        cover on each axis (count x stride + 2m - 1 samples; 3m - 1 for ohdev, 3m - 2 for
+        mdev), used as the record length for the EDF.  AVAR (MVAR, OHVAR with ``kind``) in the
+        samples' unit squared.
         """
-        ms, strides, acc, cnt = self.sums(window)
+        return self._snapshot_of(self._current_state(), window, min_clusters, kind)
+
+    def snapshots(self, window=False, min_clusters=None):
+        """Return :meth:`snapshot` of every computed kind, ``{kind: snapshot}``, of one state."""
+        st = self._current_state()
+        return {kind: self._snapshot_of(st, window, min_clusters, kind) for kind in self.kinds}
+
+    def _snapshot_of(self, st, window, min_clusters, kind):
+        ms, strides, acc, cnt = self._sums_of(st, window, kind)
+        order, scale, power, lead = _SPEC[kind]
         min_clusters = self.min_clusters if min_clusters is None else int(min_clusters)
-        n_eff = cnt * strides[:, None] + 2 * ms[:, None] - 1
+        n_eff = cnt * strides[:, None] + order * ms[:, None] + lead
         ok = (cnt > 0) & (n_eff >= min_clusters * ms[:, None])
         sel = ok.any(axis=1)
         if not sel.any():
             return None
         m, ok, cnt = ms[sel], ok[sel], cnt[sel]
         avar = np.full(ok.shape, np.nan)
-        avar[ok] = acc[sel][ok] / (2.0 * (m[:, None] * m[:, None] * cnt)[ok].astype(float))
+        if kind == 'oadev':  # as before the other kinds (bit-identical)
+            avar[ok] = acc[sel][ok] / (2.0 * (m[:, None] * m[:, None] * cnt)[ok].astype(float))
+        else:  # in floats: m^4 overflows int64 from m = 55109
+            mf = m[:, None].astype(float)
+            avar[ok] = acc[sel][ok] / (scale * mf ** power * cnt)[ok]
         return m, avar, np.where(ok, n_eff[sel], 0)
 
     def result_from(self, snapshot, columns=None):
@@ -457,6 +644,22 @@ class StreamingAllan:
         return AllanResult.from_avar(m, avar[:, columns], n_eff[:, columns], self.rate_hz,
                                      [self.axes[j] for j in columns])
 
+    def deviation_from(self, kind, snapshot):
+        """Return a :class:`StreamingDeviation` of a :meth:`snapshot` of ``kind`` (or None)."""
+        if snapshot is None:
+            return None
+        m, var, n_eff = snapshot
+        return StreamingDeviation(kind, m / self.rate_hz, m, np.sqrt(var), n_eff, self.axes,
+                                  self.rate_hz)
+
+    def deviation(self, kind, window=False, min_clusters=None):
+        """
+        Return the deviation ``kind`` (oadev, mdev, ohdev) of all data seen, or of the window.
+
+        A :class:`StreamingDeviation` (values, no intervals), or None before enough data.
+        """
+        return self.deviation_from(kind, self.snapshot(window, min_clusters, kind))
+
     def result(self, window=False, min_clusters=None):
         """
         Allan deviation of everything seen (or of the sliding window) as an AllanResult.
@@ -465,6 +668,28 @@ class StreamingAllan:
         the averaging times that axis has too little data for.
         """
         return self.result_from(self.snapshot(window, min_clusters))
+
+
+@dataclass(frozen=True)
+class StreamingDeviation:
+    """
+    One streaming deviation curve: ``kind``, ``tau`` (T,) s, ``m`` (T,), ``dev`` (T, A).
+
+    ``dev`` in the samples' unit (rad/s, m/s^2), NaN on an axis at the averaging times its own
+    data do not reach; ``n_eff`` (T, A) samples spanned by each factor's terms.
+    """
+
+    kind: str
+    tau: np.ndarray
+    m: np.ndarray
+    dev: np.ndarray
+    n_eff: np.ndarray
+    axes: tuple
+    rate_hz: float
+
+    def axis_index(self, axis):
+        """Column of ``axis`` in ``dev``."""
+        return self.axes.index(axis)
 
 
 def _as_mask(mask, n, n_axes, name):

@@ -10,6 +10,8 @@ and publishes every ``publish_period`` seconds:
   detected;
 * ``imu/allan_deviation`` (std_msgs/Float64MultiArray): dims ``row`` (7: tau, gyro_x .. accel_z)
   x ``tau`` (T);
+* ``imu/allan_deviation/<kind>`` for each other kind of the ``estimators`` parameter (``mdev``,
+  ``ohdev``: streaming modified Allan and overlapping Hadamard deviations), the same layout;
 * ``imu/allan_plot/compressed`` (sensor_msgs/CompressedImage, PNG): the Allan deviation figure,
   rendered in a worker thread only while something subscribes (:mod:`.allan_plot`);
 * ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share), each axis
@@ -58,6 +60,7 @@ from ..core import health as hm
 from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
 from ..core.model import NoiseModel
 from ..core.online import check_rate_options, OnlineAllan, StagedEstimate
+from ..core.streaming import parse_estimators
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 from ..formats.imu_adapter import cdr_to_arrays
@@ -90,6 +93,10 @@ PARAMETERS = [
                               's-th overlapping term (docs/online.md)', (1, 10_000_000)),
     Param('min_clusters', 10, 'publish an averaging time once the data span min_clusters x tau',
           (2, 10000)),
+    Param('estimators', ['oadev'], 'deviations computed (string array or comma list of oadev, '
+                                   'mdev, ohdev; oadev always): each other kind is published on '
+                                   'imu/allan_deviation/<kind>, same layout as '
+                                   'imu/allan_deviation'),
     Param('gate', True, 'leave spans where the IMU moves out of the estimate'),
     Param('gate_window_s', 0.2, 'stationarity gate window, s', (0.005, 60.0)),
     Param('gate_std_factor', 3.0, 'motion if a window std exceeds this x the noise floor',
@@ -139,6 +146,7 @@ STEP_BUDGET_S = 0.02
 _RESTART = {'rate_hz', 'window_s', 'max_tau', 'points_per_decade', 'stride_base',
             'min_clusters', 'gate', 'gate_window_s', 'gate_std_factor', 'gate_step_factor',
             'gate_gyro_max', 'gate_hold_s', 'gap_factor'}
+_RESTART |= {'estimators'}  # the new kinds' sums start with the estimate
 
 
 def parse_terms(text):
@@ -160,7 +168,8 @@ def pipeline_options(p):
             'terms': parse_terms(p['terms']), 'gate_options': gate_options,
             'max_tau': p['max_tau'], 'points_per_decade': p['points_per_decade'],
             'stride_base': p['stride_base'], 'min_clusters': p['min_clusters'],
-            'window_s': p['window_s']}
+            'window_s': p['window_s'],
+            'estimators': parse_estimators(p['estimators'])}
 
 
 def check_parameters(p):
@@ -171,6 +180,7 @@ def check_parameters(p):
     from ..core.health import NoiseBudget
     from ..core.model import ModelError, NoiseModel
     parse_terms(p['terms'])
+    parse_estimators(p['estimators'])
     parse_targets(p['targets'], 'targets')
     NoiseBudget.from_yaml(p['budget_file'] or None)
     if p['model_file']:
@@ -214,6 +224,8 @@ class AllanNode(Node):
         self._max_batch = depth
         self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
         self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
+        self._pub_kinds = {}  # imu/allan_deviation/<kind> of the other estimators
+        self._deviation_publishers()
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._pub_cov = self.create_publisher(
             Imu, self.params['covariance_topic'], qos_profile_sensor_data,
@@ -252,6 +264,8 @@ class AllanNode(Node):
                 self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
             else:
                 self.pipeline.terms = parse_terms(self.params['terms'])
+        if 'estimators' in changed:
+            self._deviation_publishers()
         if 'budget_file' in changed:
             self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
         if 'model_file' in changed:
@@ -261,6 +275,16 @@ class AllanNode(Node):
             self.destroy_timer(self._publish_timer)
             self._publish_timer = self.create_timer(self.params['publish_period'],
                                                     self.publish)
+
+    def _deviation_publishers(self):
+        """One publisher per extra kind of ``estimators`` (made or destroyed on a change)."""
+        kinds = [k for k in parse_estimators(self.params['estimators']) if k != 'oadev']
+        for kind in [k for k in self._pub_kinds if k not in kinds]:
+            self.destroy_publisher(self._pub_kinds.pop(kind))
+        for kind in kinds:
+            if kind not in self._pub_kinds:
+                self._pub_kinds[kind] = self.create_publisher(
+                    Float64MultiArray, f'imu/allan_deviation/{kind}', 10)
 
     # -- work ------------------------------------------------------------------------
 
@@ -306,6 +330,10 @@ class AllanNode(Node):
             if result is not None:
                 self._pub_dev.publish(multiarray(deviation_table(result, AXES),
                                                  DEVIATION_LABELS))
+            for kind, curve in cycle.deviations.items():  # mdev, ohdev: the same layout
+                if curve is not None and kind in self._pub_kinds:
+                    self._pub_kinds[kind].publish(multiarray(deviation_table(curve, AXES),
+                                                             DEVIATION_LABELS))
             table = coefficient_table(fitted, AXES) if fitted is not None else None
             if table is not None:
                 self._pub_coeffs.publish(multiarray(table, COEFF_LABELS))
@@ -374,6 +402,7 @@ class AllanNode(Node):
             'averaging_times': 0 if result is None else int(result.tau.size),
             'longest_tau_s': math.nan if result is None else float(result.tau[-1]),
             'estimator_memory_bytes': p.memory_bytes(),
+            'estimators': ','.join(parse_estimators(self.params['estimators'])),
             'window_s': self.params['window_s'],
             'budget_file': self.budget.source,
             'model_file': self.model_file or '(none)',

@@ -175,6 +175,10 @@ def declare_parameter_table(node, table):
         elif param.range is not None and isinstance(param.default, int) \
                 and not isinstance(param.default, bool):
             kwargs['integer_range'] = int_range(*param.range)
+        elif isinstance(param.default, list):
+            # dynamic typing: a string array or one comma-separated string
+            # (-p estimators:=oadev,mdev); the node's own check parses and validates it
+            kwargs['dynamic_typing'] = True
         if param.choices is not None:
             kwargs['additional_constraints'] = 'one of ' + ', '.join(map(str, param.choices))
         node.declare_parameter(param.name, param.default,

@@ -4,7 +4,8 @@ The numbers on ``imu/allan_coeffs`` and ``imu/allan_deviation`` (the contract la
 ``imu/allan_coeffs``: dims ``axis`` (6) x ``term`` (5: :data:`~imu_allan.core.units.IEEE_TERMS`)
 x ``stat`` (3: value, ci_low, ci_high; 68.3 %), row-major, ``data_offset`` 0, SI units,
 continuous-time coefficients, NaN where a term is not detected.  ``imu/allan_deviation``: dims
-``row`` (7: tau, then the six axes) x ``tau``.  The node encodes with these functions; users
+``row`` (7: tau, then the six axes) x ``tau``; ``imu/allan_deviation/<kind>`` (mdev, ohdev) the
+same with that deviation.  The node encodes with these functions; users
 and tools (``monitor``) decode with :func:`decode_coefficients` and :func:`decode_deviation`,
 which check the layout, or :func:`decode_table` for the bare reshape.
 """
@@ -47,15 +48,18 @@ def deviation_table(result, axes=AXES):
     """
     Return the ``imu/allan_deviation`` numbers: array (1 + len(axes), T): tau then ADEV per axis.
 
-    Axes missing from ``result`` are NaN rows.
+    Axes missing from ``result`` are NaN rows.  ``result`` may also be another deviation
+    (``.dev``, e.g. a :class:`~imu_allan.core.streaming.StreamingDeviation` for
+    ``imu/allan_deviation/<kind>``, the same layout).
     """
     if result is None:
         return np.zeros((1 + len(axes), 0))
     out = np.full((1 + len(axes), result.tau.size), np.nan)
     out[0] = result.tau
+    dev = result.dev if hasattr(result, 'dev') else result.adev
     for i, axis in enumerate(axes):
         if axis in result.axes:
-            out[1 + i] = result.adev[:, result.axis_index(axis)]
+            out[1 + i] = dev[:, result.axis_index(axis)]
     return out
 
 
@@ -111,16 +115,21 @@ def decode_coefficients(source, dims=None):
         raise InputError('imu/allan_coeffs', str(exc)) from None
 
 
-def decode_deviation(source, dims=None):
-    """``(tau (T,), adev (T, 6))`` of ``imu/allan_deviation`` (s, and rad/s or m/s^2)."""
-    data, dims = _layout(source, dims, 'imu/allan_deviation')
-    _check_labels(dims, DEVIATION_LABELS, 'imu/allan_deviation')
+def decode_deviation(source, dims=None, topic='imu/allan_deviation'):
+    """
+    ``(tau (T,), dev (T, 6))`` of ``imu/allan_deviation`` (s, and rad/s or m/s^2).
+
+    The same for ``imu/allan_deviation/<kind>`` (mdev, ohdev: the same layout); ``topic``
+    names it in errors.
+    """
+    data, dims = _layout(source, dims, topic)
+    _check_labels(dims, DEVIATION_LABELS, topic)
     if dims[0][1] != 1 + len(AXES):
-        raise InputError('imu/allan_deviation', f'{dims[0][1]} rows, expected {1 + len(AXES)}')
+        raise InputError(topic, f'{dims[0][1]} rows, expected {1 + len(AXES)}')
     try:
         table = decode_table(data, dims)
     except ValueError as exc:
-        raise InputError('imu/allan_deviation', str(exc)) from None
+        raise InputError(topic, str(exc)) from None
     return table[0], table[1:].T
 
 
