@@ -156,6 +156,8 @@ def run_one(path, args, options, progress=None, out_dir=None):
                 'adev': {'tau': denoised.result.tau.tolist(),
                          'adev': denoised.result.adev[:, j].tolist()}}
             for j, a in enumerate(denoised.axes)}
+    from ..report.temperature_report import add_temperature, temperature_sentence
+    add_temperature(report, path, fmt, samples, analysis)
     if args.out:
         step('writing report')
         from ..report.outputs import write_out_dir
@@ -171,7 +173,8 @@ def run_one(path, args, options, progress=None, out_dir=None):
             extra = write_bag
         report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
                                             extra=extra, exports=(args.export, args.inflate))
-    return report, console_summary(analysis) + '\n' + advice_sentence(advice)
+    return report, (console_summary(analysis) + '\n' + advice_sentence(advice)
+                    + temperature_sentence(report))
 
 
 @guarded

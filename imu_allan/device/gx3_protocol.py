@@ -535,8 +535,8 @@ class Temperatures:
     A decoded 0xD1 reply.
 
     ``counts``: the 4 raw 12-bit codes in :data:`TEMPERATURE_CHANNELS` order; ``timer``:
-    ticks.  :attr:`celsius` is the board temperature from the magnetometer-side channel, the only one
-    with an absolute calibration (DCP-GX3 Eq. 15); the others are relative only.
+    ticks.  :attr:`celsius` is the board temperature from the magnetometer-side channel, the
+    only one with an absolute calibration (DCP-GX3 Eq. 15); the others are relative only.
     """
 
     counts: tuple

@@ -36,7 +36,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, Temperature
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from .allan_plot import PlotPublisher
@@ -54,6 +54,7 @@ from ..core import health as hm
 from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
 from ..core.model import NoiseModel
 from ..core.online import check_rate_options, OnlineAllan, StagedEstimate
+from ..core.temperature import TemperatureRange
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 from ..formats.imu_adapter import cdr_to_arrays
@@ -206,6 +207,11 @@ class AllanNode(Node):
         self._pub_coeffs = self.create_publisher(Float64MultiArray, 'imu/allan_coeffs', 10)
         self._pub_dev = self.create_publisher(Float64MultiArray, 'imu/allan_deviation', 10)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        # The temperature range the current estimate spans (the driver's imu/temperature).
+        self._temperature = TemperatureRange(self.params['window_s'])
+        self.create_subscription(Temperature, 'imu/temperature',
+                                 lambda msg: self._temperature.add_message(msg),
+                                 qos_profile_sensor_data)
         self._pub_cov = self.create_publisher(
             Imu, self.params['covariance_topic'], qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
@@ -241,6 +247,7 @@ class AllanNode(Node):
             if changed & _RESTART:
                 self.get_logger().info('estimator settings changed: estimate restarted')
                 self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
+                self._temperature = TemperatureRange(self.params['window_s'])
             else:
                 self.pipeline.terms = parse_terms(self.params['terms'])
         if 'budget_file' in changed:
@@ -367,6 +374,7 @@ class AllanNode(Node):
             'model_file': self.model_file or '(none)',
             **self.last_cycle,
             **self._plot.stats(),
+            **self._temperature.key_values(),
         })
         if p.estimator is not None:  # per axis where values were rejected (NaN, inf, ...)
             stream.values.update({f'samples_used.{a}': int(n) for a, n, r in zip(

@@ -6,8 +6,8 @@ from imu_allan.core.temperature import (
     bias_slopes,
     coinciding_change,
     regress_slopes,
-    TemperatureProfile,
     temperature_changes,
+    TemperatureProfile,
 )
 from imu_allan.core.units import AXES
 import numpy as np
@@ -114,3 +114,20 @@ def test_changes_warmup_ends_near_the_plateau():
     assert move.t_start_s == pytest.approx(300 * np.log(10 / 9), abs=2.0)
     assert move.t_end_s == pytest.approx(300 * np.log(10), abs=2.0)
     assert move.to_json()['from_c'] == 20.0
+
+
+def test_temperature_range_all_and_window():
+    """Whole estimate: min/max of every reading; sliding window: of the last window_s s."""
+    from imu_allan.core.temperature import TemperatureRange
+    whole, window = TemperatureRange(), TemperatureRange(window_s=10.0)
+    assert np.isnan(whole.key_values()['temperature_min_c'])
+    for t, c in ((0, 30.0), (5, 20.0), (12, 25.0), (14, float('nan')), (16, 26.0)):
+        whole.add(t, c)
+        window.add(t, c)
+    assert whole.key_values() == {'temperature_min_c': 20.0, 'temperature_max_c': 30.0}
+    # The window at t = 16 s holds the readings of 6..16 s: 25 and 26.
+    assert window.key_values() == {'temperature_min_c': 25.0, 'temperature_max_c': 26.0}
+    window.add(30.0, 24.0)
+    assert window.key_values() == {'temperature_min_c': 24.0, 'temperature_max_c': 24.0}
+    whole.reset()
+    assert whole.count == 0 and np.isnan(whole.high)

@@ -72,7 +72,7 @@ def test_reply_interleaved_in_a_stream_in_any_chunking():
     temps = {k: p.encode_temperature_reply(rng.integers(1800, 2400, 4), 625 * k)
              for k in (3, 50, 51, 199)}
     stream = b''.join(r + temps.get(k, b'') for k, r in enumerate(records))
-    for trial in range(20):
+    for _ in range(20):
         parser = StreamParser()
         cuts = np.sort(rng.integers(0, len(stream), size=40))
         out = []
