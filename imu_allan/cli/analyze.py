@@ -158,6 +158,8 @@ def run_one(path, args, options, progress=None, out_dir=None):
                 'adev': {'tau': denoised.result.tau.tolist(),
                          'adev': denoised.result.adev[:, j].tolist()}}
             for j, a in enumerate(denoised.axes)}
+    from ..report.temperature_report import add_temperature, temperature_sentence
+    add_temperature(report, path, fmt, samples, analysis)
     if args.out:
         step('writing report')
         from ..report.outputs import write_out_dir
@@ -174,7 +176,8 @@ def run_one(path, args, options, progress=None, out_dir=None):
         exports = (args.export, args.inflate, args.overbound, args.overbound_horizon)
         report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
                                             extra=extra, exports=exports)
-    return report, console_summary(analysis) + '\n' + advice_sentence(advice)
+    return report, (console_summary(analysis) + '\n' + advice_sentence(advice)
+                    + temperature_sentence(report))
 
 
 @guarded

@@ -239,6 +239,18 @@ class TimeSync:
         self.last_device = end
         return np.rint((device_s + offsets) * 1e9).astype(np.int64) + self.epoch * 10**9
 
+    def stamp_at(self, device_s):
+        """
+        Host-clock stamp, integer ns, of one device time with the current offset.
+
+        None before the first :meth:`stamps` (no mapping yet).  Changes nothing: for
+        occasional replies, such as the temperatures, that must not move the offset the
+        records follow.
+        """
+        if self.offset is None or self.epoch is None:
+            return None
+        return int(round((float(device_s) + float(self.offset)) * 1e9)) + self.epoch * 10**9
+
 
 #: Driver modes -> streamed data command.
 MODES = {
@@ -297,6 +309,7 @@ class SessionStats:
         self.timer_resets = 0
         self.rollovers = 0
         self.internal_errors = 0
+        self.temperatures = 0
 
 
 class Gx3Session:
@@ -308,11 +321,17 @@ class Gx3Session:
     name, device units) and host-clock ``stamps`` (int64 nanoseconds).  ``clock()`` returns
     host seconds (the driver passes its ROS clock).  ``log(level, text)`` reports events
     (level 'info', 'warn', 'error').
+
+    Temperatures: every ``temperature_period`` s (0 = never) while streaming, the session
+    sends 0xD1; the device answers between two data records, the framer picks the reply out
+    of the stream (no record is lost), and ``on_temperature(reading, stamp_ns)`` gets the
+    decoded :class:`~imu_allan.device.gx3_protocol.Temperatures` and the host-clock stamp of
+    its timer (mapped like the records', or the host clock before the first record).
     """
 
     def __init__(self, port, baud, mode, rate_hz, on_batch, clock=time.time, log=None,
                  stall_timeout=1.0, reply_timeout=0.3, record_raw=None, poll_interval=0.005,
-                 time_sync=None, backoff=None):
+                 time_sync=None, backoff=None, temperature_period=0.0, on_temperature=None):
         """Configure; call :meth:`run` in a thread and :meth:`stop` to end it."""
         self.decimation, self.flags = check_rate(rate_hz, baud, mode)
         self.code = MODES[mode]
@@ -344,6 +363,10 @@ class Gx3Session:
         self.vectorized = True
         self._replies = deque()
         self.thread = None
+        self.temperature_period = float(temperature_period or 0.0)
+        self.on_temperature = on_temperature
+        self.last_temperature_c = math.nan
+        self._next_temperature = 0.0
 
     # ------------------------------------------------------------------ thread control
     def start(self):
@@ -403,6 +426,10 @@ class Gx3Session:
                             continue
                     got = self._pump()
                     now = time.monotonic()
+                    if self.temperature_period > 0 and now >= self._next_temperature:
+                        # Polled between records: the reply is framed out of the stream.
+                        self.link.write(p.cmd_temperatures())
+                        self._next_temperature = now + self.temperature_period
                     if got:
                         last_data = now
                         self.backoff.reset()
@@ -502,17 +529,43 @@ class Gx3Session:
         # after it took on the wire (the parser keeps unfinished bytes buffered).
         later = self.parser.buffered + sum(map(len, packets))
         code = self.code
-        records, times = [], []
+        records, times, temperatures = [], [], []
         for packet in packets:
             later -= len(packet)
             if packet[0] == code:
                 records.append(packet)
                 times.append(host - later * byte_time)
+            elif packet[0] == p.TEMPERATURES:
+                temperatures.append(packet)
             else:
                 self._replies.append(packet)
         if records:
             self._deliver(b''.join(records), np.array(times))
+        for packet in temperatures:
+            self._temperature(packet, host)
         return len(records)
+
+    def _temperature(self, packet, host):
+        """Decode a 0xD1 reply, stamp its timer like the records and hand it over."""
+        reading = p.decode_temperature_reply(packet)
+        self.stats.temperatures += 1
+        self.last_temperature_c = reading.celsius
+        if self.on_temperature is None:
+            return
+        stamp = None
+        last = self.unwrapper.last
+        if last is not None:
+            # The reply's timer is within a record or two of the last record's: unwrap it
+            # against that one (a rollover between them is 2**32 ticks away either way).
+            ticks = reading.timer + self.unwrapper.offset
+            if ticks < last - p.TIMER_MODULUS // 2:
+                ticks += p.TIMER_MODULUS
+            elif ticks > last + p.TIMER_MODULUS // 2:
+                ticks -= p.TIMER_MODULUS
+            stamp = self.sync.stamp_at(p.ticks_to_seconds(ticks))
+        if stamp is None:
+            stamp = int(round(host * 1e9))
+        self.on_temperature(reading, stamp)
 
     def _deliver(self, block, host_times):
         """Decode, unwrap, count gaps, stamp and hand over the records in ``block`` (bytes)."""

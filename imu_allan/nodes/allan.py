@@ -42,7 +42,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, Temperature
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from .allan_plot import PlotPublisher
@@ -61,6 +61,7 @@ from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedA
 from ..core.model import NoiseModel
 from ..core.online import check_rate_options, OnlineAllan, StagedEstimate
 from ..core.streaming import parse_estimators
+from ..core.temperature import TemperatureRange
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 from ..formats.imu_adapter import cdr_to_arrays
@@ -227,6 +228,11 @@ class AllanNode(Node):
         self._pub_kinds = {}  # imu/allan_deviation/<kind> of the other estimators
         self._deviation_publishers()
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        # The temperature range the current estimate spans (the driver's imu/temperature).
+        self._temperature = TemperatureRange(self.params['window_s'])
+        self.create_subscription(Temperature, 'imu/temperature',
+                                 lambda msg: self._temperature.add_message(msg),
+                                 qos_profile_sensor_data)
         self._pub_cov = self.create_publisher(
             Imu, self.params['covariance_topic'], qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
@@ -262,6 +268,7 @@ class AllanNode(Node):
             if changed & _RESTART:
                 self.get_logger().info('estimator settings changed: estimate restarted')
                 self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
+                self._temperature = TemperatureRange(self.params['window_s'])
             else:
                 self.pipeline.terms = parse_terms(self.params['terms'])
         if 'estimators' in changed:
@@ -408,6 +415,7 @@ class AllanNode(Node):
             'model_file': self.model_file or '(none)',
             **self.last_cycle,
             **self._plot.stats(),
+            **self._temperature.key_values(),
         })
         if p.estimator is not None:  # per axis where values were rejected (NaN, inf, ...)
             stream.values.update({f'samples_used.{a}': int(n) for a, n, r in zip(
