@@ -26,6 +26,7 @@ import sys
 import numpy as np
 
 from .imu_adapter import imu_to_row
+from ..core.units import AXES
 from ..errors import InputError
 
 IMU_TYPE = 'sensor_msgs/msg/Imu'
@@ -125,6 +126,31 @@ def decode_rows(rows, ros1):
         data[sel, :3] = _take_f8(sub, start + 8 * _GYRO_OFF, 3)
         data[sel, 3:] = _take_f8(sub, start + 8 * _ACCEL_OFF, 3)
     return ok, t, data
+
+
+def cdr_to_arrays(blobs):
+    """
+    Convert serialized (CDR) Imu messages to ``(t, data)`` as :func:`.imu_adapter.imus_to_arrays`.
+
+    The live nodes take raw bytes from their subscription and decode them here in bulk with
+    the bag reader's fixed-layout decoder (:func:`decode_rows`), about
+    ten times cheaper than building a Python message per sample; anything the layout does not
+    cover (big-endian CDR, odd lengths) is deserialized one by one and goes through
+    :func:`.imu_adapter.imu_to_row`, so the numbers are the same either way.  (Here, not in
+    :mod:`.imu_adapter`: this module imports the adapter, the adapter imports nothing of it.)
+    """
+    n = len(blobs)
+    t = np.empty(n, dtype=np.float64)
+    data = np.empty((n, len(AXES)), dtype=np.float64)
+    lengths = np.fromiter((len(b) for b in blobs), dtype=np.int64, count=n)
+    for length in np.unique(lengths):
+        idx = np.flatnonzero(lengths == length)
+        rows = np.frombuffer(b''.join(blobs[i] for i in idx), dtype=np.uint8)
+        ok, t_rows, d_rows = decode_rows(rows.reshape(idx.size, int(length)), ros1=False)
+        t[idx[ok]], data[idx[ok]] = t_rows[ok], d_rows[ok]
+        for i in idx[~ok]:
+            t[i], data[i] = imu_to_row(deserialize(bytes(blobs[i])))
+    return t, data
 
 
 def set_covariance_diagonals(blobs, variances):

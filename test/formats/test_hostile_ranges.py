@@ -52,7 +52,7 @@ def _message_offsets(raw):
 
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory):
-    """A valid MCAP (bytes), its folder's samples as read, and its Message record offsets."""
+    """Return a valid MCAP (bytes), its samples as read, and its Message record offsets."""
     folder = write_imu_bag(tmp_path_factory.mktemp('ok') / 'bag', _samples(), storage='mcap')
     src = next(folder.glob('*.mcap'))
     raw = src.read_bytes()
