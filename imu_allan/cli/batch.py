@@ -91,7 +91,7 @@ def analyze_task(path, args, options, out_dir=None):
     Returns a dict: ``input``, ``ok`` and either ``report`` (the JSON report) and ``text`` (the
     console summary) or ``error`` (one line naming the input).
     """
-    from .analyze import run_one
+    from .one_input import run_one
     try:
         report, text = run_one(path, args, options, out_dir=out_dir)
     except InputError as exc:

@@ -362,6 +362,7 @@ class Gx3Session:
         # batches with a rollover or reset take (a reference for tests).
         self.vectorized = True
         self._replies = deque()
+        self._last_read = 0.0  # host time of the last read with data (s)
         self.thread = None
         self.temperature_period = float(temperature_period or 0.0)
         self.on_temperature = on_temperature
@@ -480,7 +481,7 @@ class Gx3Session:
         self.stats.opens += 1
         if self.stats.opens > 1:
             self.stats.reconnects += 1
-        self.parser.reset()
+        self._flush_parser()
         self._new_epoch()
         self.log('info', f'{self.link.port}: opened at {self.link.baud} baud')
         return True
@@ -490,7 +491,22 @@ class Gx3Session:
         self.last_error = reason
         self.log('error', f'{reason}; reopening with back-off')
         self.link.close()
+        self._flush_parser()
         self._new_epoch()
+
+    def _flush_parser(self):
+        """
+        End the byte stream of a port that closed: deliver what the parser still holds.
+
+        As :func:`~imu_allan.device.gx3_stream.parse_bytes` ends a capture: a header-like byte
+        near the end announces a packet past the last byte and holds back up to a packet's
+        length (79 bytes) behind it; :meth:`StreamParser.flush` frames the good records there
+        (delivered, stamped by the last read) and counts the rest in ``rejected_bytes``,
+        instead of forgetting them uncounted.
+        """
+        packets = self.parser.flush()
+        if packets:
+            self._take(packets, self._last_read)
         self._wait(self.backoff.next())
 
     def _new_epoch(self):
@@ -518,10 +534,13 @@ class Gx3Session:
         data = self.link.read()
         if not data:
             return 0
-        host = self.clock()
+        host = self._last_read = self.clock()
         if self.raw is not None:
             self.raw.write(data)
-        packets = self.parser.feed(data)
+        return self._take(self.parser.feed(data), host)
+
+    def _take(self, packets, host):
+        """Deliver the data records of ``packets`` (read at ``host`` s); keep replies."""
         if not packets:
             return 0
         byte_time = p.BITS_PER_BYTE / self.link.baud

@@ -64,8 +64,7 @@ from ..core.streaming import parse_estimators
 from ..core.temperature import TemperatureRange
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
-from ..formats.imu_adapter import cdr_to_arrays
-from ..formats.imu_cdr import set_covariance_diagonals
+from ..formats.imu_cdr import cdr_to_arrays, set_covariance_diagonals
 from ..report.coeffs_layout import (
     COEFF_LABELS,
     coefficient_table,
