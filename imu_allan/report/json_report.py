@@ -11,6 +11,7 @@ import numpy as np
 
 from .kalibr import kalibr_values
 from ..core.units import sample_unit
+from ..core.warmup import warmup_sentence
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
              'intervals with Greenhall-Riley EDF; joint GLS non-negative fit')
@@ -53,6 +54,7 @@ def analysis_to_json(analysis, samples=None):
             'static': bool(analysis.static),
             'motion': analysis.motion,
             'tau_max_s': float(res.tau[-1]),
+            'warmup_s': float(getattr(analysis, 'warmup_s', 0.0)),
             'warnings': list(analysis.warnings),
         },
         'timing': {'gaps': timing.n_gaps, 'missing_samples': timing.missing_samples,
@@ -102,6 +104,8 @@ def console_summary(analysis):
                     for k, v in kalibr.items() if k not in ('update_rate', 'upper_limits'))
     lines.append(f'Kalibr (continuous-time, worst axis): {kal}')
     lines.append('verdict: ' + ('static' if analysis.static else 'NOT static (moving)'))
+    if getattr(analysis, 'warmup_s', 0.0):
+        lines.append(warmup_sentence(analysis.warmup_s))
     if analysis.outliers.total:
         lines.append(f'outliers beyond Tukey fences (F=3): {analysis.outliers.total}')
     for warning in analysis.warnings:
