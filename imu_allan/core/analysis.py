@@ -43,6 +43,8 @@ class AnalysisOptions:
     rate_hz: float = None
     allow_jumps: bool = False
     online: bool = False
+    #: export coefficients of a record the motion verdict calls moving (Kalibr, exporters)
+    allow_motion: bool = False
 
 
 @dataclass
@@ -65,6 +67,7 @@ class Analysis:
     t: np.ndarray = None
     upper_limits: dict = field(default_factory=dict)
     integrity: str = ''
+    allow_motion: bool = False
 
 
 _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
@@ -214,7 +217,8 @@ def analyze_samples(samples, options=None):
                     duration_s=n / rate, timing=timing, outliers=outliers, result=result,
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
                     t=samples.t, upper_limits=upper,
-                    integrity=getattr(samples, 'integrity', ''))
+                    integrity=getattr(samples, 'integrity', ''),
+                    allow_motion=options.allow_motion)
 
 
 def _kalibr_upper_limits(fit):

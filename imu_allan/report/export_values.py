@@ -9,7 +9,10 @@ One place for the rules the Kalibr file introduced and every exporter shares:
 * ``inflate = (white, walk)`` multiplies the standard deviations: ``white`` the white noise N,
   ``walk`` the bias terms (random walk K, bias instability B);
 * a single-valued key takes the worst (largest) axis of its sensor; which axis, and whether it
-  was an upper limit, is recorded per key for the file header.
+  was an upper limit, is recorded per key for the file header;
+* an analysis whose motion verdict says the IMU moved gives no values (its curve measures the
+  motion, not the sensor noise) unless it was run with ``allow_motion``
+  (``analyze --allow-motion``).
 """
 
 import math
@@ -31,6 +34,12 @@ def check_inflate(inflate):
         if not (math.isfinite(factor) and 0.0 < factor <= MAX_INFLATE):
             raise ValueError(f'inflation factor {factor:g} must be > 0 and <= {MAX_INFLATE:g}')
     return white, walk
+
+
+def motion_withheld(analysis):
+    """True when ``analysis`` moved (motion verdict) and was not run with ``allow_motion``."""
+    return (analysis is not None and not getattr(analysis, 'static', True)
+            and not getattr(analysis, 'allow_motion', False))
 
 
 class ExportValues:
@@ -56,6 +65,8 @@ class ExportValues:
         self.topic = topic
         #: key -> {'axes': [axis, ...], 'upper': [axis, ...]} for the header
         self.used = {}
+        #: the record moved and motion was not allowed: nothing is exported
+        self.motion_withheld = motion_withheld(analysis)
 
     def axes(self, sensor):
         """Fitted axes of ``'gyro'`` or ``'accel'``, in the package's order."""
@@ -64,6 +75,8 @@ class ExportValues:
     def value(self, axis, term, param='value'):
         """``(value, is_upper_limit)`` of one term on one axis, inflated; NaN if unknown."""
         factor = self.inflate[INFLATED_BY[term]] if term in INFLATED_BY else 1.0
+        if self.motion_withheld:
+            return math.nan, False
         value = self.fit.value(axis, term, param) if axis in self.fit.axes else math.nan
         if math.isfinite(value):
             return value * factor, False
