@@ -43,8 +43,15 @@ from .bounded_min import bounded_minimum
 from .edf import edf_oadev
 
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
-from .fit import (deterministic_index, fit_terms, Problem, ramp_drift_variance,
-                  SELECTION_PENALTY, shape_columns, UPPER_LIMIT_DELTA_CHI2)
+from .fit import (
+    deterministic_index,
+    fit_terms,
+    Problem,
+    ramp_drift_variance,
+    SELECTION_PENALTY,
+    shape_columns,
+    UPPER_LIMIT_DELTA_CHI2,
+)
 from .units import IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 

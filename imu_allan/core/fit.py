@@ -381,7 +381,7 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LI
 
 
 def _normal_quantile(p):
-    """Standard normal quantile Phi^-1(p)."""
+    """Return the standard normal quantile Phi^-1(p)."""
     from scipy.special import ndtri
     return float(ndtri(p))
 

@@ -37,7 +37,7 @@ def check_inflate(inflate):
 
 
 def motion_withheld(analysis):
-    """True when ``analysis`` moved (motion verdict) and was not run with ``allow_motion``."""
+    """Return whether ``analysis`` moved (motion verdict) without ``allow_motion``."""
     return (analysis is not None and not getattr(analysis, 'static', True)
             and not getattr(analysis, 'allow_motion', False))
 

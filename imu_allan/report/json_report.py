@@ -108,7 +108,7 @@ def console_summary(analysis):
     kal = ', '.join(f'{k} {_fmt(v)}' + (' (upper limit)' if k in kalibr['upper_limits'] else '')
                     for k, v in kalibr.items() if k not in ('update_rate', 'upper_limits'))
     if moved:
-        kal = 'not given: the IMU moved (analyze --allow-motion gives the motion\'s numbers)'
+        kal = 'not given: the IMU moved (analyze --allow-motion gives the numbers anyway)'
     lines.append(f'Kalibr (continuous-time, worst axis): {kal}')
     lines.append('verdict: ' + ('static' if analysis.static else 'NOT static (moving)'))
     if analysis.outliers.total:

@@ -43,10 +43,11 @@ def test_selection_and_alternatives(outcome):
 
 def test_interval_coverage(outcome):
     """
-    The 68.3 % intervals hold the truth 68.3 +- 6 points pooled over the terms; per term within
-    3 binomial standard errors of 68.3 % (24-100 cases per term here, so 3 SE is 14-29 points:
-    this catches a 2x error in width, the full table checks the +-6 points); the 95 % intervals
-    >= 91 % pooled and per term >= 95 % - 3 SE.
+    68.3 % intervals hold the truth 68.3 +- 6 points pooled; 95 % ones >= 91 % pooled.
+
+    Per term the 68.3 % coverage must lie within 3 binomial standard errors of 68.3 % (24-100
+    cases per term here, so 3 SE is 14-29 points: this catches a 2x error in width, the full
+    table checks the +-6 points) and the 95 % coverage >= 95 % - 3 SE.
     """
     n_all = sum(n for n, _, _ in outcome['cover'].values())
     pooled68 = sum(n * c for n, c, _ in outcome['cover'].values()) / n_all
