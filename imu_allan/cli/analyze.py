@@ -61,6 +61,8 @@ def build_parser():
                    help='replace Tukey F=3 outliers by the axis mean (as the thesis did)')
     p.add_argument('--allow-jumps', action='store_true',
                    help='accept time-stamp jumps (treat the record as contiguous)')
+    p.add_argument('--allow-motion', action='store_true',
+                   help='export the coefficients (Kalibr, --export) even when the IMU moved')
     p.add_argument('--online', action='store_true',
                    help='use the bounded-memory online estimator of the allan node')
     p.add_argument('--scheduler', metavar='tcp://HOST:PORT',
@@ -102,7 +104,7 @@ def _options(args):
     return AnalysisOptions(terms=terms, points_per_decade=args.points_per_decade,
                            min_clusters=args.min_clusters, replace_outliers=args.replace_outliers,
                            tau_max=args.tau_max, rate_hz=args.rate, allow_jumps=args.allow_jumps,
-                           online=args.online)
+                           online=args.online, allow_motion=args.allow_motion)
 
 
 @guarded

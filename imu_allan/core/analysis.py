@@ -44,6 +44,8 @@ class AnalysisOptions:
     rate_hz: float = None
     allow_jumps: bool = False
     online: bool = False
+    #: export coefficients of a record the motion verdict calls moving (Kalibr, exporters)
+    allow_motion: bool = False
 
 
 @dataclass
@@ -67,6 +69,7 @@ class Analysis:
     upper_limits: dict = field(default_factory=dict)
     integrity: str = ''
     warmup_s: float = 0.0  # start left out: the bias was settling (core/warmup.py)
+    allow_motion: bool = False
 
 
 _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
@@ -221,7 +224,8 @@ def analyze_samples(samples, options=None):
                     duration_s=n / rate, timing=timing, outliers=outliers, result=result,
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
                     t=samples.t, upper_limits=upper,
-                    integrity=getattr(samples, 'integrity', ''), warmup_s=warmup_s)
+                    integrity=getattr(samples, 'integrity', ''), warmup_s=warmup_s,
+                    allow_motion=options.allow_motion)
 
 
 def _kalibr_upper_limits(fit):

@@ -15,6 +15,9 @@ One place for the rules the Kalibr file introduced and every exporter shares:
   instead (AVAR at or above the measured upper 95 % bound from tau0 to the horizon), the
   inflation multiplying on top; per key the factor against the raw value (fit or upper limit)
   and the averaging times where the bound is tight are recorded for the header and the report.
+* an analysis whose motion verdict says the IMU moved gives no values (its curve measures the
+  motion, not the sensor noise) unless it was run with ``allow_motion``
+  (``analyze --allow-motion``).
 """
 
 import math
@@ -37,6 +40,12 @@ def check_inflate(inflate):
         if not (math.isfinite(factor) and 0.0 < factor <= MAX_INFLATE):
             raise ValueError(f'inflation factor {factor:g} must be > 0 and <= {MAX_INFLATE:g}')
     return white, walk
+
+
+def motion_withheld(analysis):
+    """Return whether ``analysis`` moved (motion verdict) without ``allow_motion``."""
+    return (analysis is not None and not getattr(analysis, 'static', True)
+            and not getattr(analysis, 'allow_motion', False))
 
 
 class ExportValues:
@@ -74,6 +83,8 @@ class ExportValues:
         self.overbound_used = {}
         self._overbound_fits = {}
         self._last_overbound = {}
+        #: the record moved and motion was not allowed: nothing is exported
+        self.motion_withheld = motion_withheld(analysis)
         if self.overbound is not None and getattr(self.fit, 'result', None) is None:
             raise ValueError('overbound needs the measured Allan deviation (a FittedModel from '
                              'fit_noise_model, or an Analysis)')
@@ -113,6 +124,8 @@ class ExportValues:
     def value(self, axis, term, param='value'):
         """``(value, is_upper_limit)`` of one term on one axis, inflated; NaN if unknown."""
         factor = self.inflate[INFLATED_BY[term]] if term in INFLATED_BY else 1.0
+        if self.motion_withheld:
+            return math.nan, False
         raw, upper = self.raw_value(axis, term, param)
         if (self.overbound is None or term not in self.model or param != 'value'
                 or axis not in self.fit.axes):
