@@ -43,6 +43,9 @@ class AnalysisOptions:
     rate_hz: float = None
     allow_jumps: bool = False
     online: bool = False
+    #: Deviation kinds to compute (:data:`imu_allan.core.deviations.KINDS`); ``oadev`` is the
+    #: estimate the fit uses, the others go into :attr:`Analysis.deviations`.
+    estimators: tuple = ('oadev',)
 
 
 @dataclass
@@ -65,6 +68,8 @@ class Analysis:
     t: np.ndarray = None
     upper_limits: dict = field(default_factory=dict)
     integrity: str = ''
+    #: Extra deviations asked for (``AnalysisOptions.estimators``): kind -> DeviationResult.
+    deviations: dict = field(default_factory=dict)
 
 
 _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
@@ -205,6 +210,9 @@ def analyze_samples(samples, options=None):
     except FitError as exc:
         raise InputError(where, str(exc)) from None
     upper = _kalibr_upper_limits(fit)
+    from .deviations import extra_deviations
+    deviations = extra_deviations(data, rate, options.estimators, samples.axes,
+                                  options.points_per_decade, options.min_clusters)
     outliers, static, motion = pending.result()
     if not static:
         moving = [a for a, d in motion.items() if d['moving']]
@@ -214,7 +222,7 @@ def analyze_samples(samples, options=None):
                     duration_s=n / rate, timing=timing, outliers=outliers, result=result,
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
                     t=samples.t, upper_limits=upper,
-                    integrity=getattr(samples, 'integrity', ''))
+                    integrity=getattr(samples, 'integrity', ''), deviations=deviations)
 
 
 def _kalibr_upper_limits(fit):

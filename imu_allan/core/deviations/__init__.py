@@ -9,6 +9,6 @@ The family of frequency-stability deviations (Stable32's): one module per family
   :mod:`.greenhall`: Greenhall & Riley EDF; :mod:`.api`: :func:`deviation`.
 """
 
-from .api import deviation, DeviationResult, KINDS
+from .api import deviation, DeviationResult, extra_deviations, KINDS, parse_kinds
 
-__all__ = ['DeviationResult', 'deviation', 'KINDS']
+__all__ = ['DeviationResult', 'deviation', 'extra_deviations', 'KINDS', 'parse_kinds']

@@ -75,28 +75,45 @@ class DeviationResult:
         return self.axes.index(axis)
 
 
-def raw_variance(kind, x, ms, data=None):
+def raw_variance(kind, x, ms, data=None, fast=True):
     """
     Uncorrected variance (T, A) of ``kind`` from the phase ``x`` (A, N) in sample units.
 
     tdev gives MVAR (scaled afterwards); ``data`` (n, A), when given, lets oadev use the
-    package's compiled Allan kernel (:func:`imu_allan.core.allan.avar_function`).
+    package's compiled Allan kernel (:func:`imu_allan.core.allan.avar_function`); hdev,
+    ohdev, mdev, tdev and totdev run compiled (:mod:`.kernels`) from the same amount of work
+    as the Allan kernel (:data:`imu_allan.core.allan.SMALL_WORK`), numpy below it.  mtotdev,
+    htotdev and theo1 run compiled (:mod:`.total_kernel`; on long records with thinned window
+    starts, exact whenever the work fits its budget); ``fast=False``: their numpy oracles.
     """
-    if kind in ('adev', 'hdev', 'ohdev'):
-        return allan_family.variance_reference(kind, x, ms)
     if kind == 'oadev':
-        if data is not None:
+        if data is not None and fast:
             return _allan.avar_function(data.size * len(ms))(data, ms)
+        return allan_family.variance_reference(kind, x, ms)
+    if kind in ('hdev', 'ohdev', 'mdev', 'tdev', 'totdev') and fast \
+            and x.size * len(ms) >= _allan.SMALL_WORK:
+        try:
+            from . import kernels
+        except ImportError:  # no numba: the numpy versions below
+            pass
+        else:
+            return kernels.variance(kind, x, ms)
+    if kind in ('adev', 'hdev', 'ohdev'):
         return allan_family.variance_reference(kind, x, ms)
     if kind in ('mdev', 'tdev'):
         return modified.variance_fast(x, ms)
     if kind == 'totdev':
         return total.totvar(x, ms)
-    if kind == 'mtotdev':
-        return total.mtotvar(x, ms)
-    if kind == 'htotdev':
-        return total.htotvar(x, ms)
-    return theo.theo1_fast(x, ms)
+    if kind in ('mtotdev', 'htotdev', 'theo1'):
+        if not fast:
+            return {'mtotdev': total.mtotvar, 'htotdev': total.htotvar,
+                    'theo1': theo.theo1_fast}[kind](x, ms)
+        try:
+            from . import total_kernel
+        except ImportError:  # no numba: the numpy versions (exact, slower)
+            return raw_variance(kind, x, ms, data, fast=False)
+        return total_kernel.variance(kind, x, ms)
+    raise ValueError(f'unknown deviation kind {kind!r}')
 
 
 def n_terms(kind, n_phase, m):
@@ -229,3 +246,34 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     counts = np.array([n_terms(kind, n + 1, int(m)) for m in ms], dtype=np.int64)
     return DeviationResult(kind, tau, ms, dev, low, high, dof, alpha, counts, axes,
                            float(rate_hz), n)
+
+
+def parse_kinds(text, where='--estimators'):
+    """Kinds named in a comma-separated ``text``, in order; InputError naming an unknown one."""
+    from ...errors import InputError
+    kinds = [k.strip().lower() for k in str(text).split(',') if k.strip()]
+    for kind in kinds:
+        if kind not in KINDS:
+            raise InputError(where, f'unknown estimator {kind!r} (known: {", ".join(KINDS)})')
+    if not kinds:
+        raise InputError(where, 'names no estimator')
+    return tuple(dict.fromkeys(kinds))
+
+
+def extra_deviations(data, rate_hz, kinds, axes, points_per_decade, min_clusters):
+    """
+    Compute the deviations of ``kinds`` but oadev (the analysis' own): kind -> result.
+
+    A kind the record is too short for is left out (the Allan estimate decides whether the
+    record is usable at all).
+    """
+    out = {}
+    for kind in kinds:
+        if kind == 'oadev':
+            continue
+        try:
+            out[kind] = deviation(data, rate_hz, kind, points_per_decade=points_per_decade,
+                                  min_clusters=min_clusters, axes=axes)
+        except ValueError:
+            continue
+    return out
