@@ -78,6 +78,10 @@ def build_parser():
     p.add_argument('--imu-id', metavar='ID',
                    help='with --db: the imu_id of every input (default: the topic namespace '
                         'and the Imu frame_id)')
+    p.add_argument('--estimators', default='oadev', metavar='KIND,...',
+                   help='deviations to compute, comma-separated (default: oadev; also adev, '
+                        'mdev, tdev, hdev, ohdev, totdev, mtotdev, htotdev, theo1): the '
+                        'others go into report.json and onto the plots')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     add_export_arguments(p)
     p.add_argument('--target', metavar='TERM=REL,...', default='',
@@ -101,10 +105,12 @@ def _options(args):
             raise InputError('--terms', f'unknown term {term!r} (known: {", ".join(ALL_TERMS)})')
     from ..core.advisor import parse_targets
     args.targets = parse_targets(args.target, '--target')
+    from ..core.deviations import parse_kinds
     return AnalysisOptions(terms=terms, points_per_decade=args.points_per_decade,
                            min_clusters=args.min_clusters, replace_outliers=args.replace_outliers,
                            tau_max=args.tau_max, rate_hz=args.rate, allow_jumps=args.allow_jumps,
-                           online=args.online, allow_motion=args.allow_motion)
+                           online=args.online, allow_motion=args.allow_motion,
+                           estimators=parse_kinds(args.estimators, '--estimators'))
 
 
 @guarded

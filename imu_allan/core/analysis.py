@@ -46,6 +46,9 @@ class AnalysisOptions:
     online: bool = False
     #: export coefficients of a record the motion verdict calls moving (Kalibr, exporters)
     allow_motion: bool = False
+    #: Deviation kinds to compute (:data:`imu_allan.core.deviations.KINDS`); ``oadev`` is the
+    #: estimate the fit uses, the others go into :attr:`Analysis.deviations`.
+    estimators: tuple = ('oadev',)
 
 
 @dataclass
@@ -70,6 +73,8 @@ class Analysis:
     integrity: str = ''
     warmup_s: float = 0.0  # start left out: the bias was settling (core/warmup.py)
     allow_motion: bool = False
+    #: Extra deviations asked for (``AnalysisOptions.estimators``): kind -> DeviationResult.
+    deviations: dict = field(default_factory=dict)
 
 
 _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
@@ -215,6 +220,9 @@ def analyze_samples(samples, options=None):
     except FitError as exc:
         raise InputError(where, str(exc)) from None
     upper = _kalibr_upper_limits(fit)
+    from .deviations import extra_deviations
+    deviations = extra_deviations(data, rate, options.estimators, samples.axes,
+                                  options.points_per_decade, options.min_clusters)
     outliers, static, motion = pending.result()
     if not static:
         moving = [a for a, d in motion.items() if d['moving']]
@@ -225,7 +233,7 @@ def analyze_samples(samples, options=None):
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
                     t=samples.t, upper_limits=upper,
                     integrity=getattr(samples, 'integrity', ''), warmup_s=warmup_s,
-                    allow_motion=options.allow_motion)
+                    allow_motion=options.allow_motion, deviations=deviations)
 
 
 def _kalibr_upper_limits(fit):

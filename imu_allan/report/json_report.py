@@ -42,6 +42,13 @@ def analysis_to_json(analysis, samples=None):
             'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis]),
                     'alternatives': analysis.fit.alternatives(axis)},
         }
+        if getattr(analysis, 'deviations', None):
+            axes[axis]['deviations'] = {
+                kind: {'tau': _floats(d.tau), 'dev': _floats(d.dev[:, d.axis_index(axis)]),
+                       'ci_low': _floats(d.ci_low[:, d.axis_index(axis)]),
+                       'ci_high': _floats(d.ci_high[:, d.axis_index(axis)]),
+                       'edf': _floats(d.edf[:, d.axis_index(axis)])}
+                for kind, d in analysis.deviations.items()}
     timing = analysis.timing
     kalibr, _ = kalibr_values(analysis)
     report = {

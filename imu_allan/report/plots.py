@@ -86,6 +86,22 @@ def draw_adev(ax, result, fitted, axes, denoised=None):
     ax.legend(fontsize=7, ncol=2, loc='best')
 
 
+#: Line style of each extra deviation kind drawn beside the overlapping ADEV.
+_KIND_STYLE = {'adev': '1', 'mdev': 'v', 'tdev': '4', 'hdev': '2', 'ohdev': 's',
+               'totdev': '^', 'mtotdev': '<', 'htotdev': '>', 'theo1': 'D'}
+
+
+def draw_deviations(ax, deviations, axes):
+    """Draw the extra deviations (kind -> DeviationResult) as small open markers per axis."""
+    for kind, dev in (deviations or {}).items():
+        if kind == 'tdev':  # a time deviation (unit x s): another quantity, another plot
+            continue
+        for axis in axes:
+            j = dev.axis_index(axis)
+            ax.plot(dev.tau, dev.dev[:, j], _KIND_STYLE.get(kind, '.'), ms=3.5, mfc='none',
+                    mew=0.7, color=_COLORS[axis[-1]], alpha=0.8, label=f'{axis} {kind}')
+
+
 def plot_adev(path, analysis, sensor, denoised=None):
     """
     Allan deviation plot of one sensor ('gyro' or 'accel') saved as PNG at ``path``.
@@ -99,6 +115,7 @@ def plot_adev(path, analysis, sensor, denoised=None):
     ax = fig.subplots()
     draw_adev(ax, analysis.result, analysis.fit, axes,
               None if denoised is None else denoised.result)
+    draw_deviations(ax, getattr(analysis, 'deviations', None), axes)
     name = 'gyroscope' if sensor == 'gyro' else 'accelerometer'
     ax.set_title(f'{name}: overlapping Allan deviation, 68.3 % bands, fitted terms\n'
                  f'{analysis.source} ({analysis.duration_s / 3600:.2f} h at '

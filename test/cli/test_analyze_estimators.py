@@ -1,0 +1,54 @@
+"""``analyze --estimators``: extra deviations in report.json and on the plots; bad kinds."""
+
+import json
+
+from conftest import run_command
+from imu_allan import deviation, simulate, thesis_gx3_25_model
+from imu_allan.formats.csv_samples import write_csv
+from imu_allan.formats.samples import Samples
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope='module')
+def short_csv(tmp_path_factory):
+    n = 100 * 300  # 5 min at 100 Hz
+    data = simulate(thesis_gx3_25_model(), n, 100.0, seed=5)
+    data[:, 5] += 9.80665
+    path = tmp_path_factory.mktemp('csv') / 'still.csv'
+    write_csv(path, Samples(t=np.arange(n) / 100.0, data=data))
+    return path, data
+
+
+def test_estimators_in_report_and_plots(short_csv, tmp_path):
+    path, data = short_csv
+    out = tmp_path / 'out'
+    proc = run_command('analyze', path, '--estimators', 'oadev,mdev,ohdev,totdev,theo1',
+                       '--out', out, '--quiet')
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((out / 'report.json').read_text())
+    for entry in report['axes'].values():
+        assert set(entry['deviations']) == {'mdev', 'ohdev', 'totdev', 'theo1'}
+        for curve in entry['deviations'].values():
+            assert set(curve) == {'tau', 'dev', 'ci_low', 'ci_high', 'edf'}
+            assert len(curve['tau']) == len(curve['dev']) == len(curve['edf']) > 3
+            assert all(lo < d < hi for lo, d, hi in zip(curve['ci_low'], curve['dev'],
+                                                        curve['ci_high']))
+    # The numbers are the API's on the same samples (the CSV keeps 9 significant digits).
+    mdev = deviation(data[:, :1], 100.0, 'mdev')
+    np.testing.assert_allclose(report['axes']['gyro_x']['deviations']['mdev']['dev'],
+                               mdev.dev[:, 0], rtol=1e-5)
+    assert any(out.glob('*.png'))
+
+
+def test_default_has_no_extra_curves(short_csv):
+    proc = run_command('analyze', short_csv[0], '--json')
+    assert proc.returncode == 0, proc.stderr
+    assert all('deviations' not in e for e in json.loads(proc.stdout)['axes'].values())
+
+
+def test_unknown_estimator_is_one_line_exit_2(short_csv):
+    proc = run_command('analyze', short_csv[0], '--estimators', 'oadev,foodev', '--json')
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and 'foodev' in lines[0] and '--estimators' in lines[0]
