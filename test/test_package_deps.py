@@ -27,8 +27,9 @@ MODULE_KEYS = {
     'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'numba': 'python3-numba',
     'serial': 'python3-serial', 'pywt': 'python3-pywt', 'yaml': 'python3-yaml',
     'matplotlib': 'python3-matplotlib', 'rosbags': 'python3-rosbags-pip',
+    'jinja2': 'python3-jinja2', 'markupsafe': 'python3-jinja2',
     'lz4': 'python3-rosbags-pip', 'backports': 'python3-rosbags-pip',
-    'setuptools': 'python3-setuptools',
+    'setuptools': 'python3-setuptools', 'gtsam': 'python3-gtsam-pip',
 }
 
 
@@ -148,3 +149,12 @@ def test_rosdep_yaml_has_a_pip_fallback(rosdep):
                                   ('osx:14:sonoma', '#pip\nPyWavelets')):
         out = rosdep('resolve', 'python3-pywt', os_override=os_override)
         assert out.returncode == 0 and out.stdout.strip() == expected, (os_override, out)
+
+
+def test_gtsam_test_dependency_resolves_to_pip(rosdep):
+    """GTSAM's Python module (a test_depend) comes from pip on every platform."""
+    pkg = parse_package(str(REPO / 'package.xml'))
+    assert 'python3-gtsam-pip' in {d.name for d in pkg.test_depends}
+    for os_override in ('ubuntu:24.04:noble', 'debian:12:bookworm', 'osx:14:sonoma'):
+        out = rosdep('resolve', 'python3-gtsam-pip', os_override=os_override)
+        assert out.returncode == 0 and out.stdout.strip() == '#pip\ngtsam', (os_override, out)

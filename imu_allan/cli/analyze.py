@@ -8,7 +8,6 @@ one table, optionally recorded in a DuckDB history (:mod:`imu_allan.cli.batch`).
 """
 
 import json
-from pathlib import Path
 import sys
 
 from .common import (
@@ -19,6 +18,7 @@ from .common import (
     emit,
     guarded,
 )
+from .one_input import run_one
 from .progress import Progress
 from ..core.units import ALL_TERMS, IEEE_TERMS
 from ..errors import InputError
@@ -61,6 +61,8 @@ def build_parser():
                    help='replace Tukey F=3 outliers by the axis mean (as the thesis did)')
     p.add_argument('--allow-jumps', action='store_true',
                    help='accept time-stamp jumps (treat the record as contiguous)')
+    p.add_argument('--allow-motion', action='store_true',
+                   help='export the coefficients (Kalibr, --export) even when the IMU moved')
     p.add_argument('--online', action='store_true',
                    help='use the bounded-memory online estimator of the allan node')
     p.add_argument('--scheduler', metavar='tcp://HOST:PORT',
@@ -91,6 +93,8 @@ def _options(args):
         terms = [t.strip() for t in args.terms.split(',') if t.strip()]
     if args.export and not args.out:
         raise InputError('--export', 'needs --out DIR (the files go into DIR/export/)')
+    from ..report.exporters import check_overbound_args
+    check_overbound_args(args)
     from ..core.analysis import AnalysisOptions
     for term in terms or []:
         if term not in ALL_TERMS:
@@ -100,78 +104,7 @@ def _options(args):
     return AnalysisOptions(terms=terms, points_per_decade=args.points_per_decade,
                            min_clusters=args.min_clusters, replace_outliers=args.replace_outliers,
                            tau_max=args.tau_max, rate_hz=args.rate, allow_jumps=args.allow_jumps,
-                           online=args.online)
-
-
-def _denoised_analysis(samples, analysis, options):
-    from ..core.analysis import analyze_samples
-    from ..core.denoise import denoise
-    from ..formats.samples import Samples
-    clean = denoise(analysis.data, analysis.rate_hz)
-    den = Samples(t=samples.t, data=clean, axes=samples.axes,
-                  source=samples.source + ' (denoised)')
-    return den, analyze_samples(den, options)
-
-
-def _write_denoised_bag(path, fmt, samples, denoised_samples, folder):
-    """rosbag2 (MCAP) ``folder/denoised_bag`` with imu/data_denoised beside the original topics."""
-    from ..formats.bag_writer import copy_bag_with_topic, write_imu_bag
-    dst = Path(folder) / 'denoised_bag'
-    if fmt in ('rosbag2', 'ros1'):
-        copy_bag_with_topic(path, dst, 'imu/data_denoised', denoised_samples)
-    else:
-        write_imu_bag(dst, samples, topic='imu/data_raw', storage='mcap',
-                      extra_topics={'imu/data_denoised': denoised_samples})
-    return dst
-
-
-def run_one(path, args, options, progress=None, out_dir=None):
-    """
-    Analyse one input; return ``(report dict, console text)``; raise InputError.
-
-    ``out_dir`` is where ``--out`` files go (default ``args.out``).
-    """
-    from ..core.analysis import analyze_samples
-    from ..formats.readers import read_samples
-    from ..report.json_report import analysis_to_json, console_summary
-    step = progress.step if progress else (lambda _name: None)
-    step('reading')
-    fmt = args.format
-    samples = read_samples(path, fmt=fmt, topic=args.topic)
-    if args.export_samples:
-        from ..formats.csv_samples import write_csv
-        write_csv(args.export_samples, samples)
-    step('Allan deviation and fit')
-    analysis = analyze_samples(samples, options)
-    denoised = None
-    report = analysis_to_json(analysis, samples)
-    from ..report.advice import advice_sentence, advice_to_json, compute_advice
-    advice = compute_advice(analysis, options, args.targets)
-    report['advice'] = advice_to_json(advice)
-    if args.denoise:
-        step('denoising')
-        den_samples, denoised = _denoised_analysis(samples, analysis, options)
-        report['denoised'] = {
-            a: {'terms': denoised.fit.term_report(a),
-                'adev': {'tau': denoised.result.tau.tolist(),
-                         'adev': denoised.result.adev[:, j].tolist()}}
-            for j, a in enumerate(denoised.axes)}
-    if args.out:
-        step('writing report')
-        from ..report.outputs import write_out_dir
-        out_dir = Path(out_dir or args.out)
-        extra = None
-        if args.denoise:
-            from ..formats.readers import detect_format
-            real_fmt = detect_format(path) if fmt == 'auto' else fmt
-            report['denoised_bag'] = str(out_dir / 'denoised_bag')
-
-            def write_bag(staging):
-                _write_denoised_bag(path, real_fmt, samples, den_samples, staging)
-            extra = write_bag
-        report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
-                                            extra=extra, exports=(args.export, args.inflate))
-    return report, console_summary(analysis) + '\n' + advice_sentence(advice)
+                           online=args.online, allow_motion=args.allow_motion)
 
 
 @guarded

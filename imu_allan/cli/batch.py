@@ -91,7 +91,7 @@ def analyze_task(path, args, options, out_dir=None):
     Returns a dict: ``input``, ``ok`` and either ``report`` (the JSON report) and ``text`` (the
     console summary) or ``error`` (one line naming the input).
     """
-    from .analyze import run_one
+    from .one_input import run_one
     try:
         report, text = run_one(path, args, options, out_dir=out_dir)
     except InputError as exc:
@@ -297,6 +297,13 @@ def run_batch(args, options):
         progress.close()
     results = [outcomes[p] for p in work]
     failed = [o for o in results if not o['ok']]
+    if args.out and results:  # one page per input is in its sub-folder; the index links them
+        from ..report.html import write_batch_index
+        try:
+            write_batch_index(args.out, results, out_dirs)
+        except OSError as exc:
+            raise InputError(args.out, f'cannot write index.html ({exc.strerror or exc})') \
+                from None
     for o in failed:
         sys.stderr.write(f'analyze: {o["error"]}\n')
     if args.json:

@@ -8,8 +8,9 @@ Usage::
 
 Reads the recording through :func:`imu_allan.formats.readers.read_samples`, runs the workflow of
 :mod:`imu_allan.core.discrepancy` and prints a summary (or the JSON report with ``--json``).
-``--out DIR`` writes ``report.json``, ``final_model.yaml`` and PNG plots (and ``corrected.sdf``
-for a Gazebo / PX4 SDF model, :mod:`imu_allan.formats.gazebo_sdf`).  Bad input: one line
+``--out DIR`` writes ``report.json``, ``final_model.yaml``, PNG plots (and ``corrected.sdf``
+for a Gazebo / PX4 SDF model, :mod:`imu_allan.formats.gazebo_sdf`) and the page
+``report.html``.  Bad input: one line
 on stderr naming the file and the problem, exit status 2.
 """
 
@@ -42,7 +43,8 @@ def build_parser():
     parser.add_argument('--json', action='store_true',
                         help='print the JSON report on stdout and nothing else')
     parser.add_argument('--out', metavar='DIR',
-                        help='write report.json, final_model.yaml and PNG plots to DIR')
+                        help='write report.json, final_model.yaml, PNG plots and '
+                             'report.html to DIR')
     parser.add_argument('--topic', help='IMU topic in a bag (default: the only Imu topic)')
     parser.add_argument('--format', default='auto', choices=FORMATS,
                         help='input format (default: auto)')
@@ -120,6 +122,8 @@ def main(argv=None):
                 with open(os.path.join(args.out, gazebo_sdf.CORRECTED_FILE), 'w',
                           encoding='utf-8') as f:
                     f.write(sim.corrected(result, source))
+            from ..report.html import write_discrepancy_page
+            write_discrepancy_page(args.out, report)  # last: it shows the files above
         except OSError as exc:
             return _fail(f'{args.out}: cannot write ({exc.strerror or exc})')
     try:
@@ -129,7 +133,8 @@ def main(argv=None):
         else:
             print(summary_text(result, source))
             if args.out:
-                print(f'report and plots written to {args.out}')
+                print(f'report and plots written to {args.out}; open '
+                      f'{os.path.join(args.out, "report.html")}')
         sys.stdout.flush()
     except BrokenPipeError:  # e.g. piped into head: not an error worth a traceback
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())

@@ -2,8 +2,9 @@
 ``fleet``: which IMU is getting worse?  Trends and flags from the ``analyze --db`` history.
 
 Usage: ``fleet DB --out DIR [--json] [--since DATE]``.  Writes one trend plot per ``imu_id``
-(``DIR/<imu_id>.png``) and ``DIR/fleet.json``; prints a table of the IMUs and one line per flag
-(``--json``: the JSON instead).  The flags are defined in :mod:`imu_allan.history.trends`.
+(``DIR/<imu_id>.png``), ``DIR/fleet.json`` and the page ``DIR/index.html``; prints a table of
+the IMUs and one line per flag (``--json``: the JSON instead).  The flags are defined in
+:mod:`imu_allan.history.trends`.
 """
 
 from datetime import datetime
@@ -25,7 +26,7 @@ def build_parser():
                     '95th percentile.')
     p.add_argument('db', metavar='DB', help='DuckDB file written by analyze --db')
     p.add_argument('--out', metavar='DIR', required=True,
-                   help='write one PNG per IMU and fleet.json here')
+                   help='write one PNG per IMU, fleet.json and index.html here')
     p.add_argument('--json', action='store_true', help='print the JSON report only')
     p.add_argument('--since', metavar='DATE',
                    help='only records that start on or after DATE (ISO 8601, UTC)')
@@ -87,6 +88,8 @@ def fleet_report(db, out_dir, since=None):
               'units': 'SI; noise coefficients are continuous-time; intervals 68.3 %',
               'not_static_records_left_out': moving, 'imus': entries, 'flags': flags}
     (out / 'fleet.json').write_text(json.dumps(report, indent=1) + '\n', encoding='utf-8')
+    from ..report.html import write_fleet_page
+    write_fleet_page(out, report, imus)
     return report
 
 
@@ -115,7 +118,8 @@ def console_text(report):
                      + f'  {n_flags or ""}')
     lines.append(f'flags: {len(report["flags"])}')
     lines.extend('  ' + f['why'] for f in report['flags'])
-    lines.append(f'plots and fleet.json in {Path(report["imus"][0]["plot"]).parent}')
+    folder = Path(report['imus'][0]['plot']).parent
+    lines.append(f'plots and fleet.json in {folder}; open {folder / "index.html"}')
     return '\n'.join(lines)
 
 

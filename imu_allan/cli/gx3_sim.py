@@ -30,9 +30,16 @@ ignores commands) and then resume, ``--disconnect-after/--disconnect-seconds`` c
 terminal (the port vanishes), then comes back as a freshly powered-up device on a new
 terminal (use ``--link`` for a stable path).
 
+Temperature (command 0xD1): ``--temperature`` sets the board temperature against time since
+the simulator started (``constant:T``, ``ramp:T0:T1:SECONDS``, ``warmup:T0:T1:TAU``: deg C
+and s); 0xD1 returns it as ADC codes through the inverse of the DCP manual's Eq. 15.  Polled
+while streaming, the reply follows the next record and carries its timer (the order the
+manual gives for the GX2).  ``--temperature-slope`` shifts the biases by ``slope * (T -
+T0)`` (gyro rad/s/K, optionally accel m/s^2/K), so a test knows the true slope.
+
 ``--record-truth FILE`` writes a CSV row per record (``index,status,code,timer`` then the
-float32 values exactly as sent, device units) and per command reply, so tests can compare a
-driver's output with what was sent.
+float32 values exactly as sent, device units, and the temperature in deg C) and per command
+reply, so tests can compare a driver's output with what was sent.
 """
 
 import dataclasses
@@ -90,6 +97,12 @@ def build_parser():
                     help='seconds of streaming before the terminal is closed')
     ap.add_argument('--disconnect-seconds', type=bounded_float(0.0, 3600.0), default=1.0,
                     help='time before the device comes back, s (default 1)')
+    ap.add_argument('--temperature', default='constant:25', metavar='PROFILE',
+                    help='board temperature against time since start, deg C: constant:T, '
+                         'ramp:T0:T1:SECONDS or warmup:T0:T1:TAU (default constant:25)')
+    ap.add_argument('--temperature-slope', metavar='GX,GY,GZ[,AX,AY,AZ]',
+                    help='bias change per K of temperature above the profile start: gyro '
+                         'rad/s/K (then accel m/s^2/K); default none')
     return ap
 
 

@@ -43,7 +43,15 @@ from .bounded_min import bounded_minimum
 from .edf import edf_oadev
 
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
-from .fit import fit_terms, Problem, SELECTION_PENALTY, shape_columns, UPPER_LIMIT_DELTA_CHI2
+from .fit import (
+    deterministic_index,
+    fit_terms,
+    Problem,
+    ramp_drift_variance,
+    SELECTION_PENALTY,
+    shape_columns,
+    UPPER_LIMIT_DELTA_CHI2,
+)
 from .units import IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 
@@ -55,7 +63,7 @@ DEFAULT_TARGETS = {'white_noise': 0.02, 'quantization': 0.25, 'bias_instability'
 TARGET_RANGE = (0.001, 1.0)
 #: Pairs of terms a short record may not tell apart.
 PAIRS = (('bias_instability', 'rate_random_walk'), ('quantization', 'white_noise'),
-         ('gauss_markov', 'bias_instability'))
+         ('gauss_markov', 'bias_instability'), ('rate_random_walk', 'rate_ramp'))
 #: Criterion difference (chi^2 units) that separates two alternatives (Kass & Raftery 1995).
 SEPARATION_MARGIN = 10.0
 #: Longest record considered, as a multiple of the current one.
@@ -114,12 +122,19 @@ class TermAdvice:
 
 @dataclass
 class Unresolved:
-    """A pair of terms the data cannot yet separate on an axis, and the time until they do."""
+    """
+    Two term sets the data cannot yet tell apart on an axis, and the time until they can.
+
+    ``terms`` are the terms in which they differ: a pair (a, b) when one set has a where the
+    other has b (a swap), one term when the sets differ by that term alone.  ``alternative``
+    is the other set (the selected one is the axis's fit).
+    """
 
     axis: str
     terms: tuple
     more_s: float
     reason: str = None
+    alternative: tuple = None
 
 
 @dataclass
@@ -130,6 +145,8 @@ class Advice:
     duration_s: float
     axes: dict = field(default_factory=dict)
     unresolved: list = field(default_factory=list)
+    #: axes the motion verdict calls moving (set by the report): no noise measurement
+    moving: list = field(default_factory=list)
 
     @property
     def record_more_s(self):
@@ -209,7 +226,7 @@ class _Forecast:
         avar = _terms.model_avar(axis_terms, tau, self.rate_hz)
         alpha = identify_noise(tau, avar[:, None])[:, 0]
         edf = np.array([edf_oadev(int(a), int(m), int(n) + 1) for a, m in zip(alpha, ms)])
-        problem = Problem(tau, avar, edf, alpha, self.rate_hz)
+        problem = Problem(tau, avar, edf, alpha, self.rate_hz, n / self.rate_hz)
         self._cache[(n, key)] = problem
         return problem
 
@@ -220,11 +237,16 @@ class _Forecast:
             return {}
         names = list(axis_terms)
         shapes = shape_columns(problem, names, _nonlinear(axis_terms))
-        g = problem.whiten(problem.avar, shapes)
+        ramp = deterministic_index(names)
+        det = 0.0 if ramp is None else shapes[:, ramp] * axis_terms['rate_ramp']['value'] ** 2
+        g = problem.whiten(problem.avar, shapes, det)
         try:
             cov = np.linalg.inv(g.T @ g)
         except np.linalg.LinAlgError:
             return {}
+        if ramp is not None:  # the noise's own drift, as the fit adds it
+            cov[ramp, ramp] += ramp_drift_variance(problem, {
+                t: p['value'] ** 2 for t, p in axis_terms.items() if 'value' in p})
         out = {}
         for j, term in enumerate(names):
             value = axis_terms[term][_main_param(term)]
@@ -253,12 +275,14 @@ def _best_chi2(problem, names, start):
     """Smallest GLS chi^2 of ``names`` (one nonlinear parameter profiled near ``start``)."""
     nonlinear = [t for t in names if len(TERM_PARAMETERS[t]) > 1]
     if not nonlinear:
-        return problem.solve(shape_columns(problem, names, {}))[1]
+        return problem.solve(shape_columns(problem, names, {}),
+                             deterministic=deterministic_index(names))[1]
     name = nonlinear[0]
     centre = math.log(start.get(name) or math.sqrt(problem.tau[0] * problem.tau[-1]))
 
     def chi2(log_p):
-        return problem.solve(shape_columns(problem, names, {name: math.exp(log_p)}))[1]
+        return problem.solve(shape_columns(problem, names, {name: math.exp(log_p)}),
+                             deterministic=deterministic_index(names))[1]
     return min(bounded_minimum(chi2, centre - 2.0, centre + 2.0, xatol=0.02)[1], chi2(centre))
 
 
@@ -322,7 +346,8 @@ class _AxisAdvisor:
         j = result.axis_index(axis)
         # the measured curve, set up once
         self.problem = Problem(result.tau, result.avar[:, j], result.edf[:, j],
-                               result.alpha[:, j], result.rate_hz)
+                               result.alpha[:, j], result.rate_hz,
+                               result.n_samples / result.rate_hz)
         self.rate_hz = result.rate_hz
         self.n = int(result.n_samples)
         self.fitted = fitted
@@ -371,23 +396,43 @@ class _AxisAdvisor:
         penalty = SELECTION_PENALTY * math.log(max(fit.n_points, 2))
         return fit, fit.chi2 + _n_params(list(fit.terms)) * penalty
 
-    def _pairs(self, axis_terms, n_max):
-        chosen = list(axis_terms)
-        _, crit = self._data_criterion(chosen)
+    def _candidates(self, chosen):
+        """``(terms differing, alternative set)``: pair swaps, then the fit's alternatives."""
+        seen = {frozenset(chosen)}
         for a, b in PAIRS:
             if (a in chosen) == (b in chosen):
                 continue
             have, other = (a, b) if a in chosen else (b, a)
-            alt_names = [other if t == have else t for t in chosen]
+            alt = [other if t == have else t for t in chosen]
+            seen.add(frozenset(alt))
+            yield (a, b), alt
+        alternatives = getattr(self.fitted, 'alternatives', None)
+        for alt in (alternatives(self.axis)[1:] if alternatives else []):
+            if frozenset(alt) in seen:
+                continue
+            seen.add(frozenset(alt))
+            diff = tuple(t for t in chosen if t not in alt) + tuple(
+                t for t in alt if t not in chosen)
+            yield diff, list(alt)
+
+    def _pairs(self, axis_terms, n_max):
+        chosen = list(axis_terms)
+        _, crit = self._data_criterion(chosen)
+        alternatives = getattr(self.fitted, 'alternatives', None)
+        listed = {frozenset(a) for a in (alternatives(self.axis)[1:] if alternatives else [])}
+        for pair, alt_names in self._candidates(chosen):
             alt_fit, alt_crit = self._data_criterion(alt_names)
             yield
-            if other not in alt_fit.terms or abs(alt_crit - crit) >= SEPARATION_MARGIN:
+            # an alternative the fit lists stays open whatever this refit says
+            if frozenset(alt_names) not in listed and (
+                    any(t not in alt_fit.terms for t in alt_names)
+                    or abs(alt_crit - crit) >= SEPARATION_MARGIN):
                 continue
-            pair = (a, b)
+            other = tuple(alt_names)
             times = []
             start = _nonlinear(alt_fit.terms)
             for truth, names, key in ((axis_terms, alt_names, 'fit'),
-                                      (alt_fit.terms, chosen, other)):
+                                      (alt_fit.terms, chosen, '+'.join(other))):
                 # If the noise-free gap says "separated" already, the data were unlucky: grow
                 # the measured gap as the forecast grows instead (never 0 for an open pair).
                 gap0 = self.forecast.criterion_gap(self.n, truth, key, names, start)
@@ -400,9 +445,10 @@ class _AxisAdvisor:
                 times.append((yield from _crossing(evaluate, self.n, n_max, 1.0)))
             if any(t is None for t in times):
                 self.unresolved.append(Unresolved(self.axis, pair, None, 'not separated '
-                                                  f'within {HORIZON:g} x the record'))
+                                                  f'within {HORIZON:g} x the record', other))
             else:
-                self.unresolved.append(Unresolved(self.axis, pair, self._more_s(max(times))))
+                self.unresolved.append(Unresolved(self.axis, pair, self._more_s(max(times)),
+                                                  None, other))
 
     def _undetected(self, axis_terms, n_max):
         chosen = list(axis_terms)
@@ -524,8 +570,9 @@ def advice_health(advice, name='recording advice'):
                 waits.append((more, f'{axis} {term} to {advice.targets[term]:g}'))
     for u in advice.unresolved:
         more = math.nan if u.more_s is None else u.more_s
-        values[f'{u.axis}.{u.terms[0]}_vs_{u.terms[1]}.more_s'] = more
-        waits.append((more, f'{u.axis} {u.terms[0]} vs {u.terms[1]}'))
+        what = '_vs_'.join(u.terms) if len(u.terms) == 2 else 'maybe_' + '_'.join(u.terms)
+        values[f'{u.axis}.{what}.more_s'] = more
+        waits.append((more, f'{u.axis} {what.replace("_vs_", " vs ")}'))
     open_items = [(m, what) for m, what in waits if not m == 0.0]
     if not open_items:
         return Health(name, OK, f'every precision target is met ({advice.duration_s:.0f} s '

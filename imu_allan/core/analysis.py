@@ -21,6 +21,7 @@ from .allan import (
 from .fit import fit_noise_model, FitError, FittedModel
 from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
 from .units import is_gyro, physical_limits, sample_unit
+from .warmup import find_warmup
 from ..errors import InputError
 
 #: Motion thresholds on 1-s block means, relative to the record's median: a still MEMS IMU's
@@ -43,6 +44,8 @@ class AnalysisOptions:
     rate_hz: float = None
     allow_jumps: bool = False
     online: bool = False
+    #: export coefficients of a record the motion verdict calls moving (Kalibr, exporters)
+    allow_motion: bool = False
 
 
 @dataclass
@@ -65,6 +68,8 @@ class Analysis:
     t: np.ndarray = None
     upper_limits: dict = field(default_factory=dict)
     integrity: str = ''
+    warmup_s: float = 0.0  # start left out: the bias was settling (core/warmup.py)
+    allow_motion: bool = False
 
 
 _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
@@ -173,6 +178,11 @@ def analyze_samples(samples, options=None):
         if outliers.total:
             warnings.append(f'{outliers.total} outlier(s) replaced (Tukey F=3): '
                             + ', '.join(f'{a} {c}' for a, c in outliers.counts.items() if c))
+    t = samples.t
+    warmup_s = find_warmup(data, rate, samples.axes)[0]
+    if warmup_s:  # the settling start would pass for a random walk: leave it out
+        cut = int(round(warmup_s * rate))
+        data, t = data[cut:], t[cut:]
     n = data.shape[0]
     needed = 2 * options.min_clusters
     if n < needed:
@@ -192,7 +202,7 @@ def analyze_samples(samples, options=None):
     pool.shutdown(wait=False)   # the thread ends with the checks
     if options.online:
         from .online import online_allan
-        result = online_allan(data, rate, t=samples.t, axes=samples.axes)
+        result = online_allan(data, rate, t=t, axes=samples.axes)
         if result is None:
             raise InputError(where, "too short for the online estimator's shortest "
                                     'averaging time after the motion gate')
@@ -214,7 +224,8 @@ def analyze_samples(samples, options=None):
                     duration_s=n / rate, timing=timing, outliers=outliers, result=result,
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
                     t=samples.t, upper_limits=upper,
-                    integrity=getattr(samples, 'integrity', ''))
+                    integrity=getattr(samples, 'integrity', ''), warmup_s=warmup_s,
+                    allow_motion=options.allow_motion)
 
 
 def _kalibr_upper_limits(fit):

@@ -35,6 +35,7 @@ import numpy as np
 from . import terms as _terms
 from .bisection import guided, log_ratio, run
 from .bounded_min import bounded_minimum
+from .edf import CI_LEVEL
 from .model import NoiseModel
 from .nnls import nnls_scaled
 from .terms import TERMS
@@ -45,12 +46,21 @@ CORRELATION_WIDTH = {2: 0.41, 1: 0.41, 0: 0.41, -1: 0.58, -2: 1.08}
 #: Flicker noise also correlates estimates decades apart (0.06 at two decades): weight of a
 #: long-range exponential component exp(-|d log10 tau| / 3) per noise exponent.
 CORRELATION_TAIL = {-1: 0.1}
+#: White phase noise (quantization) correlates estimates at all averaging times alike: every
+#: squared second difference holds 6 x_k^2 of the same phase points, so for m != m' (not
+#: multiples) rho = 72 / (72 (1 + 2 (4/9) + 2 (1/36))) = 0.51; measured 0.52-0.58 (400
+#: records of 20000 samples, m = 1 .. 300).  Share of a constant component per exponent.
+#: Without it the quantization and white-noise intervals held the truth in ~55 % of cases.
+CORRELATION_PLATEAU = {2: 0.5}
 _MIN_EDF = 1.0
 #: Multiple of ln(T) charged per term in the selection criterion (BIC uses 1).  Measured on
 #: 16 simulated 2-h records x 6 axes (thesis and ADIS16448-like models): 1 -> 91 of 96 axes get
 #: exactly the true terms (4 spurious random walks from flicker drift), 2 -> 95 of 96.
 SELECTION_PENALTY = 2.0
 _IRLS_ITERATIONS = 6
+#: A term set whose criterion exceeds the best one's by less than this is an alternative the
+#: data cannot reject (Kass & Raftery 1995: a BIC difference of 6-10 is strong evidence).
+ALTERNATIVE_MARGIN = 6.0
 #: Delta chi^2 of the 95 % upper limit of an undetected term (:func:`upper_limit`).
 UPPER_LIMIT_DELTA_CHI2 = 4.0
 _LIMIT_RESOLUTION = 1e-3  # of the upper limit in log c: 0.05 % of the coefficient
@@ -65,6 +75,11 @@ class AxisFit:
     chi2: float = math.nan
     dof: int = 0
     n_points: int = 0
+    #: squared coefficients c_j of the selected terms and their GLS covariance (term order)
+    coef: dict = field(default_factory=dict)
+    cov: np.ndarray = None
+    #: (criterion, term names) of every candidate term set, best first (automatic selection)
+    candidates: list = field(default_factory=list)
 
 
 class FitError(ValueError):
@@ -76,12 +91,14 @@ def correlation_matrix(tau, alpha):
     logt = np.log10(np.asarray(tau, dtype=float))
     width = np.array([CORRELATION_WIDTH.get(int(a), 0.5) for a in alpha])
     tail = np.sqrt([CORRELATION_TAIL.get(int(a), 0.0) for a in alpha])
+    plateau = np.sqrt([CORRELATION_PLATEAU.get(int(a), 0.0) for a in alpha])
     steps = np.diff(logt) / (0.5 * (width[1:] + width[:-1]))
     u = np.concatenate([[0.0], np.cumsum(steps)])
-    base = np.sqrt(1.0 - tail ** 2)
+    base = np.sqrt(1.0 - tail ** 2 - plateau ** 2)
     short = np.exp(-np.abs(u[:, None] - u[None, :]) ** 1.5)
     long = np.exp(-np.abs(logt[:, None] - logt[None, :]) / 3.0)
-    return base[:, None] * base[None, :] * short + tail[:, None] * tail[None, :] * long
+    return (base[:, None] * base[None, :] * short + tail[:, None] * tail[None, :] * long
+            + plateau[:, None] * plateau[None, :])
 
 
 class Problem:
@@ -94,8 +111,14 @@ class Problem:
     problem, and each IRLS step is one small matrix product instead of a factorisation.
     """
 
-    def __init__(self, tau, avar, edf, alpha, rate_hz):
-        """Keep the usable averaging times of one axis (s, AVAR in SI units squared, EDF)."""
+    def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None):
+        """
+        Keep the usable averaging times of one axis (s, AVAR in SI units squared, EDF).
+
+        ``duration_s`` (the record length) gives a rate ramp's drift variance
+        (:func:`ramp_drift_variance`); without it a ramp's interval lacks that part.
+        """
+        self.duration_s = duration_s
         ok = np.isfinite(avar) & (avar > 0) & np.isfinite(edf) & (edf >= _MIN_EDF)
         self.tau = tau[ok]
         self.avar = avar[ok]
@@ -114,25 +137,39 @@ class Problem:
             self._columns[name] = TERMS[name].shape(self.tau, self.rate_hz, None)
         return self._columns[name]
 
-    def whiten(self, model, columns):
-        """Return ``columns`` (AVAR per tau, one column each) whitened for ``model`` AVAR."""
-        return self._l_inv @ (columns / (self._rel_sd * model)[:, None])
+    def whiten(self, model, columns, deterministic=0.0):
+        """
+        Return ``columns`` (AVAR per tau, one column each) whitened for ``model`` AVAR.
 
-    def solve(self, shapes, iterations=_IRLS_ITERATIONS, offset=0.0):
+        ``deterministic`` is the part of ``model`` from a deterministic signal (a rate ramp):
+        it adds to the expected AVAR but not to the scatter of its estimate, whose chi-square
+        variance 2 AVAR^2 / EDF belongs to the noise part alone.
+        """
+        noise = np.maximum(model - deterministic, 1e-3 * self.avar)
+        return self._l_inv @ (columns / (self._rel_sd * noise)[:, None])
+
+    def solve(self, shapes, iterations=_IRLS_ITERATIONS, offset=0.0, deterministic=None,
+              offset_deterministic=False):
         """
         IRLS GLS-NNLS; return (coefficients, chi2, whitened design).
 
-        ``offset`` is a fixed model part (AVAR per tau) added to ``shapes @ coef``.
+        ``offset`` is a fixed model part (AVAR per tau) added to ``shapes @ coef``;
+        ``deterministic`` the column index of a deterministic term (rate ramp) in ``shapes``,
+        ``offset_deterministic`` whether the offset is one (see :meth:`whiten`).
         """
         model = self.avar
+        det = 0.0
         coef = np.zeros(shapes.shape[1])
         design = np.column_stack([shapes, self.avar - offset])
+        fixed = offset if offset_deterministic else 0.0
         for _ in range(iterations):
-            low = self.whiten(model, design)
+            low = self.whiten(model, design, det)
             coef = nnls_scaled(low[:, :-1], low[:, -1])
             # keep weights finite where the model vanishes (e.g. a term pinned at zero)
             model = np.maximum(shapes @ coef + offset, 1e-3 * self.avar)
-        low = self.whiten(model, design)
+            det = fixed + (0.0 if deterministic is None
+                           else shapes[:, deterministic] * coef[deterministic])
+        low = self.whiten(model, design, det)
         g, y = low[:, :-1], low[:, -1]
         resid = y - g @ coef
         return coef, float(resid @ resid), g
@@ -141,6 +178,38 @@ class Problem:
 def shape_columns(problem, names, nonlinear):
     """AVAR shape of each named term at the problem's averaging times, one column each."""
     return np.column_stack([problem.column(name, nonlinear.get(name)) for name in names])
+
+
+def deterministic_index(names):
+    """Index of the deterministic term (rate ramp) in ``names``, None if there is none."""
+    names = list(names)
+    return names.index('rate_ramp') if 'rate_ramp' in names else None
+
+
+def ramp_drift_variance(problem, coef):
+    """
+    Variance of a fitted rate ramp's R^2 from the noise's own drift over the record.
+
+    A deterministic ramp adds R^2 tau^2 / 2 to AVAR exactly, but the cross term R tau e of
+    the estimator (e the mean first difference of tau-averages, which telescopes to the
+    difference D of the averages at the record's two ends over M tau0 ~ T) moves R^2 by
+    2 R D / T at every tau alike: the slope the noise itself shows.  Var(D) is the noise's
+    structure function at separation T with windows w = tau_max: 2 N^2 / w (white),
+    (2 B^2 / pi) (ln(T / w) + 1.5) (flicker; the integral of (1 - cos 2 pi f T) sinc^2 / f,
+    evaluated numerically), K^2 T (random walk), 4 Q^2 / w^2 (quantization).  Returns
+    4 R^2 Var(D) / (T - 2 w)^2 (0 without a record length).
+    """
+    t_rec = problem.duration_s
+    if not t_rec or 'rate_ramp' not in coef:
+        return 0.0
+    w = float(problem.tau[-1])
+    span = max(t_rec - 2.0 * w, w)
+    var_d = (2.0 * coef.get('white_noise', 0.0) / w
+             + 2.0 / math.pi * coef.get('bias_instability', 0.0)
+             * (math.log(max(t_rec / w, 1.0)) + 1.5)
+             + coef.get('rate_random_walk', 0.0) * t_rec
+             + 4.0 * coef.get('quantization', 0.0) / w ** 2)
+    return 4.0 * coef['rate_ramp'] * var_d / span ** 2
 
 
 def _nonlinear_range(problem, name):
@@ -160,8 +229,10 @@ def fit_terms(problem, names, profile_intervals=True):
     names = list(names)
     nl_names = [n for n in names if TERMS[n].position]
 
+    ramp = deterministic_index(names)
+
     def evaluate(nonlinear):
-        return problem.solve(shape_columns(problem, names, nonlinear))
+        return problem.solve(shape_columns(problem, names, nonlinear), deterministic=ramp)
 
     nonlinear = {}
     profiles = {}
@@ -190,6 +261,13 @@ def fit_terms(problem, names, profile_intervals=True):
         cov = np.full((active.sum(), active.sum()), np.nan)
     sd = np.full(coef.size, np.nan)
     sd[active] = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    fit.coef = {name: float(c) for name, c in zip(names, coef) if c > 0}
+    if 'rate_ramp' in fit.coef:
+        j = list(fit.coef).index('rate_ramp')
+        cov = cov.copy()
+        cov[j, j] += ramp_drift_variance(problem, fit.coef)
+        sd[names.index('rate_ramp')] = math.sqrt(max(cov[j, j], 0.0))
+    fit.cov = cov
     for j, name in enumerate(names):
         if not active[j]:
             continue
@@ -226,10 +304,10 @@ def _profile_interval(profile, chi2_min):
     return math.exp(crossing(grid[0])), math.exp(crossing(grid[-1]))
 
 
-def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None):
-    """Fit one axis; ``terms=None`` selects the IEEE terms by BIC."""
+def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None):
+    """Fit one axis; ``terms=None`` selects the IEEE terms by BIC (``duration_s``: Problem)."""
     problem = Problem(np.asarray(tau, float), np.asarray(avar, float),
-                      np.asarray(edf, float), np.asarray(alpha), rate_hz)
+                      np.asarray(edf, float), np.asarray(alpha), rate_hz, duration_s)
     if problem.tau.size == 0:
         raise FitError('no averaging time with a usable Allan variance')
     if terms is not None:
@@ -240,15 +318,20 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None):
     candidates = list(IEEE_TERMS) if problem.tau.size >= 4 else ['white_noise']
     best, best_bic = None, math.inf
     penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
+    scored = []
     for k in range(1, len(candidates) + 1):
         for subset in combinations(candidates, k):
             fit = fit_terms(problem, subset)
             if len(fit.terms) < k:  # a pinned-at-zero term: the smaller subset covers it
                 continue
             bic = fit.chi2 + len(fit.terms) * penalty
+            scored.append((bic, subset))
             if bic < best_bic:
                 best, best_bic = fit, bic
-    return best if best is not None else AxisFit(n_points=problem.tau.size)
+    if best is None:
+        return AxisFit(n_points=problem.tau.size)
+    best.candidates = sorted(scored, key=lambda item: item[0])
+    return best
 
 
 def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LIMIT_DELTA_CHI2):
@@ -267,15 +350,19 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LI
     base = shape_columns(problem, others, {})
     extra = problem.column(term)
 
+    ramp = deterministic_index(others)
+
     def chi2(log_c):
-        return problem.solve(base, offset=math.exp(log_c) * extra)[1]
+        return problem.solve(base, offset=math.exp(log_c) * extra, deterministic=ramp,
+                             offset_deterministic=term == 'rate_ramp')[1]
 
     def evaluate(log_c):  # (beyond the limit, level): the level ~ linear in log c
         excess = chi2(log_c) - chi2_min
         # (the floor keeps a level where re-weighting leaves the excess at or below 0)
         return excess > delta_chi2, log_ratio(max(excess, 1e-3 * delta_chi2), delta_chi2)
 
-    coef, chi2_min, g = problem.solve(np.column_stack([base, extra]))
+    coef, chi2_min, g = problem.solve(np.column_stack([base, extra]),
+                                      deterministic=deterministic_index(others + [term]))
     hi = math.log(float(np.max(problem.avar / extra)))
     if not evaluate(hi)[0]:
         return math.nan
@@ -291,6 +378,12 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LI
     guess = math.log(max(coef[-1] + math.sqrt(delta_chi2) * sd, math.exp(lo)))
     lo, _ = run(guided(evaluate, lo, hi, halvings, (2.0 * (lo - guess), 2.0 * (hi - guess))))
     return math.sqrt(math.exp(lo))
+
+
+def _normal_quantile(p):
+    """Return the standard normal quantile Phi^-1(p)."""
+    from scipy.special import ndtri
+    return float(ndtri(p))
 
 
 class FittedModel:
@@ -316,9 +409,52 @@ class FittedModel:
         """Return a fitted parameter (SI, continuous time), NaN if the term was not detected."""
         return self.model.value(axis, term, param)
 
-    def interval(self, axis, term, param='value'):
-        """Return the 68.3 % interval of a parameter, ``(nan, nan)`` if not detected."""
-        return self.intervals.get(axis, {}).get(term, {}).get(param, (math.nan, math.nan))
+    def interval(self, axis, term, param='value', level=CI_LEVEL):
+        """
+        Return the two-sided ``level`` interval of a parameter, ``(nan, nan)`` if not detected.
+
+        ``level`` defaults to 68.27 % (one standard deviation), the interval stored with the
+        fit.  Other levels: the normal quantile z = Phi^-1((1 + level) / 2) times the GLS
+        standard deviation of the squared coefficient, mapped through sqrt (the 68.27 %
+        interval is z = 1); for tau_c / f0 the stored profile interval's log half-widths
+        scaled by z.
+        """
+        stored = self.intervals.get(axis, {}).get(term, {}).get(param)
+        if stored is None:
+            return (math.nan, math.nan)
+        if not 0.0 < level < 1.0:
+            raise ValueError(f'confidence level {level!r} must be between 0 and 1')
+        if abs(level - CI_LEVEL) < 1e-12:
+            return stored
+        z = _normal_quantile(0.5 + 0.5 * level)
+        fit = self.fits[axis]
+        value = self.model.value(axis, term, param)
+        if param == TERMS[term].params[0] and term in fit.coef:
+            j = list(fit.coef).index(term)
+            c, sd = fit.coef[term], math.sqrt(max(fit.cov[j, j], 0.0))
+            return (math.sqrt(max(c - z * sd, 0.0)), math.sqrt(c + z * sd))
+        lo, hi = stored
+        return (value * (lo / value) ** z, value * (hi / value) ** z)
+
+    def alternatives(self, axis):
+        """
+        Term sets the data of ``axis`` cannot reject, the selected one first.
+
+        Every candidate set whose selection criterion is within :data:`ALTERNATIVE_MARGIN`
+        of the best (see there); ``[selected]`` when the terms were named, not selected.
+        """
+        fit = self.fits.get(axis)
+        if fit is None or not fit.terms:
+            return []
+        selected = list(fit.terms)
+        if not fit.candidates:
+            return [selected]
+        best = fit.candidates[0][0]
+        out = [selected]
+        for crit, names in fit.candidates:
+            if crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected):
+                out.append(list(names))
+        return out
 
     def upper_limit(self, axis, term):
         """
@@ -388,5 +524,6 @@ def fit_noise_model(result, terms=None, axes=None):
     for axis in (axes or result.axes):
         j = result.axis_index(axis)
         fits[axis] = fit_axis(result.tau, result.avar[:, j], result.edf[:, j],
-                              result.alpha[:, j], result.rate_hz, terms)
+                              result.alpha[:, j], result.rate_hz, terms,
+                              result.n_samples / result.rate_hz)
     return FittedModel(fits, result.rate_hz, result)

@@ -510,6 +510,87 @@ def decode_timer_reply(packet):
 
 
 # --------------------------------------------------------------------------------------------
+# Temperatures (0xD1)
+
+#: The four u16 channels of the 15-byte 0xD1 reply, in wire order (GX3-25 names; DCP-GX3
+#: section "Temperatures"): the board sensor near the magnetometer, then three sensors read
+#: through the gyro/accel channels.
+TEMPERATURE_CHANNELS = ('mag', 'gyro_y_accel_x', 'gyro_x_accel_z_accel_y', 'gyro_z')
+#: The channels are 12-bit ADC codes (0..4095) with a 3.0 V reference.
+TEMPERATURE_ADC_MAX = 4095
+TEMPERATURE_VREF_V = 3.0
+# DCP-GX3 Eq. 15 (TemperatureMag only; the other channels have no absolute calibration):
+# deg C = -1481.96 + sqrt(2.1962e6 + (1.8639 - V) / 3.88e-6), V = 3.0 * counts / 4096.
+_T_OFFSET_C = 1481.96
+_T_SQUARE = 2.1962e6
+_T_V0 = 1.8639
+_T_K = 3.88e-6
+#: Valid range of the sensor's calibration, deg C (DCP-GX3 Eq. 16).
+TEMPERATURE_RANGE_C = (-40.0, 85.0)
+
+
+@dataclass
+class Temperatures:
+    """
+    A decoded 0xD1 reply.
+
+    ``counts``: the 4 raw 12-bit codes in :data:`TEMPERATURE_CHANNELS` order; ``timer``:
+    ticks.  :attr:`celsius` is the board temperature from the magnetometer-side channel, the
+    only one with an absolute calibration (DCP-GX3 Eq. 15); the others are relative only.
+    """
+
+    counts: tuple
+    timer: int
+
+    @property
+    def celsius(self):
+        """Board temperature, deg C (DCP-GX3 Eq. 15 on the TemperatureMag channel)."""
+        return counts_to_celsius(self.counts[0])
+
+
+def counts_to_celsius(counts):
+    """
+    Convert TemperatureMag ADC counts to deg C with the exact form of DCP-GX3 Eq. 15.
+
+    ``V = 3.0 * counts / 4096``; ``deg C = -1481.96 + sqrt(2.1962e6 + (1.8639 - V) / 3.88e-6)``
+    (the linear form of Eq. 16, ``-(V - 1.8583) / 11.67e-3``, agrees within 0.7 deg C over
+    -40..85 deg C).  One count is 0.058..0.068 deg C; the counts fall as it warms.  Arrays
+    are converted element-wise.
+    """
+    volts = TEMPERATURE_VREF_V * np.asarray(counts, dtype=np.float64) / 4096.0
+    out = -_T_OFFSET_C + np.sqrt(_T_SQUARE + (_T_V0 - volts) / _T_K)
+    return float(out) if out.ndim == 0 else out
+
+
+def celsius_to_counts(celsius):
+    """Inverse of :func:`counts_to_celsius`, rounded to the nearest code and clipped to 12 bits."""
+    c = np.asarray(celsius, dtype=np.float64)
+    volts = _T_V0 - _T_K * ((c + _T_OFFSET_C) ** 2 - _T_SQUARE)
+    out = np.clip(np.rint(volts * 4096.0 / TEMPERATURE_VREF_V), 0, TEMPERATURE_ADC_MAX)
+    return int(out) if out.ndim == 0 else out.astype(np.int64)
+
+
+def cmd_temperatures():
+    """Poll the temperatures: the single byte ``D1`` (15-byte reply; also while streaming)."""
+    return bytes([TEMPERATURES])
+
+
+def encode_temperature_reply(counts, timer):
+    """Encode the 15-byte 0xD1 reply: header, 4 x u16 counts, u32 timer, checksum."""
+    counts = [int(c) for c in counts]
+    if len(counts) != 4 or not all(0 <= c <= 0xFFFF for c in counts):
+        raise ValueError(f'0xD1 carries four u16 counts, got {counts}')
+    return with_checksum(struct.pack('>B4HI', TEMPERATURES, *counts, timer % TIMER_MODULUS))
+
+
+def decode_temperature_reply(packet):
+    """Return the :class:`Temperatures` of a 15-byte 0xD1 reply (ValueError if malformed)."""
+    _check(packet, TEMPERATURES)
+    counts = struct.unpack_from('>4H', packet, 1)
+    return Temperatures(counts, timer_of(packet))
+
+
+# --------------------------------------------------------------------------------------------
 # Timer unwrapping
 
 

@@ -239,6 +239,18 @@ class TimeSync:
         self.last_device = end
         return np.rint((device_s + offsets) * 1e9).astype(np.int64) + self.epoch * 10**9
 
+    def stamp_at(self, device_s):
+        """
+        Host-clock stamp, integer ns, of one device time with the current offset.
+
+        None before the first :meth:`stamps` (no mapping yet).  Changes nothing: for
+        occasional replies, such as the temperatures, that must not move the offset the
+        records follow.
+        """
+        if self.offset is None or self.epoch is None:
+            return None
+        return int(round((float(device_s) + float(self.offset)) * 1e9)) + self.epoch * 10**9
+
 
 #: Driver modes -> streamed data command.
 MODES = {
@@ -297,6 +309,7 @@ class SessionStats:
         self.timer_resets = 0
         self.rollovers = 0
         self.internal_errors = 0
+        self.temperatures = 0
 
 
 class Gx3Session:
@@ -308,11 +321,17 @@ class Gx3Session:
     name, device units) and host-clock ``stamps`` (int64 nanoseconds).  ``clock()`` returns
     host seconds (the driver passes its ROS clock).  ``log(level, text)`` reports events
     (level 'info', 'warn', 'error').
+
+    Temperatures: every ``temperature_period`` s (0 = never) while streaming, the session
+    sends 0xD1; the device answers between two data records, the framer picks the reply out
+    of the stream (no record is lost), and ``on_temperature(reading, stamp_ns)`` gets the
+    decoded :class:`~imu_allan.device.gx3_protocol.Temperatures` and the host-clock stamp of
+    its timer (mapped like the records', or the host clock before the first record).
     """
 
     def __init__(self, port, baud, mode, rate_hz, on_batch, clock=time.time, log=None,
                  stall_timeout=1.0, reply_timeout=0.3, record_raw=None, poll_interval=0.005,
-                 time_sync=None, backoff=None):
+                 time_sync=None, backoff=None, temperature_period=0.0, on_temperature=None):
         """Configure; call :meth:`run` in a thread and :meth:`stop` to end it."""
         self.decimation, self.flags = check_rate(rate_hz, baud, mode)
         self.code = MODES[mode]
@@ -343,7 +362,12 @@ class Gx3Session:
         # batches with a rollover or reset take (a reference for tests).
         self.vectorized = True
         self._replies = deque()
+        self._last_read = 0.0  # host time of the last read with data (s)
         self.thread = None
+        self.temperature_period = float(temperature_period or 0.0)
+        self.on_temperature = on_temperature
+        self.last_temperature_c = math.nan
+        self._next_temperature = 0.0
 
     # ------------------------------------------------------------------ thread control
     def start(self):
@@ -403,6 +427,10 @@ class Gx3Session:
                             continue
                     got = self._pump()
                     now = time.monotonic()
+                    if self.temperature_period > 0 and now >= self._next_temperature:
+                        # Polled between records: the reply is framed out of the stream.
+                        self.link.write(p.cmd_temperatures())
+                        self._next_temperature = now + self.temperature_period
                     if got:
                         last_data = now
                         self.backoff.reset()
@@ -453,7 +481,7 @@ class Gx3Session:
         self.stats.opens += 1
         if self.stats.opens > 1:
             self.stats.reconnects += 1
-        self.parser.reset()
+        self._flush_parser()
         self._new_epoch()
         self.log('info', f'{self.link.port}: opened at {self.link.baud} baud')
         return True
@@ -463,7 +491,22 @@ class Gx3Session:
         self.last_error = reason
         self.log('error', f'{reason}; reopening with back-off')
         self.link.close()
+        self._flush_parser()
         self._new_epoch()
+
+    def _flush_parser(self):
+        """
+        End the byte stream of a port that closed: deliver what the parser still holds.
+
+        As :func:`~imu_allan.device.gx3_stream.parse_bytes` ends a capture: a header-like byte
+        near the end announces a packet past the last byte and holds back up to a packet's
+        length (79 bytes) behind it; :meth:`StreamParser.flush` frames the good records there
+        (delivered, stamped by the last read) and counts the rest in ``rejected_bytes``,
+        instead of forgetting them uncounted.
+        """
+        packets = self.parser.flush()
+        if packets:
+            self._take(packets, self._last_read)
         self._wait(self.backoff.next())
 
     def _new_epoch(self):
@@ -491,10 +534,13 @@ class Gx3Session:
         data = self.link.read()
         if not data:
             return 0
-        host = self.clock()
+        host = self._last_read = self.clock()
         if self.raw is not None:
             self.raw.write(data)
-        packets = self.parser.feed(data)
+        return self._take(self.parser.feed(data), host)
+
+    def _take(self, packets, host):
+        """Deliver the data records of ``packets`` (read at ``host`` s); keep replies."""
         if not packets:
             return 0
         byte_time = p.BITS_PER_BYTE / self.link.baud
@@ -502,17 +548,43 @@ class Gx3Session:
         # after it took on the wire (the parser keeps unfinished bytes buffered).
         later = self.parser.buffered + sum(map(len, packets))
         code = self.code
-        records, times = [], []
+        records, times, temperatures = [], [], []
         for packet in packets:
             later -= len(packet)
             if packet[0] == code:
                 records.append(packet)
                 times.append(host - later * byte_time)
+            elif packet[0] == p.TEMPERATURES:
+                temperatures.append(packet)
             else:
                 self._replies.append(packet)
         if records:
             self._deliver(b''.join(records), np.array(times))
+        for packet in temperatures:
+            self._temperature(packet, host)
         return len(records)
+
+    def _temperature(self, packet, host):
+        """Decode a 0xD1 reply, stamp its timer like the records and hand it over."""
+        reading = p.decode_temperature_reply(packet)
+        self.stats.temperatures += 1
+        self.last_temperature_c = reading.celsius
+        if self.on_temperature is None:
+            return
+        stamp = None
+        last = self.unwrapper.last
+        if last is not None:
+            # The reply's timer is within a record or two of the last record's: unwrap it
+            # against that one (a rollover between them is 2**32 ticks away either way).
+            ticks = reading.timer + self.unwrapper.offset
+            if ticks < last - p.TIMER_MODULUS // 2:
+                ticks += p.TIMER_MODULUS
+            elif ticks > last + p.TIMER_MODULUS // 2:
+                ticks -= p.TIMER_MODULUS
+            stamp = self.sync.stamp_at(p.ticks_to_seconds(ticks))
+        if stamp is None:
+            stamp = int(round(host * 1e9))
+        self.on_temperature(reading, stamp)
 
     def _deliver(self, block, host_times):
         """Decode, unwrap, count gaps, stamp and hand over the records in ``block`` (bytes)."""

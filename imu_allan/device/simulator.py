@@ -22,6 +22,7 @@ import numpy as np
 from . import gx3_protocol as p
 from ..core.model import thesis_gx3_25_model
 from ..core.simulate import simulate
+from ..core.temperature import TemperatureProfile
 from ..core.units import AXES, STANDARD_GRAVITY
 
 JUNK_BYTES = bytes(b for b in range(256) if b not in p.REPLY_LENGTHS)
@@ -31,7 +32,10 @@ MAG_NOISE_GAUSS = 0.0005
 TRUTH_COLUMNS = ('index', 'status', 'code', 'timer', 'accel_x', 'accel_y', 'accel_z',
                  'gyro_x', 'gyro_y', 'gyro_z', 'mag_x', 'mag_y', 'mag_z', 'm11', 'm12', 'm13',
                  'm21', 'm22', 'm23', 'm31', 'm32', 'm33', 'euler_roll', 'euler_pitch',
-                 'euler_yaw')
+                 'euler_yaw', 'temperature_c')
+#: The simulated gyro-side temperature channels of 0xD1: offsets (ADC codes) from the board
+#: channel (they have no absolute calibration on the real unit either).
+TEMPERATURE_CHANNEL_OFFSETS = (0, 40, -30, 10)
 #: termios speed constants of the baud rates the device supports.
 BAUD_CONSTANTS = {b: getattr(termios, f'B{b}') for b in p.BAUD_RATES}
 #: What a receiver at the wrong baud rate makes of the bytes (a fixed scramble).
@@ -69,6 +73,8 @@ class SimConfig:
     stall_seconds: float = 2.0
     disconnect_after: float = None
     disconnect_seconds: float = 1.0
+    temperature: str = 'constant:25'
+    temperature_slope: str = None
 
     def check(self):
         """Validate the values; raise ValueError with a one-line reason (``--option``)."""
@@ -99,6 +105,32 @@ class SimConfig:
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value >= 0):
                 raise ValueError(f'--{name.replace("_", "-")} must be a number >= 0')
+        try:
+            self.profile = TemperatureProfile.parse(self.temperature or 'constant:25')
+        except ValueError as exc:
+            raise ValueError(f'--temperature {exc}') from None
+        self.slopes = temperature_slopes(self.temperature_slope)
+
+
+def temperature_slopes(text):
+    """
+    Bias-versus-temperature slopes in AXES order from ``--temperature-slope`` text.
+
+    Three values (gyro x, y, z, rad/s per K) or six (then accel x, y, z, m/s^2 per K),
+    comma-separated; None or '' gives zeros.  Raise ValueError with a one-line reason.
+    """
+    slopes = np.zeros(len(AXES))
+    if not text:
+        return slopes
+    try:
+        values = [float(x) for x in str(text).split(',')]
+    except ValueError:
+        values = []
+    if len(values) not in (3, 6) or not all(math.isfinite(v) and abs(v) <= 1.0 for v in values):
+        raise ValueError(f'--temperature-slope must be 3 or 6 comma-separated numbers (gyro '
+                         f'rad/s/K, then accel m/s^2/K, each within +-1), got {text!r}')
+    slopes[:len(values)] = values
+    return slopes
 
 
 def gravity_vector(axis):
@@ -147,9 +179,15 @@ class NoiseSource:
 class Device:
     """Protocol state of one powered-up 3DM-GX3-25 (no I/O: feed commands, take bytes)."""
 
-    def __init__(self, cfg, noise, now):
-        """Power up at host time ``now`` (monotonic seconds)."""
+    def __init__(self, cfg, noise, now, epoch=None):
+        """
+        Power up at host time ``now`` (monotonic seconds).
+
+        ``epoch``: host time at which the temperature profile starts (default ``now``; a
+        reset or reconnect keeps the simulator's, as a real unit keeps its temperature).
+        """
         self.cfg = cfg
+        self.epoch = now if epoch is None else epoch
         self.noise = noise
         self.power_on = now
         self.timer_start = cfg.timer_start
@@ -164,6 +202,9 @@ class Device:
         self.pending_baud = None
         self.gravity_g = gravity_vector(cfg.gravity_axis)
         self.mag_rng = np.random.default_rng(None if cfg.seed is None else cfg.seed + 1)
+        # 0xD1 polled while streaming: answered right after the next record (the order the
+        # DCP manual gives for the GX2: the stream record first, then the polled reply).
+        self.temperature_polls = 0
         if cfg.stream:
             self.start_stream(cfg.stream, now)
 
@@ -191,10 +232,32 @@ class Device:
         return (self.stream_ticks0 + (k * self.settings.decimation * 125) // 2) \
             % p.TIMER_MODULUS
 
+    # --- temperature
+    def temperature(self, now):
+        """Board temperature, deg C, at host time ``now`` (the ``--temperature`` profile)."""
+        return self.cfg.profile.at(now - self.epoch)
+
+    def temperature_reply(self, now, timer):
+        """Return the 15-byte 0xD1 reply for host time ``now`` and its deg C."""
+        celsius = self.temperature(now)
+        board = p.celsius_to_counts(celsius)
+        counts = [min(p.TEMPERATURE_ADC_MAX, max(0, board + d))
+                  for d in TEMPERATURE_CHANNEL_OFFSETS]
+        return p.encode_temperature_reply(counts, timer), celsius
+
     # --- data
-    def make_record(self, code, timer):
-        """Build one data record; return ``(bytes, truth dict of float32 values)``."""
+    def make_record(self, code, timer, now=None):
+        """
+        Build one data record; return ``(bytes, truth dict of float32 values)``.
+
+        ``now`` (host time of the sample) sets the temperature, which shifts the biases by
+        ``slope * (T - T_start)`` (``--temperature-slope``; T_start is the profile's start).
+        """
         row = self.noise.next(self.settings.rate_hz)
+        celsius = self.cfg.profile.start if now is None else self.temperature(now)
+        shift = self.cfg.slopes * (celsius - self.cfg.profile.start)
+        if shift.any():
+            row = row + shift
         gyro = _f32(row[:3])
         accel = _f32(row[3:] / self.cfg.gravity + self.gravity_g)
         mag = _f32(np.asarray(EARTH_FIELD_GAUSS)
@@ -210,6 +273,7 @@ class Device:
         for name, _ in p.DATA_RECORDS[code]:
             values += parts[name]
             truth[name] = parts[name]
+        truth['temperature_c'] = celsius
         return p.encode_record(code, values, timer), truth
 
     def due_records(self, now):
@@ -217,7 +281,7 @@ class Device:
         while self.stream_code and self.next_due <= now:
             self.k += 1
             timer = self.record_ticks(self.k)
-            data, truth = self.make_record(self.stream_code, timer)
+            data, truth = self.make_record(self.stream_code, timer, self.next_due)
             yield self.next_due, timer, data, truth
             self.next_due = self.stream_t0 + (self.k + 1) * self.period
 
@@ -261,11 +325,13 @@ class Device:
         """Execute one complete command; return its reply (or None)."""
         code = cmd[0]
         timer = self.ticks(now)
-        if code in p.DATA_RECORDS or code == p.TEMPERATURES:
-            if code == p.TEMPERATURES:
-                return p.with_checksum(struct.pack('>B4HI', code, 2139, 2048, 2048, 2048,
-                                                   timer))
-            return self.make_record(code, timer)[0]
+        if code == p.TEMPERATURES:
+            if self.stream_code:
+                self.temperature_polls += 1     # sent after the next record
+                return None
+            return self.temperature_reply(now, timer)[0]
+        if code in p.DATA_RECORDS:
+            return self.make_record(code, timer, now)[0]
         if code == p.SET_CONTINUOUS:
             cc = cmd[3]
             if cc == 0:
@@ -277,7 +343,7 @@ class Device:
             self.stream_code = 0
             return None
         if code == p.DEVICE_RESET:
-            self.__init__(self.cfg, self.noise, now)
+            self.__init__(self.cfg, self.noise, now, self.epoch)
             return None
         if code == p.SAMPLING_SETTINGS:
             function = cmd[3]
@@ -430,7 +496,8 @@ class Truth:
             self.stream.write('# gx3_sim truth: device units (accel g, gyro rad/s, mag gauss, '
                               'timer ticks at 62500/s); status ok, corrupted, dropped, '
                               'overrun, unread, reply, event (code 0 stall, 1 disconnect, '
-                              '2 stream stopped by a command)\n')
+                              '2 stream stopped by a command); temperature_c: deg C of the '
+                              'profile at a record or a 0xD1 reply\n')
             self.stream.write(','.join(TRUTH_COLUMNS) + '\n')
 
     def row(self, status, code, timer, truth=None):
@@ -443,6 +510,8 @@ class Truth:
         for name, n in (('accel', 3), ('gyro', 3), ('mag', 3), ('matrix', 9), ('euler', 3)):
             vals = truth.get(name)
             cols += [repr(v) for v in vals] if vals else [''] * n
+        celsius = truth.get('temperature_c')
+        cols.append('' if celsius is None else repr(float(celsius)))
         self.stream.write(','.join(cols) + '\n')
         now = time.monotonic()
         if now - self.last_flush > 0.1:
@@ -522,7 +591,7 @@ class Simulator:
     def send_reply(self, reply, now):
         """Send a command reply (and apply a pending baud change after it)."""
         self.write(reply)
-        timed = reply[0] in (p.SET_CONTINUOUS, p.TIMER)
+        timed = reply[0] in (p.SET_CONTINUOUS, p.TIMER, p.TEMPERATURES)
         self.truth.row('reply', reply[0], p.timer_of(reply) if timed else 0)
         pending = self.device.pending_baud
         if pending:
@@ -554,6 +623,16 @@ class Simulator:
                 status = 'corrupted'
             sent = self.send(data, due)
             self.truth.row(status if sent == 'ok' else sent, code, timer, truth)
+            self.send_temperatures(due, timer)
+
+    def send_temperatures(self, due, timer):
+        """Answer the 0xD1 polls received while streaming, with the record's timer."""
+        device = self.device
+        while device.temperature_polls:
+            device.temperature_polls -= 1
+            reply, celsius = device.temperature_reply(due, timer)
+            self.send(reply, due)
+            self.truth.row('reply', reply[0], timer, {'temperature_c': celsius})
 
     def faults(self, now):
         """Stall and disconnect schedule (in seconds of streaming)."""
@@ -573,7 +652,8 @@ class Simulator:
             time.sleep(cfg.disconnect_seconds)
             self.term = Terminal(cfg.link)
             now = time.monotonic()
-            self.device = Device(cfg, self.noise, now)   # a freshly powered-up unit
+            # A freshly powered-up unit (at the temperature the old one had reached).
+            self.device = Device(cfg, self.noise, now, self.device.epoch)
             self.line_free_at = now
             self.say(f'reconnected {self.term.path}')
 

@@ -176,7 +176,7 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
             blob = (s3 - 12) // 2
             if not (ptr >= 8 and ptr < page_size - 4 and hs == n3 + a + b + c + d
                     and s0 == 0 and z1 >= 0 and z2 >= 0 and s3 >= 12 and s3 % 2 == 0
-                    and p <= usable - 35 and v3 + blob <= base + page_size):
+                    and p >= 0 and p <= usable - 35 and v3 + blob <= base + page_size):
                 if nslow >= slow.shape[0]:
                     return -1, 0, 0
                 slow[nslow, 0] = cell
@@ -205,6 +205,9 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
 #: and publish time.
 MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
 
+#: Largest MCAP log time (u64 on disk) that is a time: beyond it, the record is damaged.
+_INT64_MAX = np.uint64((1 << 63) - 1)
+
 #: What :func:`mcap_walk` does with a channel's messages (indexed by channel id).
 LEAVE, COUNT, DECODE = 0, 1, 2
 
@@ -226,7 +229,7 @@ def mcap_walk(u8, u2, u4, u64, f8, pos, end, role, counts, log_time, off, length
     (rad/s, m/s^2)), :data:`COUNT` (only counted) or :data:`LEAVE`.  Every message walked is
     counted in ``counts[channel id]``.  Returns ``(pos, kept)``: the first record not walked
     (``end`` if none) and the rows kept; the walk also stops before a kept row that would not
-    fit the output arrays.
+    fit the output arrays or whose log time is beyond int64 (damage the scanner counts).
     """
     kept = 0
     room = t.shape[0]
@@ -240,8 +243,8 @@ def mcap_walk(u8, u2, u4, u64, f8, pos, end, role, counts, log_time, off, length
             break
         rec_end = pos + 9 + size
         if what == DECODE:
-            if kept >= room:
-                break
+            if kept >= room or u64[pos + 15] > _INT64_MAX:
+                break   # (a log time beyond int64 is damage: the scanner skips and counts it)
             log_time[kept] = np.int64(u64[pos + 15])
             start = pos + MESSAGE_HEADER
             off[kept] = start

@@ -68,28 +68,3 @@ def imus_to_arrays(msgs):
         t[i] = st.sec + st.nanosec * 1e-9
         data[i] = (w.x, w.y, w.z, a.x, a.y, a.z)
     return t, data
-
-
-def cdr_to_arrays(blobs):
-    """
-    Convert serialized (CDR) Imu messages to ``(t, data)`` like :func:`imus_to_arrays`.
-
-    The live nodes take raw bytes from their subscription and decode them here in bulk with
-    the bag reader's fixed-layout decoder (:func:`imu_allan.formats.imu_cdr.decode_rows`), about
-    ten times cheaper than building a Python message per sample; anything the layout does not
-    cover (big-endian CDR, odd lengths) is deserialized one by one and goes through
-    :func:`imu_to_row`, so the numbers are the same either way.
-    """
-    from .imu_cdr import decode_rows, deserialize  # imu_layout imports this module
-    n = len(blobs)
-    t = np.empty(n, dtype=np.float64)
-    data = np.empty((n, len(AXES)), dtype=np.float64)
-    lengths = np.fromiter((len(b) for b in blobs), dtype=np.int64, count=n)
-    for length in np.unique(lengths):
-        idx = np.flatnonzero(lengths == length)
-        rows = np.frombuffer(b''.join(blobs[i] for i in idx), dtype=np.uint8)
-        ok, t_rows, d_rows = decode_rows(rows.reshape(idx.size, int(length)), ros1=False)
-        t[idx[ok]], data[idx[ok]] = t_rows[ok], d_rows[ok]
-        for i in idx[~ok]:
-            t[i], data[i] = imu_to_row(deserialize(bytes(blobs[i])))
-    return t, data

@@ -298,8 +298,9 @@ class McapScan:
                         same = (block[:, 0:11] == block[0, 0:11]).all(axis=1)
                         k = kmax if same.all() else int(np.argmin(same))
                         if k > 1:
+                            # u64 on disk: add_rows skips and counts those beyond int64
                             log_time = np.ascontiguousarray(
-                                block[:k, 15:23]).view('<u8')[:, 0].astype(np.int64)
+                                block[:k, 15:23]).view('<u8')[:, 0].astype(np.uint64)
                             coll.add_rows(log_time, block[:k, 31:])
                             self.counts[cid] += k - 1
                             pos += k * stride

@@ -178,7 +178,9 @@ class Ros1Scan:
                         if k > 1:
                             tt = np.ascontiguousarray(block[:k, tpos:tpos + 8]).view('<u4')
                             log_time = tt[:, 0].astype(np.int64) * 1_000_000_000 + tt[:, 1]
-                            coll.add_rows(log_time, block[:k, hend + 4 - pos:])
+                            # a nanosecond field of 1e9 or more is no time: damaged record
+                            coll.add_rows(log_time, block[:k, hend + 4 - pos:],
+                                          bad=tt[:, 1] >= 1_000_000_000)
                             self.counts[cid] += k - 1
                             pos += k * stride
                             backoff = 0 if k >= 8 else 32
@@ -187,7 +189,8 @@ class Ros1Scan:
                     elif backoff:
                         backoff -= 1
                     sec, nsec = struct.unpack('<II', fields['time'][0][:8])
-                    coll.add_one(sec * 1_000_000_000 + nsec, bytes(buf[hend + 4:rec_end]))
+                    coll.add_one(sec * 1_000_000_000 + nsec if nsec < 1_000_000_000 else None,
+                                 bytes(buf[hend + 4:rec_end]))
             elif op == b'\x05' and top:
                 self._chunk(buf, fields, hend + 4, rec_end, pos)
             elif op == b'\x07':

@@ -34,6 +34,9 @@ class Samples:
         Bags: the Imu topic read ('' for other inputs).
     frame_id : str
         Bags: the ``header.frame_id`` of the first message ('' for other inputs).
+    temperature : tuple or None
+        Bags with a ``sensor_msgs/Temperature`` topic: ``(t, deg C)`` arrays (set by
+        ``analyze``, :mod:`imu_allan.report.temperature_report`); None otherwise.
 
     """
 
@@ -47,6 +50,7 @@ class Samples:
     integrity: str = ''
     topic: str = ''
     frame_id: str = ''
+    temperature: tuple = None
 
     @property
     def n(self):

@@ -227,6 +227,8 @@ class SqlitePages:
         p, n1 = _varints(u8, pos)
         rowid, n2 = _varints(u8, pos + n1)
         p, start = int(p[0]), cell_off + int(n1[0]) + int(n2[0])
+        if not 0 <= p < 1 << 31:  # a varint is 64 bits; SQLite's payloads stay below 2^31
+            raise Unsupported('payload size out of range')
         usable = self.usable
         x = usable - 35
         if p <= x:
@@ -412,7 +414,7 @@ class SqlitePages:
         hs, s0, s1, s2, s3, fits = _record_headers(u8, rec)
         fast = (inside & fits & (s0 == 0) & _INTEGER_SERIAL[np.clip(s1, 0, 255)]
                 & _INTEGER_SERIAL[np.clip(s2, 0, 255)] & (s3 >= 12) & (s3 % 2 == 0)
-                & (p <= self.usable - 35))
+                & (p >= 0) & (p <= self.usable - 35))  # a 9-byte varint can wrap negative
         v1 = rec + hs
         v2 = v1 + _SERIAL_SIZE[np.where(fast, s1, 0)]
         v3 = v2 + _SERIAL_SIZE[np.where(fast, s2, 0)]
@@ -451,7 +453,10 @@ class SqlitePages:
             self.lost_pages += 1
             return
         if len(vals) == 4 and vals[1] in wanted.tolist() and isinstance(vals[3], bytes):
-            stamp, blob = int(vals[2]), vals[3]
+            if not isinstance(vals[2], int):  # a receive time that is no integer: damage
+                self.lost_pages += 1
+                return
+            stamp, blob = vals[2], vals[3]
             t, row = coll.generic(blob)
             coll.add_part(np.array([order]), np.array([stamp]), np.array([t]),
                           row.reshape(1, 6), lambda _: blob)

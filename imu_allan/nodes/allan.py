@@ -22,7 +22,11 @@ and publishes every ``publish_period`` seconds:
 With ``covariance_topic`` set, every ``imu/data_raw`` message is also republished there as it
 is drained, its angular-velocity and linear-acceleration covariance diagonals set to the live
 per-sample variance N^2 rate_hz of the latest coefficients (robot_localization reads these),
-patched in the serialized bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`).
+patched in the serialized bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`);
+with ``covariance_mode`` ``overbound``, N is the white noise whose Allan variance lies at or
+above the measured upper 95 % bound at every published averaging time
+(:func:`imu_allan.core.overbound.white_overbound`): conservative for a filter without bias
+states.
 
 The numerics are :class:`imu_allan.core.online.OnlineAllan` (stamp checks, stationarity
 gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
@@ -38,7 +42,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import Imu
+from sensor_msgs.msg import Imu, Temperature
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from .allan_plot import PlotPublisher
@@ -57,10 +61,10 @@ from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedA
 from ..core.model import NoiseModel
 from ..core.online import check_rate_options, OnlineAllan, StagedEstimate
 from ..core.streaming import parse_estimators
+from ..core.temperature import TemperatureRange
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
-from ..formats.imu_adapter import cdr_to_arrays
-from ..formats.imu_cdr import set_covariance_diagonals
+from ..formats.imu_cdr import cdr_to_arrays, set_covariance_diagonals
 from ..report.coeffs_layout import (
     COEFF_LABELS,
     coefficient_table,
@@ -119,6 +123,11 @@ PARAMETERS = [
                                   'the live per-sample variance N^2 rate_hz (the driver values '
                                   'until the first estimate; empty: off; read-only)',
           read_only=True),
+    Param('covariance_mode', 'raw', 'covariance_topic variances: raw (N^2 rate_hz of the fitted '
+                                    'white noise) or overbound (the white noise whose Allan '
+                                    'variance is at or above the measured upper 95 % bound at '
+                                    'every published averaging time; docs/exports.md)',
+          choices=('raw', 'overbound')),
     Param('targets', '', 'recording advice targets TERM=REL,...: relative 68.3 % half-widths '
                          'over the defaults (white_noise=0.02, bias_instability=0.10, others '
                          '0.25)'),
@@ -218,6 +227,11 @@ class AllanNode(Node):
         self._pub_kinds = {}  # imu/allan_deviation/<kind> of the other estimators
         self._deviation_publishers()
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        # The temperature range the current estimate spans (the driver's imu/temperature).
+        self._temperature = TemperatureRange(self.params['window_s'])
+        self.create_subscription(Temperature, 'imu/temperature',
+                                 lambda msg: self._temperature.add_message(msg),
+                                 qos_profile_sensor_data)
         self._pub_cov = self.create_publisher(
             Imu, self.params['covariance_topic'], qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
@@ -253,6 +267,7 @@ class AllanNode(Node):
             if changed & _RESTART:
                 self.get_logger().info('estimator settings changed: estimate restarted')
                 self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
+                self._temperature = TemperatureRange(self.params['window_s'])
             else:
                 self.pipeline.terms = parse_terms(self.params['terms'])
         if 'estimators' in changed:
@@ -329,8 +344,11 @@ class AllanNode(Node):
             if table is not None:
                 self._pub_coeffs.publish(multiarray(table, COEFF_LABELS))
                 # robot_localization reads per-message variances: N^2 f (NaN: keep the driver's)
-                self._cov_variance = discrete_white_std(
-                    table[:, IEEE_TERMS.index('white_noise'), 0], self.pipeline.rate_hz) ** 2
+                white = table[:, IEEE_TERMS.index('white_noise'), 0]
+                if self.params['covariance_mode'] == 'overbound' and result is not None:
+                    from ..core.overbound import white_overbound
+                    white = white_overbound(result, AXES)
+                self._cov_variance = discrete_white_std(white, self.pipeline.rate_hz) ** 2
             self._plot.offer(result, fitted)  # rendered off this thread, only if subscribed
             self._cycle = None
             self._cycle_cpu += time.perf_counter() - start
@@ -396,6 +414,7 @@ class AllanNode(Node):
             'model_file': self.model_file or '(none)',
             **self.last_cycle,
             **self._plot.stats(),
+            **self._temperature.key_values(),
         })
         if p.estimator is not None:  # per axis where values were rejected (NaN, inf, ...)
             stream.values.update({f'samples_used.{a}': int(n) for a, n, r in zip(

@@ -232,7 +232,7 @@ def polled_subscription(node, msg_type, topic, depth, overrides=True, raw=False)
     Messages queue in the middleware and a timer takes them in batches with
     :func:`take_batch`: at 1 kHz this costs a few percent of a core where one executor callback
     per message costs ~20 % (measured, docs/online.md).  With ``raw`` the batch holds the
-    serialized bytes (decode them with :func:`imu_allan.formats.imu_adapter.cdr_to_arrays`).
+    serialized bytes (decode them with :func:`imu_allan.formats.imu_cdr.cdr_to_arrays`).
     """
     from rclpy.callback_groups import CallbackGroup
     from rclpy.qos import (

@@ -16,6 +16,10 @@ Published (names relative, sensor-data QoS with QoS overrides enabled):
   quaternion of the device's orientation matrix (sensor frame in the device's
   north-east-down earth frame);
 * ``imu/mag`` (sensor_msgs/MagneticField, mag modes only): tesla (device gauss * 1e-4);
+* ``imu/temperature`` (sensor_msgs/Temperature, unless ``temperature_period`` is 0): the
+  board temperature in deg C, polled with 0xD1 every ``temperature_period`` s between data
+  records (DCP-GX3 Eq. 15 on the TemperatureMag channel's 12-bit code; variance 0 = unknown;
+  stamp: the reply's device timer mapped like the records');
 * ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once per ``diagnostics_period``.
 
 Stamps are the device timer mapped to the ROS clock (method: see
@@ -29,7 +33,7 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import Imu, MagneticField
+from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from .common import (
     apply_changes,
@@ -46,7 +50,8 @@ from ..formats.imu_cdr import CdrPacker
 
 DESCRIPTION = ('Reads a LORD MicroStrain 3DM-GX3-25 over a serial port (single-byte '
                'protocol) and publishes imu/data_raw, imu/data (orientation modes), imu/mag '
-               '(mag modes) and /diagnostics. Survives unplugging, stalls and garbage.')
+               '(mag modes), imu/temperature and /diagnostics. Survives unplugging, stalls and '
+               'garbage.')
 
 #: The parameter table (nodes.common.Param); only the covariances and time_offset change at run
 #: time, everything else configures the device once.
@@ -86,6 +91,9 @@ PARAMETERS = [
                                'it)', (0.001, 0.1), read_only=True),
     Param('diagnostics_period', 1.0, 'seconds between /diagnostics messages', (0.1, 60.0),
           read_only=True),
+    Param('temperature_period', 1.0, 'seconds between temperature polls (0xD1, answered '
+                                     'between data records, published on imu/temperature '
+                                     'in deg C); 0 = off', (0.0, 3600.0), read_only=True),
 ]
 
 
@@ -112,6 +120,9 @@ class DriverNode(Node):
         self.pub_mag = self.create_publisher(
             MagneticField, 'imu/mag', qos, qos_overriding_options=overrides) \
             if self.has_mag else None
+        self.pub_temperature = self.create_publisher(
+            Temperature, 'imu/temperature', qos, qos_overriding_options=overrides) \
+            if cfg['temperature_period'] > 0 else None
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.msg_raw, self.msg_data = Imu(), Imu()
         self.msg_mag = MagneticField()
@@ -127,7 +138,9 @@ class DriverNode(Node):
                 cfg['port'], cfg['baud'], cfg['mode'], cfg['rate_hz'],
                 on_batch=self._on_batch, poll_interval=cfg['read_period'],
                 clock=self._now, log=self._log, stall_timeout=stall,
-                record_raw=cfg['record_raw'] or None)
+                record_raw=cfg['record_raw'] or None,
+                temperature_period=cfg['temperature_period'],
+                on_temperature=self._on_temperature)
         except OSError as exc:
             raise InputError(cfg['record_raw'], f'cannot open for writing '
                                                 f'({exc.strerror})') from None
@@ -208,6 +221,20 @@ class DriverNode(Node):
                 raise
             # Shutting down (signal): the last batch has nowhere to go.
 
+    def _on_temperature(self, reading, stamp_ns):
+        """Session thread: publish one temperature (deg C; variance 0 = unknown)."""
+        stamp_ns += int(round(self.cfg['time_offset'] * 1e9))
+        msg = Temperature()
+        msg.header.frame_id = self.cfg['frame_id']
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 10**9)
+        msg.temperature = float(reading.celsius)
+        msg.variance = 0.0
+        try:
+            self.pub_temperature.publish(msg)
+        except Exception:
+            if self.context.ok():
+                raise
+
     def serialize_batch(self, rec, stamps):
         """
         Return ``[(publisher, CDR bytes of the batch's messages back to back, message size)]``.
@@ -274,6 +301,8 @@ class DriverNode(Node):
             'timer_resets': st.timer_resets, 'time_jumps': session.sync.jumps,
             'device_model': session.model, 'device_serial': session.serial_number,
             'firmware': session.firmware, 'state': state,
+            'temperature_c': float(session.last_temperature_c),
+            'temperature_readings': st.temperatures,
             'last_error': session.last_error,
         }
         arr = DiagnosticArray()

@@ -23,10 +23,18 @@ from ..core.units import si_unit
 
 
 def compute_advice(analysis, options, targets=None):
-    """Return the :class:`~imu_allan.core.advisor.Advice` of an analysis, on ``analyze``'s grid."""
+    """
+    Return the :class:`~imu_allan.core.advisor.Advice` of an analysis, on ``analyze``'s grid.
+
+    A record the motion verdict calls moving gets its moving axes in ``advice.moving``: its
+    curve measures the motion, so the advice is to record at rest (:func:`advice_sentence`).
+    """
     m_max = None if options.tau_max is None else int(options.tau_max * analysis.rate_hz)
-    return advise(analysis.result, analysis.fit, targets,
-                  analysis_grid(options.points_per_decade, options.min_clusters, m_max))
+    advice = advise(analysis.result, analysis.fit, targets,
+                    analysis_grid(options.points_per_decade, options.min_clusters, m_max))
+    if not getattr(analysis, 'static', True):
+        advice.moving = [a for a, d in (analysis.motion or {}).items() if d.get('moving')]
+    return advice
 
 
 def _num(value):
@@ -53,7 +61,9 @@ def advice_to_json(advice):
                                               upper_limit=_num(entry.upper_limit),
                                               unit=si_unit(axis, term)))
     return {'targets': dict(advice.targets), 'axes': axes,
-            'unresolved': [_time_entry(u, axis=u.axis, terms=list(u.terms))
+            'unresolved': [_time_entry(u, axis=u.axis, terms=list(u.terms),
+                                       **({} if u.alternative is None else
+                                          {'alternative': list(u.alternative)}))
                            for u in advice.unresolved],
             'record_more_s': _num(advice.record_more_s),
             'undetected': undetected}
@@ -78,8 +88,38 @@ def _percent(rel):
     return f'{100 * rel:.3g} %'
 
 
+def alternative_words(u):
+    """
+    One unresolved alternative in words, with the time until the data decide.
+
+    'gyro_x: rate random walk or rate ramp: cannot tell yet; record about 4 h more'.
+    """
+    if len(u.terms) == 2:
+        what = f'{_words(u.terms[0])} or {_words(u.terms[1])}'
+    elif len(u.terms) == 1:
+        what = f'{_words(u.terms[0])} or none'
+    else:
+        what = 'which of ' + ', '.join(_words(t) for t in u.terms)
+    if u.more_s:
+        when = f'record {format_duration(u.more_s)} more'
+    else:
+        when = f'no record length within reach will tell ({u.reason})' if u.reason else \
+            'record longer'
+    return f'{u.axis}: {what}: cannot tell yet; {when}'
+
+
 def advice_sentence(advice):
-    """One sentence a person can act on: how much longer to record, and why."""
+    """
+    One sentence a person can act on: how much longer to record, and why.
+
+    Never "no need to record longer" while an alternative term set remains open
+    (``advice.unresolved``) or the record was moving (``advice.moving``).
+    """
+    moving = getattr(advice, 'moving', None)
+    if moving:
+        return (f'advice: the IMU moved during the record ({", ".join(moving)}): the curve '
+                f'measures the motion, not the sensor noise; record again at rest (on a '
+                f'still, vibration-free support) for the noise coefficients.')
     detected = [(axis, term, e) for axis, terms in advice.axes.items()
                 for term, e in terms.items() if e.detected]
     record = advice.record_more_s
@@ -95,16 +135,12 @@ def advice_sentence(advice):
     elif record > 0:
         clauses.append(f'record {format_duration(record)} more to tell the unresolved terms '
                        f'apart')
-    pairs = {}
-    for u in advice.unresolved:
-        pairs.setdefault(tuple(u.terms), []).append(u.axis)
-    for (a, b), axes in pairs.items():
-        clauses.append(f'{", ".join(axes)} cannot yet tell {_words(a)} from {_words(b)}')
+    clauses += [alternative_words(u) for u in advice.unresolved]
     for axis, term, e in detected:
         if e.more_s is None:
             clauses.append(f'{axis} {_words(term)} will not reach '
                            f'{_percent(advice.targets[term])} ({e.reason})')
-    if not clauses:
+    if not clauses and not advice.unresolved:
         met = sorted({t for _, t, _ in detected})
         targets = ', '.join(f'{_words(t)} {_percent(advice.targets[t])}' for t in met)
         return f'advice: every precision target is met ({targets}): no need to record longer.'

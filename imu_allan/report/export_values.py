@@ -9,11 +9,20 @@ One place for the rules the Kalibr file introduced and every exporter shares:
 * ``inflate = (white, walk)`` multiplies the standard deviations: ``white`` the white noise N,
   ``walk`` the bias terms (random walk K, bias instability B);
 * a single-valued key takes the worst (largest) axis of its sensor; which axis, and whether it
-  was an upper limit, is recorded per key for the file header.
+  was an upper limit, is recorded per key for the file header;
+* with ``overbound`` (``{'horizon_s': H or None}``) the terms of the consumer's own model
+  (:attr:`ExportValues.model`) take the values of :func:`imu_allan.core.overbound.overbound`
+  instead (AVAR at or above the measured upper 95 % bound from tau0 to the horizon), the
+  inflation multiplying on top; per key the factor against the raw value (fit or upper limit)
+  and the averaging times where the bound is tight are recorded for the header and the report.
+* an analysis whose motion verdict says the IMU moved gives no values (its curve measures the
+  motion, not the sensor noise) unless it was run with ``allow_motion``
+  (``analyze --allow-motion``).
 """
 
 import math
 
+from .export_registry import WHITE_WALK
 from ..core.units import AXES, sensor_of
 
 #: Which inflation factor (index into ``inflate``) scales each term; others are not inflated.
@@ -33,6 +42,12 @@ def check_inflate(inflate):
     return white, walk
 
 
+def motion_withheld(analysis):
+    """Return whether ``analysis`` moved (motion verdict) without ``allow_motion``."""
+    return (analysis is not None and not getattr(analysis, 'static', True)
+            and not getattr(analysis, 'allow_motion', False))
+
+
 class ExportValues:
     """
     Per-axis values of a fitted model, ready for an exporter (SI, continuous time).
@@ -41,8 +56,14 @@ class ExportValues:
     :class:`~imu_allan.core.analysis.Analysis` (its ``fit`` is used).
     """
 
-    def __init__(self, fitted, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw'):
-        """Collect from ``fitted``; ``rate_hz`` defaults to the rate the model was fitted at."""
+    def __init__(self, fitted, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw',
+                 overbound=None, model=WHITE_WALK):
+        """
+        Collect from ``fitted``; ``rate_hz`` defaults to the rate the model was fitted at.
+
+        ``overbound``: None (raw values) or ``{'horizon_s': seconds or None}``; ``model``: the
+        consumer's terms (what is overbounded).
+        """
         analysis = fitted if hasattr(fitted, 'fit') else None
         #: the Analysis when one was given (its band and upper limits), else None
         self.analysis = analysis
@@ -56,6 +77,45 @@ class ExportValues:
         self.topic = topic
         #: key -> {'axes': [axis, ...], 'upper': [axis, ...]} for the header
         self.used = {}
+        self.overbound = None if overbound is None else dict(overbound)
+        self.model = tuple(model)
+        #: key -> {'factor': {axis: x}, 'tight_tau_s': {axis: [s, ...]}} (overbound only)
+        self.overbound_used = {}
+        self._overbound_fits = {}
+        self._last_overbound = {}
+        #: the record moved and motion was not allowed: nothing is exported
+        self.motion_withheld = motion_withheld(analysis)
+        if self.overbound is not None and getattr(self.fit, 'result', None) is None:
+            raise ValueError('overbound needs the measured Allan deviation (a FittedModel from '
+                             'fit_noise_model, or an Analysis)')
+
+    @property
+    def horizon_s(self):
+        """Return the overbound horizon (s): as asked, else the longest measured tau; None: raw."""
+        if self.overbound is None:
+            return None
+        horizon = self.overbound.get('horizon_s')
+        return float(self.fit.result.tau[-1]) if horizon is None else float(horizon)
+
+    def overbound_fit(self, axes, shapes=None):
+        """
+        :class:`~imu_allan.core.overbound.OverboundFit` of ``shapes`` (default: the model).
+
+        ``axes``: one axis, or several whose envelope one model must bound (cached).
+        """
+        from ..core.overbound import overbound_axes
+        shapes = tuple(shapes or self.model)
+        key = (axes if isinstance(axes, str) else tuple(axes), shapes)
+        if key not in self._overbound_fits:
+            self._overbound_fits[key] = overbound_axes(
+                self.fit.result, axes, shapes, self.overbound.get('horizon_s'))
+        return self._overbound_fits[key]
+
+    def note_overbound(self, key, axis, factor, tight_tau):
+        """Record, for ``key`` on ``axis``, the factor against the raw value and the tight taus."""
+        entry = self.overbound_used.setdefault(key, {'factor': {}, 'tight_tau_s': {}})
+        entry['factor'][axis] = float(factor)
+        entry['tight_tau_s'][axis] = [float(t) for t in tight_tau]
 
     def axes(self, sensor):
         """Fitted axes of ``'gyro'`` or ``'accel'``, in the package's order."""
@@ -64,16 +124,35 @@ class ExportValues:
     def value(self, axis, term, param='value'):
         """``(value, is_upper_limit)`` of one term on one axis, inflated; NaN if unknown."""
         factor = self.inflate[INFLATED_BY[term]] if term in INFLATED_BY else 1.0
+        if self.motion_withheld:
+            return math.nan, False
+        raw, upper = self.raw_value(axis, term, param)
+        if (self.overbound is None or term not in self.model or param != 'value'
+                or axis not in self.fit.axes):
+            return raw * factor, upper
+        fit = self.overbound_fit(axis)
+        value = fit.value(term)
+        if not value > 0:   # the bound does not need the term; consumers refuse zeros
+            return raw * factor, upper
+        self._last_overbound[(axis, term)] = (value / raw if raw > 0 else math.nan,
+                                              fit.tight_tau)
+        return value * factor, False
+
+    def raw_value(self, axis, term, param='value'):
+        """``(value, is_upper_limit)`` of the fit (or its upper limit), not inflated."""
         value = self.fit.value(axis, term, param) if axis in self.fit.axes else math.nan
         if math.isfinite(value):
-            return value * factor, False
+            return value, False
         if axis not in self.fit.axes or param != 'value':
             return math.nan, False
         limit = self.fit.upper_limit(axis, term)
-        return limit * factor, math.isfinite(limit)
+        return limit, math.isfinite(limit)
 
-    def _record(self, key, axes, upper):
+    def _record(self, key, axes, upper, term=None):
         self.used[key] = {'axes': list(axes), 'upper': [a for a, u in zip(axes, upper) if u]}
+        for axis in axes:
+            if (axis, term) in self._last_overbound:
+                self.note_overbound(key, axis, *self._last_overbound[(axis, term)])
 
     def worst(self, sensor, term, key):
         """Return the largest value over the sensor's axes (None if none is known), for ``key``."""
@@ -85,7 +164,7 @@ class ExportValues:
         if best is None:
             self._record(key, [], [])
             return None
-        self._record(key, [best[1]], [best[2]])
+        self._record(key, [best[1]], [best[2]], term)
         return best[0]
 
     def per_axis(self, sensor, term, key):
@@ -94,7 +173,7 @@ class ExportValues:
         pairs = [self.value(a, term) for a in axes]
         out = [v if math.isfinite(v) else None for v, _ in pairs]
         self._record(key, [a for a, (v, _) in zip(axes, pairs) if math.isfinite(v)],
-                     [u for v, u in pairs if math.isfinite(v)])
+                     [u for v, u in pairs if math.isfinite(v)], term)
         return out
 
     def upper_limit_keys(self):

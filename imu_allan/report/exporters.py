@@ -14,9 +14,12 @@ the keys written as upper limits.
 
 Registry
 --------
-:data:`EXPORTERS` maps a name to an :class:`Exporter`::
+:data:`EXPORTERS` (in :mod:`.export_registry`) maps a name to an :class:`Exporter`::
 
-    Exporter(name, files, consumer, time_base, conversion, build, render)
+    Exporter(name, files, consumer, time_base, conversion, build, render, per_axis, model)
+
+``model`` is the consumer's own noise model (terms of ``core/terms.py``; default white noise +
+rate random walk), the one ``--overbound`` fits (:mod:`imu_allan.core.overbound`).
 
 ``build(values) -> dict`` turns an :class:`~imu_allan.report.export_values.ExportValues` into
 the data the file holds (that dict is what :func:`export` returns); ``render(data, header,
@@ -25,52 +28,30 @@ lines of :func:`header_lines`, to be written first).  Adding a consumer (for exa
 SDF ``<imu>`` element and PX4's gazebo_imu_plugin block) is two functions and one call in the
 module that defines them::
 
-    from imu_allan.report.exporters import Exporter, register
-    register(Exporter('gazebo', ('gazebo_imu.sdf',), 'Gazebo (gz-sensors)', 'per sample',
+    from imu_allan.report.export_registry import Exporter
+    GAZEBO = Exporter('gazebo', ('gazebo_imu.sdf',), 'Gazebo (gz-sensors)', 'per sample',
                       'stddev = N sqrt(f); dynamic_bias_stddev = sigma sqrt(2 / tau_c)',
-                      build=_gazebo_build, render=_gazebo_render))
+                      build=_gazebo_build, render=_gazebo_render)
 
-plus an import of that module at the end of this one, so that ``--export`` and ``all`` see it.  A
+plus its registration at the end of this one (:mod:`.sim_exporters` does so), so that
+``--export`` and ``all`` see it; that module imports only the registry, never this one.  A
 builder asks ``values.worst(sensor, term, key)`` or ``values.per_axis(sensor, term, key)``
 (and ``values.value(axis, term, param)`` for Gauss-Markov parameters); the header's axis rule
 and upper-limit marks follow from those calls.
 """
 
-from dataclasses import dataclass
 import json
 import math
 from pathlib import Path
-from typing import Callable
 
+from .export_registry import Exporter, EXPORTERS, register
 from .export_values import check_inflate, ExportValues
+from .sim_exporters import SIM_EXPORTERS
 from ..errors import InputError
 
 EXPORT_DIR = 'export'
 #: Standard gravity written where a consumer wants a gravity magnitude (m/s^2).
 GRAVITY = 9.80665
-
-
-@dataclass(frozen=True)
-class Exporter:
-    """One consumer's file format (see the module docstring)."""
-
-    name: str
-    files: tuple
-    consumer: str
-    time_base: str            # 'continuous' or 'per sample'
-    conversion: str           # how N and K become the written numbers (f = rate in Hz)
-    build: Callable
-    render: Callable
-    per_axis: bool = False    # True: one number per axis; False: the worst axis per sensor
-
-
-EXPORTERS = {}
-
-
-def register(exporter):
-    """Add (or replace) an exporter in the registry."""
-    EXPORTERS[exporter.name] = exporter
-    return exporter
 
 
 def exporter_names():
@@ -108,6 +89,25 @@ def parse_inflate(text, option='--inflate'):
         raise InputError(option, str(exc)) from None
 
 
+def parse_horizon(text, option='--overbound-horizon'):
+    """``'20'`` -> 20.0 (s); InputError unless a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(option, f'expected a positive number of seconds, got {text!r}')
+    return value
+
+
+def check_overbound_args(args):
+    """Refuse ``--overbound`` without ``--export`` and a horizon without ``--overbound``."""
+    if getattr(args, 'overbound_horizon', None) is not None and not args.overbound:
+        raise InputError('--overbound-horizon', 'needs --overbound')
+    if getattr(args, 'overbound', False) and not args.export:
+        raise InputError('--overbound', 'needs --export NAMES (it changes the exported values)')
+
+
 def add_arguments(parser):
     """Add the ``--export`` and ``--inflate`` options of ``analyze`` (one-line errors, exit 2)."""
     import argparse
@@ -125,7 +125,15 @@ def add_arguments(parser):
     parser.add_argument('--inflate', metavar='WHITE[,WALK]', type=checked(parse_inflate),
                         default=(1.0, 1.0),
                         help='multiply the exported white-noise and bias standard deviations '
-                             '(default 1: no inflation; 0 < factor <= 1000)')
+                             '(default 1: no inflation; 0 < factor <= 1000; with --overbound, '
+                             'on top of it)')
+    parser.add_argument('--overbound', action='store_true',
+                        help="with --export: write the values of each consumer's own model "
+                             'whose Allan variance is at or above the measured upper 95 %% bound '
+                             'from tau0 to the horizon (docs/exports.md)')
+    parser.add_argument('--overbound-horizon', metavar='S', type=checked(parse_horizon),
+                        help='longest averaging time the overbound holds for, s (default: the '
+                             'longest measured)')
 
 
 # ----------------------------------------------------------------------------- header
@@ -146,7 +154,8 @@ def header_lines(exporter, values):
     white, walk = values.inflate
     inflation = ('none (x1)' if white == walk == 1.0 else
                  f'white noise x{white:g}, bias (random walk, instability) x{walk:g} '
-                 '(standard deviations)')
+                 '(standard deviations)'
+                 + (', on top of the overbound' if values.overbound is not None else ''))
     lines = [f'{exporter.consumer} IMU noise parameters from imu_allan {_version()}.',
              f'input: {values.source}',
              f'rate: {values.rate_hz:g} Hz',
@@ -158,11 +167,32 @@ def header_lines(exporter, values):
         lines.append(f'warning: model measured at {values.fitted_rate_hz:g} Hz, converted for '
                      f'{values.rate_hz:g} Hz: valid only if the IMU filters to the new band '
                      'before decimating (Kalibr wiki "IMU Noise Model")')
+    lines += overbound_lines(exporter, values)
     for key, axes in values.upper_limit_keys().items():
         lines.append(f'{key}: not detected on {", ".join(axes)}: its 95 % upper limit is '
                      'written (UPPER LIMIT)')
     for key in [k for k, u in values.used.items() if not u['axes']]:
         lines.append(f'{key}: not measured (no such axis in the input): null')
+    return lines
+
+
+def overbound_lines(exporter, values):
+    """Header lines of an overbounding export: what, the horizon, per key factor and tight tau."""
+    if values.overbound is None:
+        return []
+    from ..core.overbound import OVERBOUND_LEVEL
+    lines = [f'overbound: the values of this consumer\'s model ({" + ".join(exporter.model)}) '
+             f'give an Allan variance at or above the upper {100 * OVERBOUND_LEVEL:g} % bound of '
+             f'the measured one at every averaging time from tau0 to the horizon '
+             f'{values.horizon_s:.6g} s (imu_allan.core.overbound; Lethander & Taylor 2023); '
+             'factors are against the raw fit (its 95 % upper limit where not detected), on '
+             'the standard deviations N, K, B (variance keys grow by the square)']
+    for key, entry in values.overbound_used.items():
+        parts = [f'{axis} x{factor:.3g}' + (
+            f' (bound tight at {", ".join(f"{t:.3g}" for t in entry["tight_tau_s"][axis])} s)'
+            if entry['tight_tau_s'][axis] else '')
+            for axis, factor in entry['factor'].items()]
+        lines.append(f'overbound {key}: ' + '; '.join(parts))
     return lines
 
 
@@ -508,46 +538,84 @@ def _matlab_render(data, header, values=None):
 register(Exporter(
     'matlab', ('matlab_imu.m',), 'MATLAB Navigation / Sensor Fusion Toolbox (imuSensor)',
     'continuous', 'NoiseDensity = N, RandomWalk = K, BiasInstability = B, per axis',
-    _matlab_build, _matlab_render, per_axis=True))
+    _matlab_build, _matlab_render, per_axis=True,
+    model=('white_noise', 'bias_instability', 'rate_random_walk')))
 
 
 # ----------------------------------------------------------------------------- API
 
 
-def _prepare(fitted, name, rate_hz, inflate, source, topic):
+def _prepare(fitted, name, rate_hz, inflate, source, topic, overbound=False, horizon_s=None):
     if name not in EXPORTERS:
         raise ValueError(f'unknown exporter {name!r} (known: {", ".join(EXPORTERS)})')
     exporter = EXPORTERS[name]
-    values = ExportValues(fitted, rate_hz, inflate, source, topic)
+    spec = {'horizon_s': horizon_s} if overbound else None
+    if horizon_s is not None and not overbound:
+        raise ValueError('horizon_s is only used with overbound=True')
+    values = ExportValues(fitted, rate_hz, inflate, source, topic, spec, exporter.model)
     data = exporter.build(values)
     return exporter, values, data
 
 
-def export(fitted, name, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw'):
+def export(fitted, name, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw',
+           overbound=False, horizon_s=None):
     """
     Return the data one exporter writes, as a dict (SI; time base as the consumer wants it).
 
     ``fitted`` is a FittedModel (from :func:`imu_allan.fit_noise_model`) or an Analysis;
     ``rate_hz`` the IMU rate the consumer runs at (default: the rate of the fit);
-    ``inflate`` a factor or ``(white, walk)`` on the standard deviations.
+    ``inflate`` a factor or ``(white, walk)`` on the standard deviations (on top of the
+    overbound); ``overbound=True``: the values of the consumer's own model whose Allan variance
+    is at or above the measured upper 95 % bound from tau0 to ``horizon_s`` (default: the
+    longest measured averaging time; :mod:`imu_allan.core.overbound`).
     """
-    return _prepare(fitted, name, rate_hz, inflate, source, topic)[2]
+    return _prepare(fitted, name, rate_hz, inflate, source, topic, overbound, horizon_s)[2]
+
+
+def overbound_summary(values):
+    """Return the ``overbound`` entry of one exporter for ``report.json`` (None if raw)."""
+    if values.overbound is None:
+        return None
+    return {key: {'factor': {a: (f if math.isfinite(f) else None)
+                             for a, f in entry['factor'].items()},
+                  'tight_tau_s': entry['tight_tau_s']}
+            for key, entry in values.overbound_used.items()}
 
 
 def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
-                  topic='/imu/data_raw'):
-    """Write the named exporters' files into ``folder/export/``; return their relative paths."""
+                  topic='/imu/data_raw', overbound=False, horizon_s=None, summary=None):
+    """
+    Write the named exporters' files into ``folder/export/``; return their relative paths.
+
+    With ``overbound`` and a dict ``summary``, fills it with the ``overbound`` block of
+    ``report.json``: horizon, level, inflation and, per exporter and key, the factor against the
+    raw fit per axis and the averaging times where the bound is tight.  A horizon outside the
+    measured averaging times is an InputError naming ``--overbound-horizon``.
+    """
     target = Path(folder) / EXPORT_DIR
     target.mkdir(parents=True, exist_ok=True)
     written = []
     for name in names:
-        exporter, values, data = _prepare(fitted, name, rate_hz, inflate, source, topic)
+        try:
+            exporter, values, data = _prepare(fitted, name, rate_hz, inflate, source, topic,
+                                              overbound, horizon_s)
+        except ValueError as exc:
+            if overbound and 'horizon' in str(exc):
+                raise InputError('--overbound-horizon', str(exc)) from None
+            raise
         for file_name, text in exporter.render(data, header_lines(exporter, values),
                                                values).items():
             (target / file_name).write_text(text, encoding='utf-8')
             written.append(f'{EXPORT_DIR}/{file_name}')
+        if overbound and summary is not None:
+            from ..core.overbound import OVERBOUND_LEVEL
+            summary.setdefault('horizon_s', values.horizon_s)
+            summary.setdefault('level', OVERBOUND_LEVEL)
+            summary.setdefault('inflate', list(values.inflate))
+            summary.setdefault('exports', {})[name] = overbound_summary(values)
     return written
 
 
-# Exporters defined elsewhere register themselves on import (at the end: they import this).
-from . import sim_exporters  # noqa: E402, F401, I001, I100
+# The simulators' formats (Gazebo, PX4) come last in the registry, after the estimators'.
+for _exporter in SIM_EXPORTERS:
+    register(_exporter)

@@ -9,8 +9,10 @@ import math
 
 import numpy as np
 
+from .export_values import motion_withheld
 from .kalibr import kalibr_values
 from ..core.units import sample_unit
+from ..core.warmup import warmup_sentence
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
              'intervals with Greenhall-Riley EDF; joint GLS non-negative fit')
@@ -37,7 +39,8 @@ def analysis_to_json(analysis, samples=None):
                      'ci_low': _floats(res.ci_low[:, j]), 'ci_high': _floats(res.ci_high[:, j]),
                      'edf': _floats(res.edf[:, j])},
             'terms': analysis.fit.term_report(axis),
-            'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis])},
+            'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis]),
+                    'alternatives': analysis.fit.alternatives(axis)},
         }
     timing = analysis.timing
     kalibr, _ = kalibr_values(analysis)
@@ -53,6 +56,7 @@ def analysis_to_json(analysis, samples=None):
             'static': bool(analysis.static),
             'motion': analysis.motion,
             'tau_max_s': float(res.tau[-1]),
+            'warmup_s': float(getattr(analysis, 'warmup_s', 0.0)),
             'warnings': list(analysis.warnings),
         },
         'timing': {'gaps': timing.n_gaps, 'missing_samples': timing.missing_samples,
@@ -81,6 +85,10 @@ def console_summary(analysis):
              'noise coefficients (continuous-time, 68.3 % intervals):',
              f'  {"axis":8} {"term":17} {"value (SI)":>11} {"interval (SI)":>23} {"unit":>17}'
              f'  {"conventional":>11} {"unit"}']
+    moved = motion_withheld(analysis)
+    if moved:
+        lines[1] = ('the IMU MOVED: these curves measure the motion, not the sensor noise; '
+                    'the fit of the motion (no intervals: they assume noise):')
     for axis in analysis.axes:
         report = analysis.fit.term_report(axis)
         if not report:
@@ -88,8 +96,9 @@ def console_summary(analysis):
         for term, entry in report.items():
             lo, hi = entry['ci']
             conv = entry['conventional']
+            interval = f'{"(motion)":>24}' if moved else f'[{_fmt(lo):>10}, {_fmt(hi):>10}]'
             lines.append(f'  {axis:8} {term:17} {_fmt(entry["value"]):>11} '
-                         f'[{_fmt(lo):>10}, {_fmt(hi):>10}] {entry["unit"]:>17}'
+                         f'{interval} {entry["unit"]:>17}'
                          f'  {_fmt(conv["value"]):>11} {conv["unit"]}')
             for extra in ('tau_c', 'frequency_hz'):
                 if extra in entry:
@@ -100,8 +109,12 @@ def console_summary(analysis):
     kalibr, per_axis = kalibr_values(analysis)
     kal = ', '.join(f'{k} {_fmt(v)}' + (' (upper limit)' if k in kalibr['upper_limits'] else '')
                     for k, v in kalibr.items() if k not in ('update_rate', 'upper_limits'))
+    if moved:
+        kal = 'not given: the IMU moved (analyze --allow-motion gives the numbers anyway)'
     lines.append(f'Kalibr (continuous-time, worst axis): {kal}')
     lines.append('verdict: ' + ('static' if analysis.static else 'NOT static (moving)'))
+    if getattr(analysis, 'warmup_s', 0.0):
+        lines.append(warmup_sentence(analysis.warmup_s))
     if analysis.outliers.total:
         lines.append(f'outliers beyond Tukey fences (F=3): {analysis.outliers.total}')
     for warning in analysis.warnings:

@@ -1,5 +1,7 @@
 """
-The ``--out DIR`` files: report.json, Kalibr imu.yaml, allan_results.csv and PNG plots.
+The ``--out DIR`` files: report.json, Kalibr imu.yaml, allan_results.csv, plots, report.html.
+
+report.html (:mod:`imu_allan.report.html`) shows the others; it is written last.
 
 Files are first written into a staging folder next to DIR and moved in only when all of them
 succeeded, so a failed run never leaves a half-written report behind.
@@ -51,7 +53,8 @@ def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/im
     Write every report file into ``out_dir`` atomically; returns the list of file names.
 
     ``extra(staging_dir)`` may write more files (e.g. a bag) into the staging folder first;
-    ``exports = (names, inflate)`` writes those exporters' files into ``export/``.
+    ``exports = (names, inflate[, overbound, horizon_s])`` writes those exporters' files into
+    ``export/`` (with ``overbound``, ``report.json`` gets their ``overbound`` block).
     """
     out_dir = Path(out_dir)
     try:
@@ -67,15 +70,22 @@ def _write_out_dir(out_dir, analysis, raw, denoised, report, topic, extra, expor
         if extra is not None:
             extra(staging)
         report = report if report is not None else analysis_to_json(analysis)
+        if exports and exports[0]:
+            from .exporters import write_exports
+            overbound = {}
+            write_exports(staging, analysis, exports[0], inflate=exports[1], topic=topic,
+                          overbound=bool(exports[2:3] and exports[2]),
+                          horizon_s=exports[3] if len(exports) > 3 else None, summary=overbound)
+            if overbound:
+                report['overbound'] = overbound
         (staging / 'report.json').write_text(json.dumps(report, indent=1), encoding='utf-8')
         write_kalibr_yaml(staging / 'imu.yaml', analysis, topic)
         write_results_csv(staging / 'allan_results.csv', analysis, denoised)
-        for sensor in ('gyro', 'accel'):
-            plots.plot_adev(staging / f'adev_{sensor}.png', analysis, sensor, denoised)
+        figures = {sensor: plots.plot_adev(staging / f'adev_{sensor}.png', analysis, sensor,
+                                           denoised) for sensor in ('gyro', 'accel')}
         plots.plot_timeseries(staging / 'timeseries.png', analysis, raw)
-        if exports and exports[0]:
-            from .exporters import write_exports
-            write_exports(staging, analysis, exports[0], inflate=exports[1], topic=topic)
+        from .html import write_analysis_page  # last: it lists and shows the files above
+        write_analysis_page(staging, report, figures)
         out_dir.mkdir(exist_ok=True)
         names = sorted(os.listdir(staging))
         for name in names:

@@ -87,10 +87,14 @@ def draw_adev(ax, result, fitted, axes, denoised=None):
 
 
 def plot_adev(path, analysis, sensor, denoised=None):
-    """Allan deviation plot of one sensor ('gyro' or 'accel'); returns False if no axis."""
+    """
+    Allan deviation plot of one sensor ('gyro' or 'accel') saved as PNG at ``path``.
+
+    Returns the Figure (the HTML page shows it as SVG: one drawing for both), None if no axis.
+    """
     axes = [a for a in analysis.axes if is_gyro(a) == (sensor == 'gyro')]
     if not axes:
-        return False
+        return None
     fig = Figure(figsize=(8.0, 5.6), dpi=110)
     ax = fig.subplots()
     draw_adev(ax, analysis.result, analysis.fit, axes,
@@ -101,7 +105,7 @@ def plot_adev(path, analysis, sensor, denoised=None):
                  f'{analysis.rate_hz:.4g} Hz)', fontsize=9)
     fig.tight_layout()
     fig.savefig(path)
-    return True
+    return fig
 
 
 class LiveFigure:

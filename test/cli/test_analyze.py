@@ -145,7 +145,7 @@ def test_out_dir_has_every_report_file_and_nothing_half_written(sim_csv, tmp_pat
     assert proc.returncode == 0, proc.stderr
     names = sorted(p.name for p in out.iterdir())
     assert names == ['adev_accel.png', 'adev_gyro.png', 'allan_results.csv', 'imu.yaml',
-                     'report.json', 'timeseries.png']
+                     'report.html', 'report.json', 'timeseries.png']
     for png in out.glob('*.png'):
         assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 20_000
     import yaml

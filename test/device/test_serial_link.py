@@ -392,3 +392,98 @@ def test_sim_bad_arguments():
     assert out.returncode == 2 and '--stream' in out.stderr
     out = subprocess.run(run + ['--help'], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0 and '--corrupt-rate' in out.stdout
+
+
+# ------------------------------------------------------------- reconnect: the parser is flushed
+
+class _CountingParser(StreamParser):
+    """A StreamParser that also sums the bytes of the packets it accepts (byte accounting)."""
+
+    accepted = 0
+
+    def feed(self, data):
+        """Feed, and add up the accepted packets' bytes."""
+        out = super().feed(data)
+        self.accepted += sum(map(len, out))
+        return out
+
+
+def _session(port_path, batches):
+    from imu_allan.device.serial_link import Gx3Session
+    session = Gx3Session(port_path, 115200, 'accel_rate', 100.0,
+                         on_batch=lambda code, rec, stamps: batches.append(rec.copy()),
+                         stall_timeout=2.0, poll_interval=0.002,
+                         backoff=Backoff(initial=0.05, maximum=0.2))
+    session.parser = _CountingParser()
+    return session
+
+
+def test_port_loss_flushes_the_parser_and_counts_the_false_header(tmp_path):
+    """
+    Bytes held behind a false header when the port closes: good records delivered, rest counted.
+
+    A real pty carries two records, a header-like byte (0xC5: announces 43 bytes) with 10
+    junk bytes, then a third record: the parser delivers the first two and holds the
+    last 41 bytes (the false packet reaches past them).  The far end then closes (a
+    disconnect); the session's loss path flushes as parse_bytes ends a capture: the third
+    record is delivered and the 11 bytes are counted in ``rejected_bytes``.  Before, the
+    reopen reset them away uncounted.
+    """
+    import os
+    records = [p.encode_record(p.ACCEL_RATE, [0.1 * k] * 6, 1000 + 625 * k) for k in range(3)]
+    false = bytes([0xC5]) + bytes(range(1, 11))
+    stream = records[0] + records[1] + false + records[2]
+    master, slave = os.openpty()
+    batches = []
+    session = _session(os.ttyname(slave), batches)
+    try:
+        session.link.open()
+        os.write(master, stream)
+        end = time.monotonic() + 5.0
+        while session.link.serial.in_waiting < len(stream) and time.monotonic() < end:
+            time.sleep(0.001)
+        assert session._pump() == 2
+        assert session.parser.buffered == len(false) + len(records[2])
+        os.close(master)
+        master = None
+        with pytest.raises(LinkError):
+            while True:
+                session.link.read()
+        session.backoff = Backoff(initial=0.0, maximum=0.0)
+        session._lost('disconnected')
+    finally:
+        session.link.close()
+        if master is not None:
+            os.close(master)
+        os.close(slave)
+    ps = session.parser.stats
+    assert sum(len(b) for b in batches) == 3 and session.stats.records == 3
+    assert ps.rejected_bytes == len(false) and session.parser.buffered == 0
+    assert ps.bytes_in == session.parser.accepted + ps.rejected_bytes
+
+
+def test_simulator_disconnect_every_byte_accounted(sim, tmp_path):
+    """
+    The simulator closes its terminal mid-stream and comes back; nothing read goes unaccounted.
+
+    With junk between records (header-like bytes among it), after the reconnect every byte
+    the session read is in an accepted packet, in ``rejected_bytes`` or still buffered.
+    """
+    link = str(tmp_path / 'gx3')
+    proc, port, _ = sim('--link', link, '--garbage-rate', '0.3', '--disconnect-after', '0.6',
+                        '--disconnect-seconds', '0.4')
+    port.close()
+    batches = []
+    session = _session(link, batches)
+    session.start()
+    try:
+        end = time.monotonic() + 30.0
+        while time.monotonic() < end and not (session.stats.reconnects >= 1
+                                              and session.stats.records > 150):
+            time.sleep(0.05)
+    finally:
+        session.stop()
+    assert session.stats.reconnects >= 1 and session.stats.records > 150
+    ps = session.parser.stats
+    assert ps.rejected_bytes > 0
+    assert ps.bytes_in == session.parser.accepted + ps.rejected_bytes + session.parser.buffered

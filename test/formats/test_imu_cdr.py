@@ -87,7 +87,8 @@ def test_bulk_decoder_rejects_big_endian_cdr():
 
 def test_cdr_to_arrays_equals_the_message_adapter_on_rclpy_bytes():
     """Bulk decoding of raw bytes (the allan node's intake) equals the per-message adapter."""
-    from imu_allan.formats.imu_adapter import cdr_to_arrays, imus_to_arrays
+    from imu_allan.formats.imu_adapter import imus_to_arrays
+    from imu_allan.formats.imu_cdr import cdr_to_arrays
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import Imu
     rng = np.random.default_rng(12)

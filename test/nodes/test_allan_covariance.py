@@ -8,6 +8,7 @@ sides (through the node's QoS override parameters), so a lost message is a failu
 """
 
 import math
+import subprocess
 
 from conftest import executable, NodeRun, spin_until
 from imu_allan.core.model import NoiseModel
@@ -21,6 +22,27 @@ rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 RATE = 100.0
 N = 5000
 DRIVER_GYRO, DRIVER_ACCEL = 0.5, 0.25  # the driver's own diagonal variances (pass-through)
+
+
+def _simulated_messages(model, seed):
+    """Return (samples, stamps ns, Imu messages with the driver's covariances) at RATE."""
+    from sensor_msgs.msg import Imu
+    data = simulate(model, N, RATE, seed=seed)
+    stamps = 1_700_000_000 * 10 ** 9 + np.arange(N) * 10_000_000  # ns, 10 ms apart
+    msgs = []
+    for ns, row in zip(stamps.tolist(), data):
+        m = Imu()
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(ns, 10 ** 9)
+        m.header.frame_id = 'imu_link'
+        m.orientation_covariance[0] = -1.0
+        m.angular_velocity_covariance = [DRIVER_GYRO, 1e-9, 0, 0, DRIVER_GYRO, 0, 0, 0,
+                                         DRIVER_GYRO]
+        m.linear_acceleration_covariance = [DRIVER_ACCEL, 0, 0, 0, DRIVER_ACCEL, 0, 0, 0,
+                                            DRIVER_ACCEL]
+        w, a = m.angular_velocity, m.linear_acceleration
+        w.x, w.y, w.z, a.x, a.y, a.z = (float(v) for v in row)
+        msgs.append(m)
+    return data, stamps, msgs
 
 
 def test_covariance_topic_carries_live_per_sample_variances(ros_context):
@@ -37,21 +59,7 @@ def test_covariance_topic_carries_live_per_sample_variances(ros_context):
     from std_msgs.msg import Float64MultiArray
 
     model = NoiseModel.from_dict({'gyro': {'white_noise': 5e-4}, 'accel': {'white_noise': 8e-4}})
-    data = simulate(model, N, RATE, seed=21)
-    stamps = 1_700_000_000 * 10 ** 9 + np.arange(N) * 10_000_000  # ns, 10 ms apart
-    msgs = []
-    for ns, row in zip(stamps.tolist(), data):
-        m = Imu()
-        m.header.stamp.sec, m.header.stamp.nanosec = divmod(ns, 10 ** 9)
-        m.header.frame_id = 'imu_link'
-        m.orientation_covariance[0] = -1.0
-        m.angular_velocity_covariance = [DRIVER_GYRO, 1e-9, 0, 0, DRIVER_GYRO, 0, 0, 0,
-                                         DRIVER_GYRO]
-        m.linear_acceleration_covariance = [DRIVER_ACCEL, 0, 0, 0, DRIVER_ACCEL, 0, 0, 0,
-                                            DRIVER_ACCEL]
-        w, a = m.angular_velocity, m.linear_acceleration
-        w.x, w.y, w.z, a.x, a.y, a.z = (float(v) for v in row)
-        msgs.append(m)
+    data, stamps, msgs = _simulated_messages(model, 21)
 
     # the configured rate: the covariances are N^2 f with this f
     cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=0.5',
@@ -108,3 +116,77 @@ def test_covariance_topic_carries_live_per_sample_variances(ros_context):
     for row in np.unique(diag[first_live:], axis=0):
         assert any(np.allclose(row, v, rtol=1e-12, atol=0) for v in live), row
     assert len(np.unique(diag[first_live:], axis=0)) >= 2, 'the variances never updated'
+
+
+def test_covariance_mode_overbound(ros_context):
+    """
+    ``covariance_mode:=overbound``: N^2 f with N the white noise above the measured bound.
+
+    Same stream as above but with a bias instability (a filter without bias states must
+    absorb it).  Every republished diagonal after the first estimate must be f N^2 with N^2 /
+    tau at or above the published Allan variance at every published tau of one
+    imu/allan_deviation table (the overbound holds above the upper 95 % bound, which lies
+    above the estimate itself), and within 4x of the largest tau ADEV^2 (the bound's margin at
+    the longest tau, EDF >= 10 there, is below 2x in variance); and above the raw N^2 f of the
+    coefficient tables, since bias instability lifts the white-only bound.  A value outside
+    raw, overbound is refused at start (exit 2, one line naming the parameter).
+    """
+    from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+    from sensor_msgs.msg import Imu
+    from std_msgs.msg import Float64MultiArray
+
+    model = NoiseModel.from_dict({'gyro': {'white_noise': 5e-4, 'bias_instability': 5e-4},
+                                  'accel': {'white_noise': 8e-4, 'bias_instability': 8e-4}})
+    data, stamps, msgs = _simulated_messages(model, 22)
+    cmd = [executable('allan'), '--ros-args', '-p', 'publish_period:=0.5',
+           '-p', f'rate_hz:={RATE}', '-p', 'covariance_topic:=imu/data_cov',
+           '-p', 'covariance_mode:=overbound', '-p', 'queue_depth:=20000',
+           '-p', 'qos_overrides./imu/data_raw.subscription.reliability:=reliable',
+           '-p', 'qos_overrides./imu/data_cov.publisher.reliability:=reliable',
+           '-p', 'qos_overrides./imu/data_cov.publisher.depth:=20000']
+    with NodeRun(cmd, ros_context, 'covariance_mode_client') as run:
+        node, executor = run.node, run.executor
+        qos = QoSProfile(history=QoSHistoryPolicy.KEEP_LAST, depth=20000,
+                         reliability=QoSReliabilityPolicy.RELIABLE)
+        received, tables, devs = [], [], []
+        node.create_subscription(Imu, 'imu/data_cov', received.append, qos)
+        node.create_subscription(
+            Float64MultiArray, 'imu/allan_coeffs',
+            lambda m: tables.append(np.asarray(m.data).reshape(6, 5, 3)), 50)
+        node.create_subscription(
+            Float64MultiArray, 'imu/allan_deviation',
+            lambda m: devs.append(np.asarray(m.data).reshape(7, -1)), 50)
+        pub = node.create_publisher(Imu, 'imu/data_raw', qos)
+        assert spin_until(executor, lambda: pub.get_subscription_count() > 0
+                          and node.count_publishers('imu/data_cov') > 0, 30), \
+            'allan node did not come up'
+        spin_until(executor, lambda: False, 1.0)
+        for i in range(0, N, 250):
+            for msg in msgs[i:i + 250]:
+                pub.publish(msg)
+            spin_until(executor, lambda: False, 0.25)
+        assert spin_until(executor, lambda: len(received) >= N, 60), \
+            f'{len(received)} of {N} messages republished'
+    assert 'Traceback' not in run.output, run.output
+    assert len(received) == N
+    diag = np.array([[m.angular_velocity_covariance[k] for k in (0, 4, 8)]
+                     + [m.linear_acceleration_covariance[k] for k in (0, 4, 8)]
+                     for m in received])
+    driver = np.array([DRIVER_GYRO] * 3 + [DRIVER_ACCEL] * 3)
+    live_rows = np.unique(diag[~np.all(diag == driver, axis=1)], axis=0)
+    assert len(live_rows) >= 2, 'the variances never updated'
+    white = IEEE_TERMS.index('white_noise')
+    raw = [(t[:, white, 0] * math.sqrt(RATE)) ** 2 for t in tables]
+    for row in live_rows:
+        n2 = row / RATE
+        fits = []
+        for dev in devs:
+            tau, avar = dev[0], dev[1:] ** 2
+            fits.append(np.all(n2[:, None] / tau >= avar * (1 - 1e-9))
+                        and np.all(n2 <= 4.0 * np.max(avar * tau, axis=1)))
+        assert any(fits), row
+        assert all(np.all(row > r) for r in raw), (row, raw)
+
+    bad = [executable('allan'), '--ros-args', '-p', 'covariance_mode:=loose']
+    proc = subprocess.run(bad, capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and 'covariance_mode' in proc.stderr, proc.stderr

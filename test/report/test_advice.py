@@ -44,9 +44,33 @@ def test_null_more_s_carries_a_reason():
 
 def test_sentence_names_the_time_the_term_and_the_pair():
     sentence = advice_sentence(_advice())
+    # each open alternative in words with its own time (issue 22: "rate random walk or rate
+    # ramp: cannot tell yet; record about 4 h more"), no longer one clause per pair of terms
     assert sentence == ('advice: record about 1.5 h more to pin bias instability to 10 % on '
-                        'all axes; accel_x cannot yet tell bias instability from rate random '
-                        'walk.')
+                        'all axes; accel_x: bias instability or rate random walk: cannot tell '
+                        'yet; record about 30 min more.')
+
+
+def test_an_open_alternative_is_never_no_need_to_record_longer():
+    advice = Advice(dict(DEFAULT_TARGETS), 600.0)
+    advice.axes['gyro_x'] = {'white_noise': TermAdvice(0.004, 0.0)}
+    advice.unresolved.append(Unresolved('gyro_x', ('rate_random_walk',), None,
+                                        'not separated within 1e+04 x the record',
+                                        ('white_noise', 'bias_instability',
+                                         'rate_random_walk')))
+    sentence = advice_sentence(advice)
+    assert 'no need' not in sentence
+    assert 'gyro_x: rate random walk or none: cannot tell yet' in sentence
+    assert advice_to_json(advice)['unresolved'][0]['alternative'] == [
+        'white_noise', 'bias_instability', 'rate_random_walk']
+
+
+def test_a_moving_record_is_told_to_record_at_rest():
+    advice = Advice(dict(DEFAULT_TARGETS), 600.0)
+    advice.axes['gyro_x'] = {'white_noise': TermAdvice(0.004, 0.0)}
+    advice.moving = ['gyro_z']
+    sentence = advice_sentence(advice)
+    assert 'record again at rest' in sentence and 'no need' not in sentence
 
 
 def test_sentence_when_everything_is_met():

@@ -27,10 +27,16 @@ import ast
 import json
 import math
 import re
+import runpy
+import subprocess
+import sys
 
 from conftest import run_command
 import imu_allan
+from imu_allan.core.edf import chi2_interval
 from imu_allan.core.model import NoiseModel
+from imu_allan.core.overbound import upper_bound
+from imu_allan.core.simulate import flicker_noise
 from imu_allan.errors import InputError
 from imu_allan.report.exporters import export, EXPORTERS, parse_inflate, parse_names, write_exports
 import numpy as np
@@ -425,3 +431,153 @@ def test_cli_writes_every_export_and_rejects_bad_names(tmp_path):
         assert proc.returncode == 2 and word in proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1
         assert not (tmp_path / 'bad').exists()
+
+
+# --------------------------------------------------------------------------- overbound
+
+
+@pytest.fixture(scope='module')
+def overbound_files(fitted, tmp_path_factory):
+    folder = tmp_path_factory.mktemp('overbound')
+    summary = {}
+    written = write_exports(folder, fitted, list(EXPORTERS), source='simulated test record',
+                            overbound=True, summary=summary)
+    return {p.split('/')[-1]: (folder / p).read_text() for p in written}, summary
+
+
+def _matlab_flicker(files, axes, data):
+    """MATLAB's BiasInstability (part of its model, overbounded too) as 1/f noise of that B."""
+    m = _matlab(files['matlab_imu.m'])
+    for j, axis in enumerate(axes):
+        sensor, i = axis.split('_')[0], 'xyz'.index(axis[-1])
+        rng = np.random.default_rng([SEED, 100 + j])
+        data[:, j] += flicker_noise(rng, data.shape[0], RATE, m[sensor]['BiasInstability'][i])
+    return data
+
+
+def _below_bound(fitted, name, axes, data):
+    """Averaging times (<= horizon) where the generated deviation's 3-sigma top is below it."""
+    res = fitted.result
+    gen = imu_allan.allan_deviation(data, RATE, axes=axes)
+    assert np.allclose(gen.tau, res.tau)
+    _, top = chi2_interval(gen.adev, gen.edf, level=0.9973)
+    misses = []
+    for j, axis in enumerate(axes):
+        bounded = [axis] if EXPORTERS[name].per_axis else [
+            a for a in fitted.axes if a.split('_')[0] == axis.split('_')[0]]
+        tau, bound, _ = upper_bound(res, bounded)
+        low = top[:tau.size, j] < np.sqrt(bound)
+        misses += [f'{axis} at {t:.3g} s' for t in tau[low]]
+    return misses
+
+
+@pytest.mark.parametrize('name', sorted(CONSUMERS))
+def test_consumer_keeps_the_overbound(name, fitted, overbound_files):
+    """
+    Samples drawn from an --overbound file (the consumer's own conversion) stay above the bound.
+
+    The bound is the measured upper 95 % Allan deviation (the envelope of the sensor's axes
+    where the file has one number per sensor), up to the horizon (the longest measured tau).
+    Tolerance: the generated record's own 99.73 % (3-sigma) upper end must reach the bound at
+    every averaging time; where the bound is tight the model equals it, so a correct file
+    misses with about 0.13 % probability per point, while a conversion off by sqrt(2)
+    (VINS' midpoint) or more misses by tens of sigma at the short averaging times.
+    """
+    files, summary = overbound_files
+    axes, data = _generate(CONSUMERS[name](files))
+    if name == 'matlab':
+        data = _matlab_flicker(files, axes, data)
+    assert not _below_bound(fitted, name, axes, data)
+    assert summary['exports'][name]
+    assert summary['horizon_s'] == pytest.approx(fitted.result.tau[-1])
+    for key, entry in summary['exports'][name].items():
+        assert all(f > 0 for f in entry['factor'].values()), (key, entry)
+        assert all(entry['tight_tau_s'].values()), (key, entry)
+
+
+def test_raw_and_misread_overbound_files_fall_below(fitted, files, overbound_files):
+    """The same check fails for the raw VINS file and for the overbound one read as Kalibr's."""
+    axes, data = _generate(_noise_vins(files))
+    assert _below_bound(fitted, 'vins', axes, data)
+    ob = overbound_files[0]['vins_fusion.yaml']
+    v = _opencv_yaml(ob)
+    for key in ('gyr_n', 'acc_n'):
+        ob = ob.replace(f'{key}: {v[key]:.6e}', f'{key}: {v[key] / math.sqrt(2.0):.6e}')
+    axes, data = _generate(_noise_vins(files, ob))
+    assert _below_bound(fitted, 'vins', axes, data)
+
+
+def test_overbound_headers_and_api(fitted, overbound_files):
+    files, summary = overbound_files
+    assert summary['level'] == 0.95 and summary['inflate'] == [1.0, 1.0]
+    for name, text in files.items():
+        head = text[:4000]
+        assert 'overbound: the values of this consumer' in head, name
+        assert 'to the horizon' in head and 'against the raw fit' in head, name
+        assert re.search(r'overbound \S+: \S+ x[0-9.]+ \(bound tight at ', head), name
+    data = export(fitted, 'kalibr', RATE, overbound=True)
+    assert data['gyroscope_noise_density'] == pytest.approx(
+        yaml.safe_load(files['kalibr_imu.yaml'])['gyroscope_noise_density'], rel=1e-6)
+    # --inflate multiplies on top, and says so
+    inflated = export(fitted, 'kalibr', RATE, inflate=(2, 3), overbound=True)
+    assert inflated['gyroscope_noise_density'] == pytest.approx(
+        2 * data['gyroscope_noise_density'])
+    assert inflated['gyroscope_random_walk'] == pytest.approx(3 * data['gyroscope_random_walk'])
+    # a shorter horizon bounds fewer averaging times: never larger N and K together
+    short = export(fitted, 'kalibr', RATE, overbound=True, horizon_s=1.0)
+    assert (short['gyroscope_noise_density'], short['gyroscope_random_walk']) != (
+        data['gyroscope_noise_density'], data['gyroscope_random_walk'])
+    with pytest.raises(ValueError, match='horizon'):
+        export(fitted, 'kalibr', RATE, overbound=True, horizon_s=1e6)
+    with pytest.raises(ValueError, match='overbound=True'):
+        export(fitted, 'kalibr', RATE, horizon_s=10.0)
+
+
+def test_gtsam_snippet_runs(files, tmp_path):
+    """The generated gtsam_imu.py runs in real GTSAM and holds the YAML's covariances."""
+    gtsam = pytest.importorskip('gtsam')
+    path = tmp_path / 'gtsam_imu.py'
+    path.write_text(files['gtsam_imu.py'])
+    params = runpy.run_path(str(path), run_name='snippet')['params']
+    assert isinstance(params, gtsam.PreintegrationCombinedParams)
+    data = yaml.safe_load(files['gtsam_imu.yaml'])
+    for key in ('gyroscopeCovariance', 'accelerometerCovariance', 'biasOmegaCovariance',
+                'biasAccCovariance', 'integrationCovariance'):
+        getter = getattr(params, 'get' + key[0].upper() + key[1:])
+        np.testing.assert_allclose(getter(), data[key], rtol=1e-6)
+    np.testing.assert_allclose(params.n_gravity, [0.0, 0.0, -data['gravity']])
+    proc = subprocess.run([sys.executable, str(path)], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0 and 'gyroscopeCovariance' in proc.stdout, proc.stderr
+
+
+def test_cli_overbound(tmp_path):
+    data = imu_allan.simulate({'gyro': {'white_noise': GYRO_N, 'bias_instability': 3 * GYRO_N,
+                                        'rate_random_walk': GYRO_K},
+                               'accel': {'white_noise': ACCEL_N}}, 30_000, RATE, seed=5)
+    csv = tmp_path / 'sim.csv'
+    t = np.arange(data.shape[0]) / RATE
+    np.savetxt(csv, np.column_stack([t, data]), delimiter=',', comments='',
+               header='t,gyro_x,gyro_y,gyro_z,accel_x,accel_y,accel_z')
+    out = tmp_path / 'report'
+    proc = run_command('analyze', csv, '--out', out, '--export', 'kalibr,px4', '--overbound',
+                       '--overbound-horizon', '10', '--inflate', '1,2', '--quiet')
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads((out / 'report.json').read_text())
+    block = report['overbound']
+    assert block['horizon_s'] == 10.0 and block['inflate'] == [1.0, 2.0]
+    assert set(block['exports']) == {'kalibr', 'px4'}
+    factor = block['exports']['kalibr']['gyroscope_noise_density']['factor']
+    assert list(factor.values())[0] > 1.0   # bias instability lifts N
+    head = (out / 'export' / 'kalibr_imu.yaml').read_text()
+    assert 'horizon 10 s' in head and 'on top of the overbound' in head
+    for args, option in ((['--overbound'], '--overbound'),
+                         (['--export', 'kalibr', '--overbound-horizon', '5'],
+                          '--overbound-horizon'),
+                         (['--export', 'kalibr', '--overbound', '--overbound-horizon', '1e6'],
+                          '--overbound-horizon'),
+                         (['--export', 'kalibr', '--overbound', '--overbound-horizon', 'x'],
+                          '--overbound-horizon')):
+        proc = run_command('analyze', csv, '--out', tmp_path / 'bad', *args)
+        assert proc.returncode == 2 and option in proc.stderr, (args, proc.stderr)
+        assert 'Traceback' not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1

@@ -1,0 +1,226 @@
+"""
+Calibration of the fit, measured: term selection, alternatives and interval coverage.
+
+Many axes are simulated with known truth, analysed with the overlapping Allan variance and
+fitted with automatic term selection (:func:`imu_allan.core.fit.fit_noise_model`).  Two
+generators: the package's own (:func:`imu_allan.core.simulate.simulate_axis`) and an
+independent one written here from the textbook definitions, sharing no code with the package:
+
+* white noise N: per-sample std N sqrt(fs);
+* quantization Q: white phase noise of std Q, differenced and divided by tau0;
+* bias instability B: 1/f noise by shaping the FFT of white noise with B sqrt(fs / (2 pi f))
+  (two-sided PSD B^2 / (2 pi f)), generated over 4x the record and cut, so the longest
+  averaging times have their low-frequency power;
+* rate random walk K: cumulative sum of steps of std K sqrt(tau0);
+* rate ramp R: R t.
+
+Scenarios: N B K, N B, N K, Q N B, N B R.  The parameters are drawn per axis (log-uniform)
+so that every true term dominates a visible part of the curve: the crossing averaging times
+are drawn within the measured span (see :data:`CROSSINGS`).
+
+For every axis: is the selected term set the true one; is the true one selected or among the
+alternatives; and per true term (when selected), does its 68.3 % / 95 % interval hold the
+truth.  ``python test/core/calibration_cases.py [axes per cell]`` prints the full table of
+docs/method.md; test_calibration.py runs a smaller batch and checks the goals.
+"""
+
+import math
+import sys
+import time
+
+from imu_allan.core.allan import AllanResult, avar_fast, tau_grid
+from imu_allan.core.edf import CI_LEVEL
+from imu_allan.core.fit import fit_noise_model
+from imu_allan.core.simulate import simulate_axis
+from imu_allan.core.units import AXES
+import numpy as np
+import scipy.fft
+
+SCENARIOS = {
+    'N B K': ('white_noise', 'bias_instability', 'rate_random_walk'),
+    'N B': ('white_noise', 'bias_instability'),
+    'N K': ('white_noise', 'rate_random_walk'),
+    'Q N B': ('quantization', 'white_noise', 'bias_instability'),
+    'N B R': ('white_noise', 'bias_instability', 'rate_ramp'),
+}
+SHORT = {'quantization': 'Q', 'white_noise': 'N', 'bias_instability': 'B',
+         'rate_random_walk': 'K', 'rate_ramp': 'R'}
+#: Ranges of the crossing averaging times, as (lo, hi) fractions: 'NB' of tau0 x 10^x (x in
+#: [0.5, 1.5] decades above tau0 ... ), the slow terms as fractions of the record T.
+CROSSINGS = {
+    'NB': (10.0, 300.0),        # N = flicker floor at 10..300 tau0
+    'BK': (1 / 60.0, 1 / 20.0),  # K = flicker floor at T/60 .. T/20
+    'BR': (1 / 60.0, 1 / 20.0),  # R = flicker floor at T/60 .. T/20
+    'NK': (1 / 300.0, 1 / 30.0),  # K = N at T/300 .. T/30
+    'QN': (3.0, 20.0),          # Q = N at 3 .. 20 tau0
+}
+FLOOR = 2.0 * math.log(2.0) / math.pi  # AVAR / B^2 of flicker at long tau
+
+
+def _log_uniform(rng, lo, hi):
+    return math.exp(rng.uniform(math.log(lo), math.log(hi)))
+
+
+def draw_truth(scenario, rng, n, rate_hz):
+    """Coefficients of one axis (SI) whose terms each dominate part of the curve."""
+    dt = 1.0 / rate_hz
+    t_rec = n * dt
+    names = SCENARIOS[scenario]
+    n_val = 1e-3 * _log_uniform(rng, 0.3, 3.0)
+    truth = {'white_noise': n_val}
+    b_val = None
+    if 'bias_instability' in names:
+        tau_nb = dt * _log_uniform(rng, *CROSSINGS['NB'])
+        b_val = math.sqrt(n_val ** 2 / tau_nb / FLOOR)
+        truth['bias_instability'] = b_val
+    if 'rate_random_walk' in names:
+        if b_val is not None:
+            tau = t_rec * _log_uniform(rng, *CROSSINGS['BK'])
+            truth['rate_random_walk'] = math.sqrt(3.0 * FLOOR * b_val ** 2 / tau)
+        else:
+            tau = t_rec * _log_uniform(rng, *CROSSINGS['NK'])
+            truth['rate_random_walk'] = math.sqrt(3.0) * n_val / tau
+    if 'rate_ramp' in names:
+        tau = t_rec * _log_uniform(rng, *CROSSINGS['BR'])
+        truth['rate_ramp'] = math.sqrt(2.0 * FLOOR) * b_val / tau
+    if 'quantization' in names:
+        tau = dt * _log_uniform(rng, *CROSSINGS['QN'])
+        truth['quantization'] = n_val * math.sqrt(tau / 3.0)
+    return truth
+
+
+def independent_axis(truth, n, rate_hz, rng):
+    """Rate samples of one axis from the textbook definitions (no package code)."""
+    dt = 1.0 / rate_hz
+    y = truth.get('white_noise', 0.0) * math.sqrt(rate_hz) * rng.standard_normal(n)
+    if 'quantization' in truth:
+        y += np.diff(truth['quantization'] * rng.standard_normal(n + 1)) / dt
+    if 'bias_instability' in truth:
+        span = scipy.fft.next_fast_len(4 * n, real=True)
+        f = np.fft.rfftfreq(span, d=dt)
+        gain = np.zeros_like(f)
+        gain[1:] = truth['bias_instability'] * np.sqrt(rate_hz / (2.0 * math.pi * f[1:]))
+        # white noise of unit variance has two-sided PSD dt; |gain|^2 dt = B^2 / (2 pi f)
+        y += scipy.fft.irfft(scipy.fft.rfft(rng.standard_normal(span)) * gain, span)[:n]
+    if 'rate_random_walk' in truth:
+        y += np.cumsum(truth['rate_random_walk'] * math.sqrt(dt) * rng.standard_normal(n))
+    if 'rate_ramp' in truth:
+        y += truth['rate_ramp'] * dt * np.arange(n)
+    return y
+
+
+def package_axis(truth, n, rate_hz, rng):
+    """Rate samples of one axis from :func:`imu_allan.core.simulate.simulate_axis`."""
+    return simulate_axis({t: {'value': v} for t, v in truth.items()}, n, rate_hz, rng)
+
+
+GENERATORS = {'independent': independent_axis, 'package': package_axis}
+
+
+def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6):
+    """
+    Simulate and fit ``n_axes`` axes; return ``[(truth, fitted, axis), ...]``.
+
+    Axes are generated ``chunk`` (at most 6: the package's axis names) at a time into one
+    (n, chunk) array, their Allan variances computed in one call and fitted together.
+    """
+    rng = np.random.default_rng(seed)
+    n = int(round(hours * 3600.0 * rate_hz))
+    ms = tau_grid(n)
+    out = []
+    for start in range(0, n_axes, chunk):
+        count = min(chunk, n_axes - start)
+        data = np.empty((n, count))
+        truths = []
+        for j in range(count):
+            truths.append(draw_truth(scenario, rng, n, rate_hz))
+            data[:, j] = GENERATORS[generator](truths[-1], n, rate_hz, rng)
+        result = AllanResult.from_avar(ms, avar_fast(data, ms), n, rate_hz, axes=AXES[:count])
+        del data
+        fitted = fit_noise_model(result)
+        out += [(truth, fitted, axis) for truth, axis in zip(truths, AXES)]
+    return out
+
+
+def score(cases, levels=(CI_LEVEL, 0.95)):
+    """Per-axis outcomes: selection, alternatives, and per true term the coverage flags."""
+    rows = []
+    for truth, fitted, axis in cases:
+        chosen = set(fitted.model.terms.get(axis, {}))
+        alternatives = [set(a) for a in fitted.alternatives(axis)]
+        fit = fitted.fits[axis]
+        crits = {frozenset(names): crit for crit, names in fit.candidates}
+        best = fit.candidates[0][0] if fit.candidates else math.nan
+        row = {'exact': chosen == set(truth),
+               'gap': crits.get(frozenset(truth), math.inf) - best,
+               'among': any(a == set(truth) for a in alternatives),
+               'n_alternatives': len(alternatives), 'cover': {}}
+        for term, value in truth.items():
+            if term not in chosen:
+                continue
+            row['cover'][term] = [_inside(fitted.interval(axis, term, level=lv), value)
+                                  for lv in levels]
+        rows.append(row)
+    return rows
+
+
+def _inside(interval, value):
+    lo, hi = interval
+    return bool(lo <= value <= hi)
+
+
+CELLS = [(s, g, h, r) for s in SCENARIOS for g in GENERATORS for h, r in
+         ((1.0, 100.0), (3.0, 100.0), (1.0, 400.0))]
+
+
+def run(cells=CELLS, n_axes=24, seed=1, log=None):
+    """Return ``{cell: rows}`` for every (scenario, generator, hours, rate) cell."""
+    out = {}
+    for k, cell in enumerate(cells):
+        t0 = time.process_time()
+        out[cell] = score(batch(*cell, n_axes, seed + 1000 * k))
+        if log:
+            log(f'{cell}: {time.process_time() - t0:.1f} s CPU')
+    return out
+
+
+def summary(outcomes):
+    """Aggregate: selection rates and per-term coverage over all cells."""
+    rows = [r for rs in outcomes.values() for r in rs]
+    cover = {}
+    for r in rows:
+        for term, flags in r['cover'].items():
+            cover.setdefault(term, []).append(flags)
+    return {'axes': len(rows),
+            'exact': float(np.mean([r['exact'] for r in rows])),
+            'among': float(np.mean([r['among'] or r['exact'] for r in rows])),
+            'cover': {t: (len(f), *np.mean(np.array(f, dtype=float), axis=0))
+                      for t, f in cover.items()}}
+
+
+def table(outcomes):
+    """Markdown table: one row per scenario x generator, then the total."""
+    lines = ['| truth | generator | axes | selected = truth | truth among alternatives | '
+             'mean alternatives | 68.3 % / 95 % coverage per term (cases) |',
+             '|---|---|---|---|---|---|---|']
+    groups = {}
+    for (s, g, h, r), rows in outcomes.items():
+        groups.setdefault((s, g), {})[(s, g, h, r)] = rows
+    for (s, g), cells in list(groups.items()) + [(('all', ''), outcomes)]:
+        agg = summary(cells)
+        rows = [r for rs in cells.values() for r in rs]
+        cover = ', '.join(f'{SHORT[t]} {100 * c68:.0f} / {100 * c95:.0f} ({n})'
+                          for t, (n, c68, c95) in sorted(agg['cover'].items(),
+                                                         key=lambda x: 'QNBKR'.index(SHORT[x[0]])))
+        lines.append(f'| {s} | {g} | {agg["axes"]} | {100 * agg["exact"]:.0f} % | '
+                     f'{100 * agg["among"]:.0f} % | '
+                     f'{np.mean([r["n_alternatives"] for r in rows]):.2f} | {cover} |')
+    return '\n'.join(lines)
+
+
+if __name__ == '__main__':
+    axes = int(sys.argv[1]) if len(sys.argv) > 1 else 24
+    t0 = time.process_time()
+    result = run(n_axes=axes, log=lambda s: print(s, file=sys.stderr, flush=True))
+    print(table(result))
+    print(f'\n{time.process_time() - t0:.0f} s CPU', file=sys.stderr)

@@ -1,0 +1,116 @@
+"""analyze on a bag with Imu + sensor_msgs/Temperature: slopes, range, moves, coincidences."""
+
+from imu_allan.cli.analyze import _options, build_parser, run_one
+from imu_allan.core.model import thesis_gx3_25_model
+from imu_allan.core.simulate import simulate
+from imu_allan.core.temperature import TemperatureProfile
+from imu_allan.core.units import AXES
+from imu_allan.device import gx3_protocol as p
+from imu_allan.formats.bag_writer import write_imu_bag
+from imu_allan.formats.samples import Samples
+from imu_allan.formats.temperature_bag import choose_temperature_topic, read_temperature
+from imu_allan.report.temperature_report import relate_events
+import numpy as np
+import pytest
+from rosbags.typesys import get_typestore, Stores
+
+RATE = 100.0
+SLOPES = np.array([2e-4, -1e-4, 5e-5, 2e-3, -1e-3, 5e-4])   # rad/s/K, m/s^2/K
+T0 = 1_700_000_000.0                                        # stamps on a wall clock
+
+
+def recording(seconds=1200.0, seed=4, profile='warmup:20:40:200'):
+    """Imu samples with bias = SLOPES * (T - 20) and the 1 Hz temperatures as coded (0xD1)."""
+    n = int(seconds * RATE)
+    t = T0 + np.arange(n) / RATE
+    prof = TemperatureProfile.parse(profile)
+    data = simulate(thesis_gx3_25_model(), n, RATE, seed=seed)
+    data += np.outer(prof.at(t - T0) - prof.start, SLOPES)
+    temp_t = T0 + np.arange(0.0, seconds, 1.0)
+    temp_c = p.counts_to_celsius(p.celsius_to_counts(prof.at(temp_t - T0)))
+    return Samples(t=t, data=data), temp_t, temp_c
+
+
+def temperature_messages(temp_t, temp_c, ros1=False):
+    """(stamp ns, sensor_msgs/Temperature) pairs built with the rosbags typestore."""
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)
+    temp, header, time = (ts.types['sensor_msgs/msg/Temperature'],
+                          ts.types['std_msgs/msg/Header'],
+                          ts.types['builtin_interfaces/msg/Time'])
+    out = []
+    for i, (t, c) in enumerate(zip(temp_t, temp_c)):
+        ns = int(round(t * 1e9))
+        sec, nsec = divmod(ns, 10**9)
+        kw = {'seq': i} if ros1 else {}
+        out.append((ns, temp(header=header(stamp=time(sec=sec, nanosec=nsec), frame_id='imu',
+                                           **kw), temperature=float(c), variance=0.0)))
+    return out
+
+
+def analyze(path):
+    """run_one of the analyze command on one input, --json."""
+    args = build_parser().parse_args([str(path), '--json', '--quiet'])
+    return run_one(str(path), args, _options(args))
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'ros1'])
+def test_slopes_found_within_their_intervals(tmp_path, storage):
+    """
+    A 20 min warm-up 20 -> 40 deg C with known slopes on all six axes (fixed seed).
+
+    Pass: every estimate within 3 standard errors of the truth (a 99.7 % band for a normal
+    error; the 68.3 % interval is checked for calibration in test/core/test_temperature.py).
+    """
+    samples, temp_t, temp_c = recording()
+    path = tmp_path / ('rec.bag' if storage == 'ros1' else 'rec')
+    write_imu_bag(path, samples, topic='/imu/data_raw', storage=storage, extra_topics={
+        '/imu/temperature': ('sensor_msgs/msg/Temperature',
+                             temperature_messages(temp_t, temp_c, storage == 'ros1'))})
+    topic, t, c = read_temperature(path, '/imu/data_raw')
+    assert topic == '/imu/temperature' and np.array_equal(t, temp_t)
+    assert np.array_equal(c, temp_c)
+    report, text = analyze(path)
+    section = report['temperature']
+    assert section['topic'] == '/imu/temperature' and section['n_readings'] == temp_t.size
+    assert section['range_c'] == [pytest.approx(temp_c.min()), pytest.approx(temp_c.max())]
+    assert set(section['slopes']) == set(AXES)
+    for j, axis in enumerate(AXES):
+        s = section['slopes'][axis]
+        assert abs(s['value'] - SLOPES[j]) < 3 * s['stderr'], (axis, s)
+        assert s['ci'][0] < s['value'] < s['ci'][1]
+        assert s['unit'] == ('rad/s/K' if axis.startswith('gyro') else 'm/s^2/K')
+    # The one move: 10-90 % of the warm-up, times from the first IMU sample.
+    (move,) = section['changes']
+    assert move['from_c'] == pytest.approx(20.0, abs=0.1)
+    assert move['to_c'] == pytest.approx(40.0, abs=0.1)
+    assert move['t_start_s'] == pytest.approx(200 * np.log(10 / 9), abs=2)
+    assert move['t_end_s'] == pytest.approx(200 * np.log(10), abs=8)  # 0.06 deg C codes
+    assert 'bias slope' in text and 'gyro_x' in text
+
+
+def test_no_temperature_topic_no_section(tmp_path):
+    """An Imu-only bag and a CSV: no temperature key, nothing else changes."""
+    samples, _, _ = recording(seconds=120.0)
+    path = tmp_path / 'plain'
+    write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap')
+    assert read_temperature(path) is None
+    report, _ = analyze(path)
+    assert 'temperature' not in report
+
+
+def test_topic_choice_and_coincidences():
+    """Several Temperature topics: the Imu's namespace wins; events related to moves."""
+    assert choose_temperature_topic({'/a/temp', '/imu/temperature'}, '/imu/data_raw') == \
+        '/imu/temperature'
+    assert choose_temperature_topic({'/b/t', '/a/t'}, '/imu/data_raw') == '/a/t'
+    assert choose_temperature_topic(set(), '/imu/data_raw') is None
+    report = {'duration_s': 1000.0,
+              'dynamic': {'changes': [{'axis': 'gyro_x', 't_s': 300.0},
+                                      {'axis': 'gyro_y', 't_s': 900.0}]},
+              'verdict': {'warmup_s': 120.0},
+              'temperature': {'changes': [{'t_start_s': 100.0, 't_end_s': 320.0,
+                                           'from_c': 20.0, 'to_c': 30.0}]}}
+    relate_events(report)
+    got = report['temperature']['coincidences']
+    assert [g['temperature_change'] for g in got] == [0, None, 0]
+    assert got[2]['event'] == 'warmup' and got[0]['axis'] == 'gyro_x'
