@@ -44,14 +44,14 @@ def test_allan_node_publishes_mdev_and_ohdev(ros_context):
             node.create_subscription(Float64MultiArray, topic,
                                      lambda m, k=kind: got[k].append(m), 10)
         assert run.spin_until(lambda: node.count_publishers('imu/allan_deviation/mdev') == 1
-                              and node.count_publishers('imu/allan_deviation/ohdev') == 1, 20)
+                              and node.count_publishers('imu/allan_deviation/ohdev') == 1, 40)
         run.spin_until(lambda: all(got.values()), 10)  # discovery of the subscriptions
         run.feed()
         # The cycle that reported every sample may have frozen its sums earlier; the second
         # publication after it started later.
         for values in got.values():
             values.clear()
-        assert run.spin_until(lambda: all(len(v) >= 2 for v in got.values()), 30), \
+        assert run.spin_until(lambda: all(len(v) >= 2 for v in got.values()), 60), \
             {k: len(v) for k, v in got.items()}
 
         t_seen, data_seen = imus_to_arrays(run.msgs)
@@ -79,7 +79,7 @@ def test_allan_node_publishes_mdev_and_ohdev(ros_context):
         assert (decode_deviation(got['mdev'][-1])[1][mid] < 0.9 * adev[mid]).all()
 
         client = node.create_client(SetParameters, '/allan/set_parameters')
-        assert client.wait_for_service(timeout_sec=10)
+        assert client.wait_for_service(timeout_sec=30)
 
         def set_estimators(value):
             request = SetParameters.Request()
@@ -89,14 +89,14 @@ def test_allan_node_publishes_mdev_and_ohdev(ros_context):
                                  string_array_value=value))
             request.parameters = [Parameter(name='estimators', value=pv)]
             future = client.call_async(request)
-            assert spin_until(run.executor, future.done, 10)
+            assert spin_until(run.executor, future.done, 30)
             return future.result().results[0]
 
         refused = set_estimators('oadev,totdev')
         assert not refused.successful and 'unknown estimator(s) totdev' in refused.reason
         assert set_estimators(['oadev', 'ohdev']).successful
         assert run.spin_until(lambda: node.count_publishers('imu/allan_deviation/mdev') == 0,
-                              10)
+                              30)
         assert node.count_publishers('imu/allan_deviation/ohdev') == 1
     assert 'Traceback' not in run.output, run.output
 
