@@ -22,6 +22,8 @@ _API = {
     # Allan deviation, EDF and intervals
     'allan_deviation': 'core.allan', 'AllanResult': 'core.allan',
     'edf_oadev': 'core.edf', 'chi2_interval': 'core.edf', 'CI_LEVEL': 'core.edf',
+    # the family of deviations (Stable32's), with intervals
+    'deviation': 'core.deviations', 'DeviationResult': 'core.deviations',
     # noise terms, fit, models, simulation
     'fit_noise_model': 'core.fit', 'FittedModel': 'core.fit',
     'NoiseModel': 'core.model', 'thesis_gx3_25_model': 'core.model',

@@ -1,0 +1,231 @@
+"""
+``deviation()``: every frequency-stability deviation Stable32 has, with 68.3 % intervals.
+
+The kinds and what they compute are in their family modules (:mod:`.allan_family`,
+:mod:`.modified`, :mod:`.total`, :mod:`.theo`); this module turns rate samples into the phase
+they share, picks the averaging factors (:mod:`.grid`), identifies the noise per averaging time
+(:mod:`.noise_id`), applies Stable32's bias corrections and attaches each kind's EDF and
+chi-square interval (:func:`imu_allan.core.edf.chi2_interval`, SP1065 eq 45).
+"""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from . import allan_family, grid, modified, noise_id, theo, total
+from .greenhall import edf_greenhall
+from .. import allan as _allan
+from ..edf import chi2_interval
+from ..units import AXES
+
+KINDS = grid.KINDS
+
+#: kind -> (most differences of the noise identification, allowed alpha range)
+_NOISE_ID = {'adev': (2, (-2, 2)), 'oadev': (2, (-2, 2)), 'mdev': (2, (-2, 2)),
+             'tdev': (2, (-2, 2)), 'hdev': (3, (-4, 2)), 'ohdev': (3, (-4, 2)),
+             'totdev': (2, (-2, 2)), 'mtotdev': (2, (-2, 2)), 'htotdev': (3, (-4, 2)),
+             'theo1': (2, (-2, 2))}
+
+
+@dataclass
+class DeviationResult:
+    """
+    One deviation of a record, per averaging time and axis.
+
+    Attributes
+    ----------
+    kind : str
+        One of :data:`KINDS`.
+    tau : numpy.ndarray
+        Averaging times, s, shape (T,) (theo1: 0.75 m tau0).
+    m : numpy.ndarray
+        Averaging factors, shape (T,).
+    dev, ci_low, ci_high : numpy.ndarray
+        Shape (T, A): the deviation, bias-corrected as Stable32 prints it, in the rate's unit
+        (rad/s, m/s^2; tdev: that unit x s), and its 68.3 % chi-square interval.
+    edf, alpha : numpy.ndarray
+        Shape (T, A): equivalent degrees of freedom and the identified noise exponent.
+    n_terms : numpy.ndarray
+        Shape (T,): summands behind each estimate (Stable32's '#').
+    axes : tuple of str
+        Column names.
+    rate_hz : float
+        Sample rate, Hz.
+    n_samples : int
+        Rate samples in the record.
+
+    """
+
+    kind: str
+    tau: np.ndarray
+    m: np.ndarray
+    dev: np.ndarray
+    ci_low: np.ndarray
+    ci_high: np.ndarray
+    edf: np.ndarray
+    alpha: np.ndarray
+    n_terms: np.ndarray
+    axes: tuple
+    rate_hz: float
+    n_samples: int
+
+    def axis_index(self, axis):
+        """Column index of an axis name."""
+        return self.axes.index(axis)
+
+
+def raw_variance(kind, x, ms, data=None):
+    """
+    Uncorrected variance (T, A) of ``kind`` from the phase ``x`` (A, N) in sample units.
+
+    tdev gives MVAR (scaled afterwards); ``data`` (n, A), when given, lets oadev use the
+    package's compiled Allan kernel (:func:`imu_allan.core.allan.avar_function`).
+    """
+    if kind in ('adev', 'hdev', 'ohdev'):
+        return allan_family.variance_reference(kind, x, ms)
+    if kind == 'oadev':
+        if data is not None:
+            return _allan.avar_function(data.size * len(ms))(data, ms)
+        return allan_family.variance_reference(kind, x, ms)
+    if kind in ('mdev', 'tdev'):
+        return modified.variance_fast(x, ms)
+    if kind == 'totdev':
+        return total.totvar(x, ms)
+    if kind == 'mtotdev':
+        return total.mtotvar(x, ms)
+    if kind == 'htotdev':
+        return total.htotvar(x, ms)
+    return theo.theo1_fast(x, ms)
+
+
+def n_terms(kind, n_phase, m):
+    """Summands behind the estimate of ``kind`` at factor ``m`` (Stable32's '#')."""
+    if kind in allan_family.SPEC:
+        return allan_family.terms(kind, n_phase, m)
+    if kind in ('mdev', 'tdev'):
+        return modified.terms(n_phase, m)
+    if kind == 'theo1':
+        return theo.terms(n_phase, m)
+    return total.terms(kind, n_phase, m)
+
+
+def bias_factor(kind, alpha, m, n_phase):
+    """E[raw variance] / (variance Stable32 prints), by kind and noise; 1 where none."""
+    if kind in ('totdev', 'mtotdev', 'htotdev'):
+        return total.bias_factor(kind, alpha, m, n_phase)
+    if kind == 'theo1':
+        return 1.0 / theo.bias(alpha, m)
+    return 1.0
+
+
+def edf(kind, alpha, m, n_phase):
+    """EDF of ``kind`` at factor ``m`` for noise ``alpha`` and ``n_phase`` phase points."""
+    if kind in allan_family.SPEC:
+        d, overlapping, modif = allan_family.edf_args(kind)
+        return edf_greenhall(int(alpha), d, int(m), int(n_phase), overlapping, modif)
+    if kind in ('mdev', 'tdev'):
+        return edf_greenhall(int(alpha), 2, int(m), int(n_phase), True, True)
+    if kind == 'theo1':
+        return theo.edf(alpha, m, n_phase)
+    return total.edf(kind, alpha, m, n_phase)
+
+
+def finish(kind, raw, ms, alpha, n_phase):
+    """Bias-corrected deviation, EDF and 68.3 % interval from the raw variance (T, A)."""
+    factor = np.array([[bias_factor(kind, a, m, n_phase) for a in row]
+                       for m, row in zip(ms, alpha)]).reshape(raw.shape)
+    dev = np.sqrt(np.maximum(raw, 0.0) / factor)
+    dof = np.array([[edf(kind, a, m, n_phase) for a in row]
+                    for m, row in zip(ms, alpha)], dtype=float).reshape(raw.shape)
+    if kind in ('totdev', 'mtotdev', 'htotdev', 'theo1'):
+        # SP1065's fitted EDFs go below 1 (even negative) at the longest factors, outside the
+        # range they were fitted on: one degree of freedom there, the widest honest interval.
+        dof = np.where(np.isfinite(dof), np.maximum(dof, 1.0), dof)
+    dof = np.where(dof > 0, dof, np.nan)
+    low, high = chi2_interval(dev, dof)
+    return dev, low, high, dof
+
+
+def _check(data, rate_hz, kind):
+    if kind not in KINDS:
+        raise ValueError(f'unknown deviation kind {kind!r} (known: {", ".join(KINDS)})')
+    data = np.asarray(data, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    if data.ndim != 2:
+        raise ValueError('data must have shape (n_samples, n_axes)')
+    if not rate_hz or not math.isfinite(rate_hz) or rate_hz <= 0:
+        raise ValueError('rate_hz must be a positive number')
+    if not np.all(np.isfinite(data)):
+        raise ValueError('data contain NaN or inf')
+    return data
+
+
+def _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters):
+    n = data.shape[0]
+    if taus is None:
+        ms = grid.default_ms(kind, n, points_per_decade, min_clusters)
+        if ms.size == 0:
+            raise ValueError(f'{n} samples are too few for any {kind} averaging time')
+        return ms
+    tau_in = np.atleast_1d(np.asarray(taus, dtype=float))
+    ms = grid.ms_from_taus(kind, tau_in, rate_hz)
+    low = 2 if kind == 'theo1' else 1
+    if np.any(ms < low):
+        raise ValueError(f'averaging time {tau_in[ms < low][0]:g} s is shorter than the '
+                         f'shortest {kind} averaging time '
+                         f'({grid.tau_factor(kind) * low / rate_hz:g} s)')
+    empty = np.array([n_terms(kind, n + 1, int(m)) < 1 for m in ms])
+    if np.any(empty):
+        raise ValueError(f'averaging time {tau_in[empty][0]:g} s is too long for {kind} on '
+                         f'a record of {n} samples')
+    return np.unique(ms)
+
+
+def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
+              min_clusters=_allan.DEFAULT_MIN_CLUSTERS, axes=None):
+    """
+    Frequency-stability deviation ``kind`` of rate samples with 68.3 % intervals.
+
+    Parameters
+    ----------
+    data : array_like
+        Shape (n_samples,) or (n_samples, n_axes): rate samples (rad/s, m/s^2, ...), i.e.
+        fractional-frequency-like data (allantools ``data_type='freq'``).
+    rate_hz : float
+        Sample rate, Hz; tau0 = 1 / rate_hz.
+    kind : str
+        adev, oadev, mdev, tdev, hdev, ohdev, totdev, mtotdev, htotdev or theo1.
+    taus : array_like, optional
+        Averaging times, s, each rounded to a whole factor m (theo1: even m, tau = 0.75 m
+        tau0).  Default: ``points_per_decade`` log-spaced factors up to Stable32's stop ratio
+        (:mod:`.grid`; oadev: the ``min_clusters`` guard of ``allan_deviation``).
+    points_per_decade, min_clusters : float, int
+        Grid density; the oadev guard.
+    axes : sequence of str, optional
+        Column names (default: the package axis order).
+
+    Returns
+    -------
+    DeviationResult
+
+    """
+    data = _check(data, rate_hz, kind)
+    ms = _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters)
+    n = data.shape[0]
+    x = _allan._phase(data)
+    raw = raw_variance(kind, x, ms, data)
+    dmax, span = _NOISE_ID[kind]
+    id_ms = np.maximum(np.round(ms * grid.tau_factor(kind)), 1).astype(np.int64)
+    y = np.diff(x, axis=1)
+    alpha = noise_id.identify(y, id_ms, dmax, span)
+    dev, low, high, dof = finish(kind, raw, ms, alpha, n + 1)
+    tau = ms * grid.tau_factor(kind) / float(rate_hz)
+    if kind == 'tdev':
+        scale = modified.tdev_scale(tau)[:, None]
+        dev, low, high = dev * scale, low * scale, high * scale
+    axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]
+    counts = np.array([n_terms(kind, n + 1, int(m)) for m in ms], dtype=np.int64)
+    return DeviationResult(kind, tau, ms, dev, low, high, dof, alpha, counts, axes,
+                           float(rate_hz), n)
