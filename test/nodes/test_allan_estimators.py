@@ -5,8 +5,9 @@ This process streams 6,000 simulated 100 Hz samples (RELIABLE, about 20x real ti
 started with ``estimators:=oadev,mdev,ohdev`` (a comma list), the gate off and stride_base
 1000 (so every reported factor is formed from every term), and decodes
 ``imu/allan_deviation/mdev`` and ``.../ohdev`` by their layout.  They must equal the offline
-pipeline on the same samples (1e-9; they come out bit-identical) and allantools' ``mdev`` and
-``ohdev`` of the whole record (1e-9: the batch estimators, an implementation not ours).  Then
+pipeline on the same samples (1e-9; they come out bit-identical), the package's batch
+``deviation(kind=...)`` and allantools' ``mdev`` and ``ohdev`` of the whole record (1e-9; the
+latter an implementation not ours).  Then
 the parameter is changed at run time: an unknown kind is refused with the reason, a string
 array without mdev is taken and the mdev topic loses its publisher.
 """
@@ -14,6 +15,7 @@ array without mdev is taken and the mdev topic loses its publisher.
 import subprocess
 
 from conftest import DOMAIN, executable, ros_env, spin_until
+from imu_allan import deviation
 from imu_allan.core.online import OnlineAllan
 from imu_allan.core.units import AXES
 from imu_allan.formats.imu_adapter import imus_to_arrays
@@ -66,6 +68,9 @@ def test_allan_node_publishes_mdev_and_ohdev(ros_context):
             assert tau[0] == pytest.approx(1 / RATE) and 20 < tau.size
             assert tau[-1] * RATE <= N / 10  # min_clusters (10) x tau within the record
             np.testing.assert_allclose(dev, curve.dev, rtol=1e-9)
+            batch = deviation(data_seen, RATE, kind=kind, taus=tau)  # the package's own
+            np.testing.assert_array_equal(batch.m, curve.m)
+            np.testing.assert_allclose(dev, batch.dev, rtol=1e-9)
             fn = getattr(allantools, kind)
             for a in range(6):
                 y = data_seen[:, a] - data_seen[:, a].mean()
