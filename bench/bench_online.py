@@ -233,15 +233,15 @@ def bench_node(seconds=35.0, rate=1000.0, cases=None):
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
     print(f'node: {seconds:g} s of 6-axis Imu at {rate:g} Hz (best effort) per subscriber')
     configs = (('empty rclpy subscriber', [sys.executable, '-c', _EMPTY_SUBSCRIBER]),
-                       ('allan node (publish_period 10 s)',
-                        [exe, '--ros-args', '-p', f'rate_hz:={rate}',
-                         '-p', 'publish_period:=10.0']),
-                       ('allan node + covariance_topic',
-                        [exe, '--ros-args', '-p', f'rate_hz:={rate}',
-                         '-p', 'publish_period:=10.0', '-p', 'covariance_topic:=imu/data_cov']),
-                       ('allan node estimators=oadev,mdev,ohdev',
-                        [exe, '--ros-args', '-p', f'rate_hz:={rate}',
-                         '-p', 'publish_period:=10.0', '-p', 'estimators:=oadev,mdev,ohdev']))
+               ('allan node (publish_period 10 s)',
+                [exe, '--ros-args', '-p', f'rate_hz:={rate}',
+                 '-p', 'publish_period:=10.0']),
+               ('allan node + covariance_topic',
+                [exe, '--ros-args', '-p', f'rate_hz:={rate}',
+                 '-p', 'publish_period:=10.0', '-p', 'covariance_topic:=imu/data_cov']),
+               ('allan node estimators=oadev,mdev,ohdev',
+                [exe, '--ros-args', '-p', f'rate_hz:={rate}',
+                 '-p', 'publish_period:=10.0', '-p', 'estimators:=oadev,mdev,ohdev']))
     if cases is not None:
         configs = [c for label in cases for c in configs if c[0] == label]
     for label, cmd in configs:

@@ -268,6 +268,9 @@ class AllanNode(Node):
                 self.get_logger().info('estimator settings changed: estimate restarted')
                 self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
                 self._temperature = TemperatureRange(self.params['window_s'])
+                # A cycle of the old estimate is not published: finishing it would read the
+                # new pipeline (its rate is None until measured: a TypeError, seen in tests).
+                self._cycle = None
             else:
                 self.pipeline.terms = parse_terms(self.params['terms'])
         if 'estimators' in changed:
