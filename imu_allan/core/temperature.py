@@ -288,8 +288,9 @@ def temperature_changes(t, temp_c, threshold_c=CHANGE_THRESHOLD_C, settle=0.1,
     """
     Where the temperature moved by at least ``threshold_c`` deg C.
 
-    The readings are first averaged over ``smooth_s`` s (a centred moving mean: sensor noise
-    and ADC steps would otherwise make swings of their own).  Then a zig-zag (swing) detector:
+    The readings are first averaged over ``smooth_s`` s, at most a twentieth of the record (a
+    centred moving mean: sensor noise and ADC steps would otherwise make swings of their
+    own).  Then a zig-zag (swing) detector:
     a move is a monotone run between two turning points that differ by ``threshold_c`` or
     more; smaller reversals do not end a move.  Each move's span is from the last time the
     smoothed temperature was within ``settle`` of the move of its starting level to the first
@@ -299,7 +300,8 @@ def temperature_changes(t, temp_c, threshold_c=CHANGE_THRESHOLD_C, settle=0.1,
     smoothed.
     """
     t = np.asarray(t, dtype=np.float64)
-    v = moving_average(t, temp_c, smooth_s)
+    span = float(t[-1] - t[0]) if t.size else 0.0
+    v = moving_average(t, temp_c, min(smooth_s, span / 20.0))
     n = v.size
     moves = []
     if n < 2:
