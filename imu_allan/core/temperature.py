@@ -54,8 +54,10 @@ SUB_SAMPLES = 8
 #: Smallest temperature span (deg C) with a meaningful slope: a few ADC codes of the GX3-25
 #: sensor (0.06 deg C each).
 MIN_SPAN_C = 0.3
-#: Default size of a temperature move, deg C (:func:`temperature_changes`).
+#: Default size of a temperature move, deg C, and the smoothing before it is looked for, s
+#: (:func:`temperature_changes`).
 CHANGE_THRESHOLD_C = 1.0
+SMOOTH_S = 60.0
 
 PROFILE_KINDS = ('constant', 'ramp', 'warmup')
 
@@ -264,20 +266,42 @@ class TemperatureChange:
                 'to_c': self.to_c}
 
 
-def temperature_changes(t, temp_c, threshold_c=CHANGE_THRESHOLD_C, settle=0.1):
+def moving_average(t, values, width_s):
+    """
+    Mean of the readings within ``width_s / 2`` s of each reading's time (``t`` sorted).
+
+    Near the ends the window is one-sided (it keeps its width, so the noise stays averaged;
+    a trend that starts with the record is flattened there by up to ``width_s / 2`` s).
+    """
+    t = np.asarray(t, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    if width_s <= 0 or v.size < 2:
+        return v.copy()
+    sums = np.concatenate(([0.0], np.cumsum(v)))
+    lo = np.searchsorted(t, t - width_s / 2.0, side='left')
+    hi = np.searchsorted(t, t + width_s / 2.0, side='right')
+    return (sums[hi] - sums[lo]) / (hi - lo)
+
+
+def temperature_changes(t, temp_c, threshold_c=CHANGE_THRESHOLD_C, settle=0.1,
+                        smooth_s=SMOOTH_S):
     """
     Where the temperature moved by at least ``threshold_c`` deg C.
 
-    A zig-zag (swing) detector: a move is a monotone run between two turning points that
-    differ by ``threshold_c`` or more; reversals smaller than that (sensor quantization,
-    noise) do not end a move.  Each move's span is from the last time the temperature was
-    within ``settle`` of the move of its starting level to the first time it was within
-    ``settle`` of its final level (the 10-90 % span by default; a warm-up ends where it is
-    within 10 % of its plateau).  ``t`` in s, ``temp_c`` deg C; returns a list of
-    :class:`TemperatureChange` in time order.
+    The readings are first averaged over ``smooth_s`` s, at most a twentieth of the record (a
+    centred moving mean: sensor noise and ADC steps would otherwise make swings of their
+    own).  Then a zig-zag (swing) detector:
+    a move is a monotone run between two turning points that differ by ``threshold_c`` or
+    more; smaller reversals do not end a move.  Each move's span is from the last time the
+    smoothed temperature was within ``settle`` of the move of its starting level to the first
+    time it was within ``settle`` of its final level (the 10-90 % span by default; a warm-up
+    ends where it is within 10 % of its rise from its plateau).  ``t`` in s (sorted),
+    ``temp_c`` deg C; returns a list of :class:`TemperatureChange` in time order, levels
+    smoothed.
     """
     t = np.asarray(t, dtype=np.float64)
-    v = np.asarray(temp_c, dtype=np.float64)
+    span = float(t[-1] - t[0]) if t.size else 0.0
+    v = moving_average(t, temp_c, min(smooth_s, span / 20.0))
     n = v.size
     moves = []
     if n < 2:

@@ -81,10 +81,11 @@ def test_slopes_found_within_their_intervals(tmp_path, storage):
         assert s['unit'] == ('rad/s/K' if axis.startswith('gyro') else 'm/s^2/K')
     # The one move: 10-90 % of the warm-up, times from the first IMU sample.
     (move,) = section['changes']
-    assert move['from_c'] == pytest.approx(20.0, abs=0.1)
+    assert move['from_c'] == pytest.approx(20.0, abs=1.5)     # a 60 s mean at the start
     assert move['to_c'] == pytest.approx(40.0, abs=0.1)
-    assert move['t_start_s'] == pytest.approx(200 * np.log(10 / 9), abs=2)
-    assert move['t_end_s'] == pytest.approx(200 * np.log(10), abs=8)  # 0.06 deg C codes
+    # (later by up to the 30 s half-width of the smoothing: test/core/test_temperature.py)
+    assert 200 * np.log(10 / 9) - 2 <= move['t_start_s'] <= 200 * np.log(10 / 9) + 30
+    assert 200 * np.log(10) - 8 <= move['t_end_s'] <= 200 * np.log(10) + 30
     assert 'bias slope' in text and 'gyro_x' in text
 
 
