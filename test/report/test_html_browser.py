@@ -13,8 +13,9 @@ report in the page's own number format (:func:`imu_allan.report.html.fmt`).  A s
 finds no http:, https: or protocol-relative reference and no external script, style or font.
 
 The browser is Debian's ``chromium`` (``make test`` installs it with apt when it can); without
-one the tests skip and say so.  One browser serves the module; the inputs are short simulated
-recordings (fixed seeds), so the module takes about 30 s, most of it the analyses.
+one the tests skip and say so.  One browser serves the module (a page loads in well under a
+second); the inputs are short simulated recordings (fixed seeds).  Most of the module's time
+(about 70 s of CPU here) is the analyses and the Dask cluster of the several-inputs test.
 """
 
 import io
