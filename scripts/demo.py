@@ -6,7 +6,8 @@
    (``DEMO_SECONDS``), watched with ``monitor`` (the live table, redrawn in place on a
    terminal: coefficients with intervals, stream health, recording advice);
 2. ``analyze`` on a longer simulated recording (2 h at 100 Hz, written as an MCAP rosbag2),
-   writing its report and plots to a folder named at the end.
+   writing its report and plots to a folder; the last line printed is the path of its page,
+   ``report.html``, to open in a browser.
 
 Parts that are missing are skipped with a note, so the demo runs whatever exists.
 """
@@ -76,7 +77,7 @@ def live_part(env):
 
 
 def offline_part(env):
-    """Simulate 2 h of the thesis model, write an MCAP bag, run analyze on it."""
+    """Simulate 2 h of the thesis model, write an MCAP bag, run analyze; return the page path."""
     from imu_allan import simulate, thesis_gx3_25_model
     from imu_allan.formats.bag_writer import write_imu_bag
     from imu_allan.formats.samples import Samples
@@ -85,7 +86,7 @@ def offline_part(env):
     analyze = executable('analyze')
     if analyze is None:
         print('demo: offline part skipped, analyze not built')
-        return
+        return None
     bag = OUT / 'recording_2h'
     report = OUT / 'report'
     shutil.rmtree(bag, ignore_errors=True)
@@ -98,6 +99,7 @@ def offline_part(env):
     print(f'demo: analyze {bag} --out {report}')
     subprocess.run([analyze, str(bag), '--out', str(report)], env=env, check=False)
     print(f'demo: report and plots written to {report}')
+    return report / 'report.html'
 
 
 def main():
@@ -107,7 +109,9 @@ def main():
     env = dict(os.environ)
     OUT.mkdir(exist_ok=True)
     live_part(env)
-    offline_part(env)
+    page = offline_part(env)
+    if page is not None and page.is_file():  # last: the one thing to open
+        print(f'demo: open the report page: {page}')
     return 0
 
 

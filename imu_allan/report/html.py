@@ -234,8 +234,9 @@ def advice_words(advice):
     if more is None:
         headline = 'No prediction of a recording length is possible (see below).'
     elif more > 0:
-        headline = (f'Record {format_duration(more)} more (same rate and conditions) to meet '
-                    f'every precision target.')
+        goal = ('meet every precision target and tell the terms apart'
+                if advice.get('unresolved') else 'meet every precision target')
+        headline = f'Record {format_duration(more)} more (same rate and conditions) to {goal}.'
     else:
         headline = 'Every precision target is met: no need to record longer.'
     return {'headline': headline, 'lines': items}

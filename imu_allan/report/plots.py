@@ -17,6 +17,7 @@ import matplotlib
 matplotlib.use('Agg')
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+import matplotlib.patches  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -27,34 +28,93 @@ _COLORS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
 _SLOPES = (-1.0, -0.5, 0.0, 0.5, 1.0)
 
 
-def _slope_guides(ax, tau, adev):
-    """Draw a fan of the IEEE slopes (-1 .. +1, 0.7 decade long) below the curves, at the left."""
-    t0 = tau[0] * 1.3
-    span = min(10.0 ** 0.7, tau[-1] / t0)
-    y0 = np.nanmin(adev) / 3.0
+def _slope_guides(ax, tau, adev, curves=()):
+    """
+    Draw a fan of the IEEE slopes (-1 .. +1, 0.7 decade long) clear of every curve.
+
+    The fan goes below the curves at the left or the right end, or above them at the right,
+    whichever stretches the plot's range least; ``curves`` are ``(tau, y)`` of the other lines
+    drawn (fitted terms, model), so that the fan and its labels cross none of them.
+    """
+    span = min(10.0 ** 0.7, tau[-1] / (tau[0] * 1.3))
+    spans = [(tau, col) for col in np.atleast_2d(np.asarray(adev).T)] + list(curves)
+    y_all = np.concatenate([np.ravel(y) for _, y in spans])
+    y_all = y_all[np.isfinite(y_all) & (y_all > 0)]
+    y_min, y_max = y_all.min(), y_all.max()
+    best = None
+    for t0, below in ((tau[0] * 1.3, True), (tau[-1] / (1.3 * span), True),
+                      (tau[-1] / (1.3 * span), False)):
+        inside = np.concatenate([np.ravel(y)[(np.ravel(t) >= t0) & (np.ravel(t) <= t0 * span)]
+                                 for t, y in spans])
+        inside = inside[np.isfinite(inside) & (inside > 0)]
+        if not inside.size:
+            continue
+        # the fan spans a factor `span` up and down from y0; 1.8x clearance for its labels
+        y0 = inside.min() / (span * 1.8) if below else inside.max() * span * 1.8
+        stretch = max(0.0, math.log10(y_min / (y0 / span))) + \
+            max(0.0, math.log10(y0 * span / y_max))
+        if best is None or stretch < best[0]:
+            best = (stretch, t0, y0)
+    if best is None:
+        return
+    _, t0, y0 = best
     ts = np.array([t0, t0 * span])
     for slope in _SLOPES:
         ys = y0 * (ts / t0) ** slope
         ax.plot(ts, ys, color='0.65', lw=0.8, zorder=0)
         ax.annotate(f'{slope:+g}' if slope else '0', (ts[1], ys[1]), fontsize=7,
                     color='0.45', xytext=(2, 0), textcoords='offset points', va='center')
-    ax.annotate('slopes', (t0, y0), fontsize=7, color='0.45', xytext=(0, -8),
+    ax.annotate('slopes', (t0, y0), fontsize=7, color='0.45', xytext=(0, -9),
                 textcoords='offset points')
 
 
-def draw_adev(ax, result, fitted, axes, denoised=None):
+def _label_index(curve, total):
+    """
+    Index where to name a fitted term: where its line runs furthest below the model.
+
+    There the measured points (which follow the model) are far above the label, so the two
+    never collide; only points within 1.2 decades of the model count (the rest is off the
+    plot's interesting range).
+    """
+    ratio = curve / total
+    visible = np.flatnonzero(ratio >= 10.0 ** -1.2)
+    if not visible.size:
+        return int(np.nanargmax(ratio))
+    return int(visible[np.nanargmin(ratio[visible])])
+
+
+def _grouped_legend(ax, axes, below):
+    """One legend column per axis (its measured points, model, extra curves), in axis order."""
+    handles, labels = ax.get_legend_handles_labels()
+    groups = {a: [(h, lab) for h, lab in zip(handles, labels) if lab.split()[0] == a]
+              for a in axes}
+    rows = max((len(g) for g in groups.values()), default=0)
+    if not rows:
+        return
+    blank = matplotlib.patches.Rectangle((0, 0), 0, 0, visible=False)
+    entries = [e for a in axes for e in groups[a] + [(blank, '')] * (rows - len(groups[a]))]
+    kwargs = {'loc': 'upper center', 'bbox_to_anchor': (0.5, -0.12), 'frameon': False} \
+        if below else {'loc': 'best'}
+    ax.legend(*zip(*entries), ncol=len(axes), fontsize=8, **kwargs)
+
+
+def draw_adev(ax, result, fitted, axes, denoised=None, legend_below=False, deviations=None):
     """
     Draw one sensor's Allan deviation panel on a matplotlib ``Axes``.
 
     The measured overlapping ADEV of each of ``axes`` (points) with its 68.3 % band, each
     fitted term of ``fitted`` (a :class:`~imu_allan.core.fit.FittedModel`, or None before the
-    first fit) as a dashed line named where it dominates the first axis, the total model
-    (solid), slope guides, and the ``denoised`` :class:`AllanResult` dotted when given.  The
-    one drawing shared by ``analyze``'s plots and the allan node's live figure.
+    first fit) as a dashed line named (once) below its line where it runs furthest under the
+    model, clear of the points, the total model (solid), slope guides clear of the curves,
+    the ``denoised`` :class:`AllanResult` dotted and the extra ``deviations`` (kind ->
+    DeviationResult) as open markers when given; the legend has one column
+    per axis, under the plot with ``legend_below``.  The one drawing shared by ``analyze``'s
+    plots (PNG and the page's SVG) and the allan node's live figure.
     """
     tau = result.tau
     fine = np.logspace(math.log10(tau[0]), math.log10(tau[-1]), 200)
     named = False
+    lines = []  # (tau, y) of the fitted lines, kept clear of the slope fan
     for axis in axes:
         j = result.axis_index(axis)
         color = _COLORS[axis[-1]]
@@ -66,24 +126,29 @@ def draw_adev(ax, result, fitted, axes, denoised=None):
             for term, params in fitted.model.terms.get(axis, {}).items():
                 curve = np.sqrt(_terms.term_avar(term, params, fine, result.rate_hz))
                 ax.plot(fine, curve, '--', color=color, lw=0.8, alpha=0.7)
-                if not named:  # name each term once, where it dominates the first fitted axis
-                    k = int(np.nanargmax(curve / total))
-                    ax.annotate(term.replace('_', ' '), (fine[k], curve[k]), fontsize=7,
-                                color='0.3', xytext=(0, 4), textcoords='offset points',
-                                ha='right' if k > fine.size // 2 else 'left')
+                lines.append((fine, curve))
+                if not named:  # name each term once, below its line, away from the points
+                    k = _label_index(curve, total)
+                    ax.annotate(term.replace('_', ' '), (fine[k], curve[k]), fontsize=8,
+                                color='0.25', xytext=(0, -3), textcoords='offset points',
+                                va='top', ha='right' if k > fine.size // 2 else 'left',
+                                bbox={'boxstyle': 'round,pad=0.1', 'fc': 'white', 'ec': 'none',
+                                      'alpha': 0.75})
             named = True
             ax.plot(fine, total, '-', color=color, lw=1.2, label=f'{axis} model')
+            lines.append((fine, total))
         if denoised is not None:
             dj = denoised.axis_index(axis)
             ax.plot(denoised.tau, denoised.adev[:, dj], ':', color=color, lw=1.4,
                     label=f'{axis} denoised')
-    _slope_guides(ax, tau, result.adev[:, [result.axis_index(a) for a in axes]])
+    draw_deviations(ax, deviations, axes)
+    _slope_guides(ax, tau, result.adev[:, [result.axis_index(a) for a in axes]], lines)
     ax.set_xscale('log')
     ax.set_yscale('log')
     ax.set_xlabel('averaging time tau (s)')
     ax.set_ylabel(f'Allan deviation ({sample_unit(axes[0])})')
     ax.grid(True, which='both', color='0.92', lw=0.5)
-    ax.legend(fontsize=7, ncol=2, loc='best')
+    _grouped_legend(ax, axes, legend_below)
 
 
 #: Line style of each extra deviation kind drawn beside the overlapping ADEV.
@@ -111,11 +176,11 @@ def plot_adev(path, analysis, sensor, denoised=None):
     axes = [a for a in analysis.axes if is_gyro(a) == (sensor == 'gyro')]
     if not axes:
         return None
-    fig = Figure(figsize=(8.0, 5.6), dpi=110)
+    fig = Figure(figsize=(8.0, 6.0), dpi=120)  # shown about 1000 px wide on the page
     ax = fig.subplots()
     draw_adev(ax, analysis.result, analysis.fit, axes,
-              None if denoised is None else denoised.result)
-    draw_deviations(ax, getattr(analysis, 'deviations', None), axes)
+              None if denoised is None else denoised.result, legend_below=True,
+              deviations=getattr(analysis, 'deviations', None))
     name = 'gyroscope' if sensor == 'gyro' else 'accelerometer'
     ax.set_title(f'{name}: overlapping Allan deviation, 68.3 % bands, fitted terms\n'
                  f'{analysis.source} ({analysis.duration_s / 3600:.2f} h at '

@@ -13,19 +13,21 @@ report in the page's own number format (:func:`imu_allan.report.html.fmt`).  A s
 finds no http:, https: or protocol-relative reference and no external script, style or font.
 
 The browser is Debian's ``chromium`` (``make test`` installs it with apt when it can); without
-one the tests skip and say so.  One browser serves the module; the inputs are short simulated
-recordings (fixed seeds), so the module takes about 30 s, most of it the analyses.
+one the tests skip and say so.  One browser serves the module (a page loads in well under a
+second); the inputs are short simulated recordings (fixed seeds).  Most of the module's time
+(about 70 s of CPU here) is the analyses and the Dask cluster of the several-inputs test.
 """
 
 import io
 import json
 import re
+import shutil
 
 from conftest import run_command
 from imu_allan import NoiseModel, simulate
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
-from imu_allan.report.html import fmt
+from imu_allan.report.html import fmt, write_analysis_page
 import matplotlib.image
 import numpy as np
 import pytest
@@ -242,3 +244,39 @@ def test_bad_input_writes_no_page(tmp_path):
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert not out.exists()
     assert [p.name for p in tmp_path.iterdir()] == ['bad.csv']
+
+
+def test_optional_report_blocks(browser, analysis_dir, tmp_path):
+    """
+    The blocks other options add to report.json (design.md section 6) are shown when present.
+
+    The keys are added to a real report in the contract's shapes (values made up for the
+    page, not measured); the page must render them, still clean in the browser.
+    """
+    folder = tmp_path / 'report'
+    shutil.copytree(analysis_dir, folder)
+    report = json.loads((folder / 'report.json').read_text())
+    gx = report['axes']['gyro_x']
+    gx['fit']['alternatives'] = [['white_noise', 'bias_instability'],
+                                 ['white_noise', 'gauss_markov']]
+    tau = gx['adev']['tau']
+    gx['deviations'] = {'mdev': {'tau': tau, 'dev': gx['adev']['adev'],
+                                 'ci_low': gx['adev']['ci_low'],
+                                 'ci_high': gx['adev']['ci_high'], 'edf': gx['adev']['edf']}}
+    report['verdict']['warmup_s'] = 840.0
+    report['dynamic'] = {'window_s': 120.0, 'step_s': 30.0, 'false_alarm_rate_per_day': 0.1,
+                         'changes': [{'axis': 'accel_y', 't_s': 512.5, 'what': 'white noise up',
+                                      'ratio': 1.8}]}
+    report['overbound'] = {'horizon_s': 60.0, 'factors': {'kalibr': {'gyroscope_noise_density':
+                                                                     1.25}}}
+    report['temperature'] = {'topic': '/imu/temperature', 'range_c': [21.5, 38.25],
+                             'slopes': {'gyro_x': {'value': 2.5e-5, 'ci': [2.0e-5, 3.0e-5],
+                                                   'unit': 'rad/s/degC'}}}
+    write_analysis_page(folder, report)
+    text = _check_page(browser, folder / 'report.html')
+    assert 'cannot yet reject white noise + Gauss-Markov' in text
+    assert 'gyro_x mdev' in text
+    assert 'first 840 s (14 min) left out' in text
+    assert '512.5' in text and 'white noise up' in text and 'accel_y' in text
+    assert '1.25' in text and 'gyroscope noise density' in text
+    assert '21.5 to 38.25 °C' in text and '2.5e-05' in text
