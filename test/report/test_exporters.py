@@ -446,7 +446,7 @@ def overbound_files(fitted, tmp_path_factory):
 
 
 def _matlab_flicker(files, axes, data):
-    """MATLAB's BiasInstability (part of its model, overbounded too) as 1/f noise of that B."""
+    """Add MATLAB's BiasInstability (in its model, overbounded too) as 1/f noise of that B."""
     m = _matlab(files['matlab_imu.m'])
     for j, axis in enumerate(axes):
         sensor, i = axis.split('_')[0], 'xyz'.index(axis[-1])
