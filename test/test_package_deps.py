@@ -152,7 +152,7 @@ def test_rosdep_yaml_has_a_pip_fallback(rosdep):
 
 
 def test_gtsam_test_dependency_resolves_to_pip(rosdep):
-    """GTSAM's Python module (a test_depend) comes from pip on every platform."""
+    """Resolve the GTSAM test dependency: its Python module from pip on every platform."""
     pkg = parse_package(str(REPO / 'package.xml'))
     assert 'python3-gtsam-pip' in {d.name for d in pkg.test_depends}
     for os_override in ('ubuntu:24.04:noble', 'debian:12:bookworm', 'osx:14:sonoma'):

@@ -590,7 +590,8 @@ def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
     With ``overbound`` and a dict ``summary``, fills it with the ``overbound`` block of
     ``report.json``: horizon, level, inflation and, per exporter and key, the factor against the
     raw fit per axis and the averaging times where the bound is tight.  A horizon outside the
-    measured averaging times is an InputError naming ``--overbound-horizon``.
+    measured averaging times is an InputError naming ``--overbound-horizon``, any other reason
+    the overbound cannot be made one naming ``--overbound``.
     """
     target = Path(folder) / EXPORT_DIR
     target.mkdir(parents=True, exist_ok=True)
@@ -600,8 +601,9 @@ def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
             exporter, values, data = _prepare(fitted, name, rate_hz, inflate, source, topic,
                                               overbound, horizon_s)
         except ValueError as exc:
-            if overbound and 'horizon' in str(exc):
-                raise InputError('--overbound-horizon', str(exc)) from None
+            if overbound:  # the horizon, or a record without a usable bound: one line, exit 2
+                raise InputError('--overbound-horizon' if 'horizon ' in str(exc) else
+                                 '--overbound', f'{name}: {exc}') from None
             raise
         for file_name, text in exporter.render(data, header_lines(exporter, values),
                                                values).items():

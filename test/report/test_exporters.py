@@ -24,6 +24,7 @@ Budget: about 15 s of CPU for the whole file on an idle machine (one 30-min fit,
 """
 
 import ast
+import copy
 import json
 import math
 import re
@@ -446,7 +447,7 @@ def overbound_files(fitted, tmp_path_factory):
 
 
 def _matlab_flicker(files, axes, data):
-    """MATLAB's BiasInstability (part of its model, overbounded too) as 1/f noise of that B."""
+    """Add MATLAB's BiasInstability (in its model, overbounded too) as 1/f noise of that B."""
     m = _matlab(files['matlab_imu.m'])
     for j, axis in enumerate(axes):
         sensor, i = axis.split('_')[0], 'xyz'.index(axis[-1])
@@ -581,3 +582,15 @@ def test_cli_overbound(tmp_path):
         proc = run_command('analyze', csv, '--out', tmp_path / 'bad', *args)
         assert proc.returncode == 2 and option in proc.stderr, (args, proc.stderr)
         assert 'Traceback' not in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_overbound_without_a_usable_bound_is_one_input_error(fitted, tmp_path):
+    """No finite EDF anywhere (nothing to bound): InputError naming --overbound, no traceback."""
+    broken = copy.copy(fitted)
+    broken.result = copy.copy(fitted.result)
+    broken.result.edf = np.full_like(fitted.result.edf, np.nan)
+    with pytest.raises(InputError, match='usable bound') as exc:
+        write_exports(tmp_path, broken, ['kalibr'], overbound=True)
+    assert exc.value.where == '--overbound'
+    with pytest.raises(InputError, match='horizon'):
+        write_exports(tmp_path, fitted, ['kalibr'], overbound=True, horizon_s=1e-6)
