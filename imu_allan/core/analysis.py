@@ -20,6 +20,7 @@ from .allan import (
 )
 from .fit import fit_noise_model, FitError, FittedModel
 from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
+from .stamp_order import drop_isolated, without_dropped
 from .units import is_gyro, physical_limits, sample_unit
 from .warmup import find_warmup
 from ..errors import InputError
@@ -81,7 +82,12 @@ _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
 
 
 def _validate(samples):
-    """Refuse records the estimator cannot use, naming the first offending sample."""
+    """
+    Refuse records the estimator cannot use, naming the first offending sample.
+
+    Returns the samples, without isolated out-of-order or repeated stamps (dropped with a
+    warning by the rule the allan node applies, :mod:`.stamp_order`).
+    """
     where = samples.source or 'input'
     if samples.n == 0:
         raise InputError(where, 'no samples')
@@ -108,12 +114,14 @@ def _validate(samples):
     if not np.all(np.isfinite(samples.t)):
         raise InputError(where, f'non-finite time stamp at sample '
                                 f'{int(np.flatnonzero(~np.isfinite(samples.t))[0])}')
-    back = np.flatnonzero(np.diff(samples.t) <= 0)
-    if back.size:
+    keep, problem = drop_isolated(samples.t)  # the node's rule (core/stamp_order.py)
+    if problem:
+        back = np.flatnonzero(np.diff(samples.t) <= 0)
         i = int(back[0]) + 1
         raise InputError(where, f'time stamps do not increase: sample {i} (t={samples.t[i]:.9f} s)'
                                 f' is not after sample {i - 1} (t={samples.t[i - 1]:.9f} s); '
-                                f'{back.size} such step(s)')
+                                f'{back.size} such step(s), not isolated ({problem})')
+    return without_dropped(samples, keep)
 
 
 def motion_verdict(data, axes, rate_hz):
@@ -158,7 +166,7 @@ def analyze_samples(samples, options=None):
     """
     options = options or AnalysisOptions()
     where = samples.source or 'input'
-    _validate(samples)
+    samples = _validate(samples)
     warnings = list(samples.warnings)
     timing = check_timing(samples.t)
     rate = options.rate_hz or timing.rate_hz

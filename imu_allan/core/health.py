@@ -28,6 +28,7 @@ import os
 import numpy as np
 
 from .model import as_number, ModelError, per_axis_entries, read_yaml_file
+from .stamp_order import keep_increasing
 from .units import AXES, conventional, IEEE_TERMS, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -204,8 +205,7 @@ class StampMonitor:
         if n == 0:
             return np.zeros(0, bool), np.zeros(0, bool)
         last = -math.inf if self.last_t is None else self.last_t
-        running = np.fmax.accumulate(np.concatenate(([last], t)))  # NaN does not poison it
-        keep = t > running[:-1]
+        keep = keep_increasing(t, last)  # the rule analyze applies too (core/stamp_order.py)
         kept_t = t[keep]
         break_before = np.zeros(n, bool)
         if kept_t.size:

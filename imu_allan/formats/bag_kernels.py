@@ -31,6 +31,7 @@ user cache folder where ``__pycache__`` is read-only).
 
 import numpy as np
 
+from .sqlite_pages import DIGEST_ROWID, DIGEST_TS  # fixed constants: no stale cache
 from ..core.jit import jit, UNCACHED
 
 #: Bytes of the 37 float64 at the end of an Imu, and the first byte of a CDR Imu after its
@@ -129,9 +130,16 @@ def _be_int(u8, pos, st):  # pragma: no cover - compiled
     return v
 
 
+@jit(nogil=True, inline='always')
+def row_digest(stamp, rowid):  # pragma: no cover - compiled
+    # One row's share of a table's digest (as sqlite_pages.row_digests): summed (wrapping)
+    # over its rows in any order, and compared with the same sum over its timestamp index.
+    return (np.uint64(stamp) * DIGEST_TS) ^ (np.uint64(rowid) * DIGEST_ROWID)
+
+
 @jit(nogil=True)
 def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off, length, ok,
-                t, data, slow):  # pragma: no cover - compiled; tested against SqlitePages._batch
+                t, data, slow, digest):  # pragma: no cover - compiled; tested against _batch
     """
     Walk table-leaf pages: rows of the wanted topics decoded, odd cells listed for Python.
 
@@ -142,12 +150,16 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
     not plain message rows on their page go to ``slow`` as (cell offset, page offset).
     Returns (rows kept, slow cells, pages that are not table leaves), or (-1, 0, 0) when an
     output array is too short or a page would make the numpy walk fail (the caller then runs
-    that walk on the batch).
+    that walk on the batch).  ``digest[0]`` / ``digest[1]`` (uint64) add the plain rows of
+    every topic: the sum of :func:`row_digest` and their count (once the batch is accepted:
+    ``digest`` is changed only when the walk returns rows).
     """
     last = u8.shape[0] - 1
     kept = 0
     nslow = 0
     lost = 0
+    total = np.uint64(0)
+    rows = 0
     for i in range(pages.shape[0]):
         base = (pages[i] - 1) * page_size
         hdr = base + 100 if pages[i] == 1 else base
@@ -176,7 +188,8 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
             blob = (s3 - 12) // 2
             if not (ptr >= 8 and ptr < page_size - 4 and hs == n3 + a + b + c + d
                     and s0 == 0 and z1 >= 0 and z2 >= 0 and s3 >= 12 and s3 % 2 == 0
-                    and p >= 0 and p <= usable - 35 and v3 + blob <= base + page_size):
+                    and p >= 0 and p <= usable - 35 and v3 + blob <= base + page_size
+                    and p == v3 + blob - rec):
                 if nslow >= slow.shape[0]:
                     return -1, 0, 0
                 slow[nslow, 0] = cell
@@ -184,6 +197,9 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
                 nslow += 1
                 continue
             topic = _be_int(u8, rec + hs, s1)
+            received = _be_int(u8, rec + hs + z1, s2)
+            total += row_digest(received, rowid)
+            rows += 1
             hit = False
             for w in range(wanted.shape[0]):
                 if topic == wanted[w]:
@@ -193,12 +209,76 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
             if kept >= order.shape[0]:
                 return -1, 0, 0
             order[kept] = rowid
-            stamp[kept] = _be_int(u8, rec + hs + z1, s2)
+            stamp[kept] = received
             off[kept] = v3
             length[kept] = blob
             ok[kept] = decode_imu(u8, u4, f8, v3, blob, t, data, kept)
             kept += 1
+    digest[0] += total
+    digest[1] += np.uint64(rows)
     return kept, nslow, lost
+
+
+@jit(nogil=True)
+def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no cover - compiled
+    """
+    Digest the entries of one level of a ``(timestamp)`` index B-tree; list the next level.
+
+    As ``SqlitePages._index_batch`` (the numpy reference) on ``pages``: each entry's
+    (timestamp, rowid) adds :func:`row_digest` to ``digest[0]`` and 1 to ``digest[1]``; the
+    child pages of interior pages go to ``children``.  Returns the number of children, -1 for
+    damage (a page that is no index page, a cell outside its page, a record that is not two
+    integers) or -2 when ``children`` is too short.
+    """
+    last = u8.shape[0] - 1
+    nchild = 0
+    total = np.uint64(0)
+    count = 0
+    for i in range(pages.shape[0]):
+        base = (pages[i] - 1) * page_size
+        hdr = base + 100 if pages[i] == 1 else base
+        kind = u8[hdr]
+        if kind != 0x02 and kind != 0x0A:
+            return -1
+        interior = kind == 0x02
+        head = 12 if interior else 8
+        ncell = np.int64(u8[hdr + 3]) * 256 + np.int64(u8[hdr + 4])
+        if hdr + head + 2 * ncell > base + page_size:
+            return -1
+        for j in range(ncell):
+            pp = hdr + head + 2 * j
+            ptr = np.int64(u8[pp]) * 256 + np.int64(u8[pp + 1])
+            if ptr < 8 or ptr > page_size - 8:
+                return -1
+            cell = base + ptr
+            start = cell + 4 if interior else cell
+            p, n1 = _varint(u8, start, last)
+            rec = start + n1
+            hs, n2 = _varint(u8, rec, last)
+            s0, a = _varint(u8, rec + n2, last)
+            s1, b = _varint(u8, rec + n2 + a, last)
+            z0 = _serial_size(s0)
+            z1 = _serial_size(s1)
+            if (hs != n2 + a + b or z0 < 0 or z1 < 0 or p < hs
+                    or rec + p > base + page_size):
+                return -1
+            total += row_digest(_be_int(u8, rec + hs, s0), _be_int(u8, rec + hs + z0, s1))
+            count += 1
+            if interior:
+                if nchild >= children.shape[0]:
+                    return -2
+                children[nchild] = ((np.int64(u8[cell]) << 24) | (np.int64(u8[cell + 1]) << 16)
+                                    | (np.int64(u8[cell + 2]) << 8) | np.int64(u8[cell + 3]))
+                nchild += 1
+        if interior:
+            if nchild >= children.shape[0]:
+                return -2
+            children[nchild] = ((np.int64(u8[hdr + 8]) << 24) | (np.int64(u8[hdr + 9]) << 16)
+                                | (np.int64(u8[hdr + 10]) << 8) | np.int64(u8[hdr + 11]))
+            nchild += 1
+    digest[0] += total
+    digest[1] += np.uint64(count)
+    return nchild
 
 
 #: Bytes of a Message record before its data: opcode, length, channel id, sequence, log time
@@ -258,4 +338,5 @@ def mcap_walk(u8, u2, u4, u64, f8, pos, end, role, counts, log_time, off, length
 
 #: False where numba found no writable cache folder: compiling the walks (about 5 s) in every
 #: process would cost more than they save, so :func:`.imu_cdr.compiled_walks` declines.
-CACHED = not {sqlite_walk.__name__, mcap_walk.__name__} & set(UNCACHED)
+CACHED = not ({sqlite_walk.__name__, mcap_walk.__name__, sqlite_index_level.__name__}
+              & set(UNCACHED))

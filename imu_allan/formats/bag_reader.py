@@ -455,6 +455,10 @@ class _SqliteSource:
             except (struct.error, ValueError, IndexError, Unsupported) as err:
                 self.warnings.append(f'{self.path.name}: malformed SQLite page '
                                      f'({one_line(err)}): the rest is skipped')
+            problem = '' if pg.damaged else pg.index_problem()
+            if problem:
+                self.warnings.append(f'{self.path.name}: damaged sqlite3 file ({problem}): '
+                                     'messages may be missing, misplaced or changed')
             if pg.damaged:
                 cut = pg.declared > pg.npages or pg.size % pg.page_size
                 where = f'cut after page {pg.npages} of {pg.declared}' if cut else \

@@ -17,6 +17,7 @@ reads.
 """
 
 import struct
+import threading
 
 import numpy as np
 
@@ -30,6 +31,27 @@ _SERIAL_SIZE = np.array([0, 1, 2, 3, 4, 6, 8, 8, 0, 0, -1, -1], dtype=np.int64)
 #: table (np.isin hashes its arguments on every call: a table lookup is several times faster).
 _INTEGER_SERIAL = np.isin(np.arange(256), [1, 2, 3, 4, 5, 6, 8, 9])
 _PAGE_BATCH = 512  # leaf pages decoded per numpy batch (bounds the index arrays' memory)
+
+
+#: Multipliers of the row digest (:func:`row_digests`): odd 64-bit constants (the golden
+#: ratio's and a MurmurHash3 finaliser's) that spread the bits of timestamp and rowid.  Also
+#: used by the compiled walk (:mod:`.bag_kernels`): never change them (its disk cache would
+#: keep the old ones).
+DIGEST_TS = np.uint64(0x9E3779B97F4A7C15)
+DIGEST_ROWID = np.uint64(0xC2B2AE3D27D4EB4F)
+
+
+def row_digests(stamp, rowid):
+    """
+    Return the digest of rows (timestamp, rowid): the wrapping sum of their mixed bits.
+
+    Independent of the order of the rows, so the table's rows (walked in rowid order) and the
+    entries of its ``(timestamp)`` index (walked level by level) give the same digest exactly
+    when they hold the same pairs (up to a collision, about 2^-64 per damaged pair).
+    """
+    ts = np.asarray(stamp, dtype=np.int64).view(np.uint64)
+    rid = np.asarray(rowid, dtype=np.int64).view(np.uint64)
+    return np.bitwise_xor(ts * DIGEST_TS, rid * DIGEST_ROWID).sum(dtype=np.uint64)
 
 
 #: Leaf pages (about 12 Imu messages each at 4 KiB) from which the compiled walk reads a file
@@ -150,8 +172,14 @@ class SqlitePages:
         valid = struct.unpack_from('>I', head, 24)[0] == struct.unpack_from('>I', head, 92)[0]
         self.declared = declared if valid and declared else self.npages
         self.lost_pages = 0  # referenced pages beyond the end of the file or not B-tree pages
+        # (digest, count) of the message rows walked, every topic (:func:`row_digests`)
+        self.digest = np.zeros(2, dtype=np.uint64)
+        self.indexes = {}  # index name -> (table name, root page), from sqlite_schema
+        self._index = None  # the thread digesting the index, then its result
 
     def close(self):
+        if isinstance(self._index, threading.Thread):
+            self._index.join()
         self.u8 = self._views = None
         try:
             self.mm.close()
@@ -249,8 +277,14 @@ class SqlitePages:
         return int(rowid[0]), bytes(out)
 
     @staticmethod
-    def _record(payload):
-        """Decode a record (list of Python values) from its payload bytes."""
+    def _record(payload, exact=False):
+        """
+        Decode a record (list of Python values) from its payload bytes.
+
+        ``exact``: the record must fill the payload (Unsupported otherwise): a cell whose
+        declared payload size differs from its record's is damaged (SQLite: overlapping
+        cells).
+        """
         def varint(buf, i):
             v = 0
             for k in range(9):
@@ -284,6 +318,8 @@ class SqlitePages:
                 j += size
             else:
                 raise Unsupported(f'serial type {st}')
+        if exact and j != len(payload):
+            raise Unsupported('record size differs from its payload size')
         return vals
 
     def table_rows(self, root):
@@ -303,6 +339,8 @@ class SqlitePages:
         for _, vals in self.table_rows(1):
             if len(vals) >= 4 and vals[0] == 'table':
                 out[vals[1]] = vals[3]
+            elif len(vals) >= 4 and vals[0] == 'index' and isinstance(vals[3], int):
+                self.indexes[vals[1]] = (vals[2], vals[3])
         return out
 
     def topics(self, root):
@@ -312,6 +350,132 @@ class SqlitePages:
             tid = rowid if vals[0] is None else vals[0]
             out.append((tid, vals[1], vals[2]))
         return out
+
+    def index_digest(self, root):
+        """
+        Return (digest, entries) of a ``(timestamp)`` index B-tree, or None if it is damaged.
+
+        Every page of the tree is visited level by level (interior index pages hold entries
+        too); each entry is a record (timestamp, rowid), digested as the table's rows are
+        (:func:`row_digests`).  Any page that is not an index page, a cell pointer outside its
+        page, a record that is not two integers, or more pages than the file holds (a loop)
+        is damage: None.
+        """
+        u8, ps = self.u8, self.page_size
+        level = np.array([root], dtype=np.int64)
+        total, count, seen = np.zeros(1, dtype=np.uint64), 0, 0  # (an array adds wrapping)
+        kernel = compiled_walk(self.npages)
+        while level.size:
+            seen += level.size
+            if seen > self.npages or ((level < 1) | (level > self.npages)).any():
+                return None
+            if kernel is not None:  # the compiled walk of the level (same digest, ~10x faster)
+                hdr = (level - 1) * ps + np.where(level == 1, 100, 0)
+                inner = u8[hdr] == 0x02
+                room = int((u8[hdr + 3][inner].astype(np.int64) * 256 + u8[hdr + 4][inner]
+                            + 1).sum())
+                digest = np.zeros(2, dtype=np.uint64)
+                children = np.empty(room, dtype=np.int64)
+                n = kernel.sqlite_index_level(u8, level, ps, digest, children)
+                if n < 0:
+                    return None
+                total += digest[:1]
+                count += int(digest[1])
+                level = children[:n]
+                continue
+            nxt = []
+            for b0 in range(0, level.size, _PAGE_BATCH):
+                pages = level[b0:b0 + _PAGE_BATCH]
+                got = self._index_batch(u8, ps, pages)
+                if got is None:
+                    return None
+                digest, n, children = got
+                total += np.array([digest], dtype=np.uint64)
+                count += n
+                nxt.append(children)
+            level = np.concatenate(nxt)
+        return total[0], count
+
+    def _index_batch(self, u8, ps, pages):
+        """Digest, entry count and child pages of a batch of index pages (None if damaged)."""
+        base = (pages - 1) * ps
+        hdr = base + np.where(pages == 1, 100, 0)
+        kind = u8[hdr]
+        interior = kind == 0x02
+        if not (interior | (kind == 0x0A)).all():
+            return None
+        ncell = u8[hdr + 3].astype(np.int64) * 256 + u8[hdr + 4]
+        head = np.where(interior, 12, 8)
+        if (hdr + head + 2 * ncell > base + ps).any():
+            return None
+        j = np.arange(int(ncell.max()) if ncell.size else 0)
+        mask = j[None, :] < ncell[:, None]
+        pp = (hdr + head)[:, None] + 2 * j[None, :]
+        pp = pp[mask]
+        ptr = u8[pp].astype(np.int64) * 256 + u8[pp + 1]
+        cbase = np.repeat(base, ncell)
+        inner = np.repeat(interior, ncell)
+        if ((ptr < 8) | (ptr > ps - 8)).any():
+            return None
+        cell = cbase + ptr
+        start = cell + np.where(inner, 4, 0)  # an interior cell starts with its left child
+        p, n1 = _varints(u8, start)
+        rec = start + n1
+        hs, n2 = _varints(u8, rec)
+        s0, a = _varints(u8, rec + n2)
+        s1, b = _varints(u8, rec + n2 + a)
+        ok = ((hs == n2 + a + b) & _INTEGER_SERIAL[np.clip(s0, 0, 255)] & (s0 < 10)
+              & _INTEGER_SERIAL[np.clip(s1, 0, 255)] & (s1 < 10) & (p >= hs)
+              & (rec + p <= cbase + ps))
+        if not ok.all():
+            return None
+        ts = _be_ints(u8, rec + hs, s0)
+        rowid = _be_ints(u8, rec + hs + _SERIAL_SIZE[s0], s1)
+        digest = row_digests(ts, rowid)
+        ci = cell[inner]
+        b4 = u8[ci[:, None] + np.arange(4)].astype(np.int64)
+        left = (b4[:, 0] << 24) | (b4[:, 1] << 16) | (b4[:, 2] << 8) | b4[:, 3]
+        rh = hdr[interior]
+        r4 = u8[(rh + 8)[:, None] + np.arange(4)].astype(np.int64)
+        right = (r4[:, 0] << 24) | (r4[:, 1] << 16) | (r4[:, 2] << 8) | r4[:, 3]
+        return digest, int(ptr.size), np.concatenate([left, right])
+
+    def _index_roots(self, table='messages'):
+        return [root for _, (tbl, root) in sorted(self.indexes.items()) if tbl == table]
+
+    def _digest_index(self, root):
+        try:
+            got = self.index_digest(root)
+            self._index = 'damaged' if got is None else got
+        except Exception:  # noqa: B902 - a thread must not die with damage: say "damaged"
+            self._index = 'damaged'
+
+    def index_problem(self, table='messages'):
+        """
+        Compare the rows walked with the table's timestamp index; words on a mismatch, or ''.
+
+        Only for an intact walk of the whole table (:meth:`read_messages` on a file not found
+        damaged) with one index of (timestamp): SQLite keeps one entry per row there, so a row
+        whose timestamp or rowid changed, a lost row or a cell read twice (overlapping cells)
+        shows as a different digest or count.
+        """
+        roots = self._index_roots(table)
+        if len(roots) != 1:
+            return ''
+        if isinstance(self._index, threading.Thread):
+            self._index.join()
+        if self._index is None:
+            self._digest_index(roots[0])
+        got = self._index if isinstance(self._index, tuple) else None
+        rows = int(self.digest[1])
+        if got is None:
+            return 'its timestamp index is damaged'
+        if got[1] != rows:
+            return f'{rows} rows in the message table, {got[1]} in its timestamp index'
+        if got[0] != self.digest[0]:
+            return ('rows of the message table differ from its timestamp index (a damaged '
+                    'timestamp or row id)')
+        return ''
 
     @property
     def damaged(self):
@@ -334,6 +498,12 @@ class SqlitePages:
             release(self.mm, 0, self.size)  # one byte of every page read: let them go
         wanted = np.asarray(sorted(topic_ids), dtype=np.int64)
         kernel = None if coll.force_generic or coll.ros1 else compiled_walk(leaves.shape[0])
+        roots = self._index_roots()
+        if kernel is not None and len(roots) == 1 and not self.damaged:
+            # The index's digest on the other core meanwhile (the compiled walk drops the GIL)
+            self._index = threading.Thread(target=self._digest_index, args=(roots[0],),
+                                           daemon=True)
+            self._index.start()
         for b0 in range(0, leaves.shape[0], _PAGE_BATCH):
             pages = leaves[b0:b0 + _PAGE_BATCH]
             if kernel is None or not self._walk(kernel, pages, wanted, coll):
@@ -360,7 +530,7 @@ class SqlitePages:
             self._views = kernel.byte_views(u8)
         kept, nslow, lost = kernel.sqlite_walk(
             u8, *self._views, pages, ps, self.usable, wanted, order, stamp, off, length, ok, t,
-            data, slow)
+            data, slow, self.digest)
         if kept < 0:
             return False
         self.lost_pages += lost
@@ -419,16 +589,20 @@ class SqlitePages:
         v2 = v1 + _SERIAL_SIZE[np.where(fast, s1, 0)]
         v3 = v2 + _SERIAL_SIZE[np.where(fast, s2, 0)]
         blob_len = (s3 - 12) // 2
-        fast &= (v3 + blob_len <= cbase + ps)
+        # ... and the record (header and values) is exactly the payload the cell declares
+        fast &= (v3 + blob_len <= cbase + ps) & (p == v3 + blob_len - rec)
         order = rowid  # ties in receive time keep rowid order, as ORDER BY timestamp, id
         if not fast.all():
             for i in np.nonzero(~fast)[0].tolist():
                 self._slow_cell(int(cell[i]) + shift, int(cbase[i]) + shift, wanted, coll)
         topic = _be_ints(u8, v1, np.where(fast, s1, 8))
+        received = _be_ints(u8, v2, np.where(fast, s2, 8))  # every topic's, for the digest
+        self.digest += np.array([row_digests(received[fast], rowid[fast]),
+                                 np.count_nonzero(fast)], dtype=np.uint64)
         keep = fast & (topic == wanted[0] if wanted.size == 1 else np.isin(topic, wanted))
         if not keep.any():
             return
-        stamp = _be_ints(u8, v2[keep], s2[keep])
+        stamp = received[keep]
         off, length, order = v3[keep], blob_len[keep], order[keep]
         for ln in (length[:1] if length.min() == length.max() else np.unique(length)):
             sel = length == ln
@@ -448,10 +622,12 @@ class SqlitePages:
             return
         try:
             order, payload = self._payload(cell, page_base)
-            vals = self._record(payload)
+            vals = self._record(payload, exact=True)
         except (Unsupported, IndexError, struct.error):
             self.lost_pages += 1
             return
+        if len(vals) == 4 and isinstance(vals[2], int):  # a row of any topic: the digest
+            self.digest += np.array([row_digests([vals[2]], [order]), 1], dtype=np.uint64)
         if len(vals) == 4 and vals[1] in wanted.tolist() and isinstance(vals[3], bytes):
             if not isinstance(vals[2], int):  # a receive time that is no integer: damage
                 self.lost_pages += 1

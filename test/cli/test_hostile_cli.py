@@ -6,9 +6,12 @@ argument or file checks, before any numerics (about a second each); one small an
 that a result which cannot be written is an error.
 """
 
+import json
+import struct
 import subprocess
 
 from conftest import executable, run_command
+from imu_allan.formats.bag_writer import fix_mcap_chunk_crcs, write_imu_bag
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
 import numpy as np
@@ -70,3 +73,40 @@ def test_json_to_a_closed_stdout_is_an_error(small_csv):
     proc = subprocess.run(f'exec "{executable("analyze")}" "{small_csv}" --json >&-',
                           shell=True, capture_output=True, text=True, timeout=300)
     _one_clean_line(proc, 'stdout')
+
+
+@pytest.mark.parametrize('seed', [1, 2])
+def test_one_stamp_gone_back_in_a_bag_is_dropped_not_fatal(tmp_path, seed):
+    """
+    One message's header stamp went back: dropped with a warning, exit 0 (as the node does).
+
+    The issue's case (CRC intact, so only the stamp rule sees it); a second bad stamp right
+    after it refuses the bag as before.
+    """
+    rng = np.random.default_rng(seed)
+    n = 3000
+    samples = Samples(t=1.7e9 + np.arange(n) / 100.0, data=rng.normal(0, 1e-3, (n, 6)))
+    folder = write_imu_bag(tmp_path / 'bag', samples, storage='mcap')
+    path = next(folder.glob('*.mcap'))
+    raw = bytearray(path.read_bytes())
+    # The CDR message data start 31 bytes into a Message record (opcode 0x05): encapsulation
+    # 00 01 00 00, then the header stamp's int32 seconds.  Found by those bytes.
+    u8 = np.frombuffer(bytes(raw), dtype=np.uint8)
+    i = np.flatnonzero(u8[:-40] == 0x05)
+    i = i[(u8[i + 31] == 0) & (u8[i + 32] == 1) & (u8[i + 33] == 0) & (u8[i + 34] == 0)]
+    sec = np.array([struct.unpack_from('<i', raw, j + 35)[0] for j in i.tolist()])
+    hits = i[(sec >= 1_700_000_000) & (sec <= 1_700_000_000 + n // 100)].tolist()
+    assert len(hits) == n
+    k = int(rng.integers(100, len(hits) - 100))
+    struct.pack_into('<i', raw, hits[k] + 35, 1_699_999_000)
+    path.write_bytes(bytes(raw))
+    fix_mcap_chunk_crcs(folder)
+    proc = run_command('analyze', path, '--json', timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    warnings = json.loads(proc.stdout)['verdict']['warnings']
+    assert any(w.startswith('1 isolated out-of-order') and f'sample(s) {k} ' in w
+               for w in warnings), warnings
+    struct.pack_into('<i', raw, hits[k + 1] + 35, 1_699_999_000)
+    path.write_bytes(bytes(raw))
+    fix_mcap_chunk_crcs(folder)
+    _one_clean_line(run_command('analyze', path, '--json', timeout=300), 'not isolated')
