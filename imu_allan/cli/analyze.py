@@ -77,6 +77,11 @@ def build_parser():
                    help='with --db: the imu_id of every input (default: the topic namespace '
                         'and the Imu frame_id)')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.add_argument('--dynamic', nargs='?', const=0.0, default=None, metavar='WINDOW_S',
+                   type=bounded_float(0.0, 1e7),
+                   help='dynamic Allan deviation over sliding windows and a change test per '
+                        'axis (default window: the record / 24 in [60 s, 1 h]); with --out '
+                        'also dynamic_gyro.png and dynamic_accel.png')
     add_export_arguments(p)
     p.add_argument('--target', metavar='TERM=REL,...', default='',
                    help='precision targets of the recording advice: relative 68.3 %% '
@@ -156,6 +161,18 @@ def run_one(path, args, options, progress=None, out_dir=None):
                 'adev': {'tau': denoised.result.tau.tolist(),
                          'adev': denoised.result.adev[:, j].tolist()}}
             for j, a in enumerate(denoised.axes)}
+    dynamic_text = ''
+    if args.dynamic is not None:
+        step('dynamic Allan deviation')
+        from ..report.dynamic_plots import (
+            analyze_dynamic,
+            dynamic_json,
+            dynamic_sentence,
+            write_dynamic_plots,
+        )
+        dyn, changes = analyze_dynamic(analysis, args.dynamic)
+        report['dynamic'] = dynamic_json(dyn, changes, analysis.warmup_s)
+        dynamic_text = '\n' + dynamic_sentence(dyn, changes)
     if args.out:
         step('writing report')
         from ..report.outputs import write_out_dir
@@ -169,9 +186,20 @@ def run_one(path, args, options, progress=None, out_dir=None):
             def write_bag(staging):
                 _write_denoised_bag(path, real_fmt, samples, den_samples, staging)
             extra = write_bag
+        if args.dynamic is not None:
+            extra = _also(extra, lambda staging: write_dynamic_plots(staging, dyn, changes))
         report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
                                             extra=extra, exports=(args.export, args.inflate))
-    return report, console_summary(analysis) + '\n' + advice_sentence(advice)
+    return report, console_summary(analysis) + '\n' + advice_sentence(advice) + dynamic_text
+
+
+def _also(first, then):
+    """Return an ``extra`` writer that runs ``first`` (if any), then ``then``."""
+    def both(staging):
+        if first is not None:
+            first(staging)
+        then(staging)
+    return both
 
 
 @guarded
@@ -187,7 +215,7 @@ def main(argv=None):
     from .batch import is_scan_folder, run_batch
     if len(args.inputs) == 1 and not (args.scheduler or args.db or
                                       is_scan_folder(args.inputs[0])):
-        steps = 2 + bool(args.denoise) + bool(args.out)  # read, estimate+fit, [denoise], [write]
+        steps = 2 + bool(args.denoise) + bool(args.out) + (args.dynamic is not None)
         progress = Progress(args.inputs[0], steps, enabled=not quiet)
         try:
             report, text = run_one(args.inputs[0], args, options, progress)
