@@ -13,7 +13,8 @@ window (its EDF grows with its length).  Two tests per window and axis:
   F distribution.
 * **level**: D = mean(second half of the window) - mean(first half) has variance
   2 AVAR(W/2) (the Allan variance's definition); AVAR(W/2) is extrapolated from the baseline's
-  longest tau with its local slope + 1/2 (clipped to [-1, +1]: conservative).  Normal p-value.
+  three longest taus with the local slope + 1/2 clipped to [0, +1] (conservative).  z^2 is
+  F(1, nu_b) distributed (the baseline's AVAR is itself an estimate).
 
 The threshold is Bonferroni over the tests of a day: p_crit = target / (windows per day x
 (M + 1)), M averaging factors, windows per day = 86400 / step.  Overlapping windows and
@@ -239,7 +240,7 @@ class ChangeTest:
             a_b, nu_w, nu_b, p, good = self._spectrum(j, a_w, w_cnt[:, j])
             if not good.any():
                 continue
-            p_level, _, step, _ = self._level(j, a_b, good)
+            p_level, _, step, _ = self._level(j, a_b, nu_b, good)
             best = int(np.argmin(p))
             if min(p[best], p_level) >= self.p_crit:
                 continue
@@ -255,7 +256,7 @@ class ChangeTest:
             self._pending[j] = {'level': level, 'p': min(p[best], p_level), 't_s': starts[cut],
                                 'first_pure': self.blocks_seen - self.k + cut + 1,
                                 'before': before, 'detected_s': end,
-                                'sd_half': self._level(j, a_b, good)[3]}
+                                'sd_half': self._level(j, a_b, nu_b, good)[3]}
             self.skip[j] = self.k  # the window's blocks are not pooled into the baseline
 
     def _finish(self, j, end):
@@ -290,8 +291,14 @@ class ChangeTest:
         self.skip[j] = self.k - n_pure  # the pure blocks start the new baseline
         return change
 
-    def _level(self, j, a_b, good):
-        """Level test of axis j: (p, z, step, sd of the half-window deviation)."""
+    def _level(self, j, a_b, nu_b, good):
+        """
+        Level test of axis j: (p, z, step, sd of the half-window deviation).
+
+        z^2 = D^2 / (2 AVAR_b(W/2)) is F(1, nu_b)-distributed (AVAR_b an estimate with the
+        EDF nu_b of the longest tau it is extrapolated from), not chi-square(1): a baseline
+        of an hour has only a few degrees of freedom at W/10.
+        """
         _, _, ys, yc, _ = self._ordered(j)
         h = self.k // 2
         n1, n2 = yc[:h].sum(), yc[h:].sum()
@@ -300,12 +307,13 @@ class ChangeTest:
             return 1.0, 0.0, 0.0, math.nan
         i1, i0 = top[-1], top[-2]
         slope = math.log(a_b[i1] / a_b[i0]) / math.log(self.ms[i1] / self.ms[i0])
-        slope = min(max(slope + 0.5, -1.0), 1.0)
-        avar_half = a_b[i1] * (self.window_s / 2.0 / self.tau[i1]) ** slope
+        slope = min(max(slope + 0.5, 0.0), 1.0)  # never falling: a flicker floor at least
+        avar_half = max(a_b[i] * (self.window_s / 2.0 / self.tau[i]) ** slope
+                        for i in top[-3:])  # the longest three: one low estimate is no floor
         step = ys[h:].sum() / n2 - ys[:h].sum() / n1
         sd = math.sqrt(2.0 * avar_half)
         z = step / sd
-        p = float(math.erfc(abs(z) / math.sqrt(2.0)))
+        p = float(_special().fdtrc(1.0, nu_b[i1], z * z))
         return p, z, step, math.sqrt(avar_half)
 
     def _classify(self, a_w, a_b, nu_w, nu_b, good):
