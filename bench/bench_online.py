@@ -3,14 +3,15 @@ Benchmark: the online Allan estimator and the allan node at 1 kHz x 6 axes.
 
 Sections (each prints its numbers):
 
-1. ``estimator``: per-sample cost of :class:`StreamingAllan` and of the whole online pipeline
-   (stamp checks + stationarity gate + estimator) fed in 50-sample batches (the node's drain
-   period at 1 kHz), the cost of ``result()`` and of the fit, and the memory (fixed) for
-   max_tau = 10,000 s.
+1. ``estimator``: per-sample cost of :class:`StreamingAllan`, of the whole online pipeline
+   (stamp checks + stationarity gate + estimator) and of the change test, fed in 50-sample
+   batches (the node's drain period at 1 kHz), the cost of ``result()`` and of the fit, and
+   the memory (fixed) for max_tau = 10,000 s.
 2. ``accuracy``: the strided factors (m > stride_base) against the fully overlapping
    estimator on simulated white, flicker and random-walk noise: mean ratio (bias) and the
    ratio of the spreads (how much wider an honest interval would be).
-3. ``node``: CPU share of the built ``allan`` executable while this process publishes 6-axis
+3. ``node``: CPU share of the built ``allan`` executable (change test on by default, and
+   off) while this process publishes 6-axis
    Imu messages at 1 kHz, side by side with a plain rclpy subscriber that does nothing, and the
    node's publish-cycle time (from its diagnostics); also with ``covariance_topic`` set (every
    message republished with live covariances, received here).  Needs the colcon-built package.
@@ -71,6 +72,16 @@ def bench_estimator():
     print(f'  OnlineAllan (stamps + gate + estimator): {dt / n * 1e6:6.2f} us per sample '
           f'({100 * dt / (n / rate):.2f} % of one core); memory '
           f'{pipe.memory_bytes() / 1024:.0f} KiB (fixed)')
+    from imu_allan.core.change_monitor import ChangeMonitor
+    from imu_allan.core.units import AXES
+    monitor = ChangeMonitor(rate, 600.0, AXES)
+    start = time.perf_counter()
+    for i in range(0, n, batch):
+        monitor.feed(t[i:i + batch], data[i:i + batch])
+    dt = time.perf_counter() - start
+    print(f'  ChangeMonitor (change test, window 600 s): {dt / n * 1e6:6.2f} us per sample '
+          f'({100 * dt / (n / rate):.2f} % of one core); {monitor.ms.size} averaging factors; '
+          f'memory {monitor.memory_bytes() / 1024:.0f} KiB (fixed)')
     start = time.perf_counter()
     result = pipe.result()
     dt_r = time.perf_counter() - start
@@ -236,6 +247,9 @@ def bench_node(seconds=35.0, rate=1000.0, cases=None):
                ('allan node (publish_period 10 s)',
                 [exe, '--ros-args', '-p', f'rate_hz:={rate}',
                  '-p', 'publish_period:=10.0']),
+               ('allan node, change test off',
+                [exe, '--ros-args', '-p', f'rate_hz:={rate}',
+                 '-p', 'publish_period:=10.0', '-p', 'change_window_s:=0.0']),
                ('allan node + covariance_topic',
                 [exe, '--ros-args', '-p', f'rate_hz:={rate}',
                  '-p', 'publish_period:=10.0', '-p', 'covariance_topic:=imu/data_cov']),

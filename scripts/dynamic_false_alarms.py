@@ -25,6 +25,7 @@ def main():
     p.add_argument('--hours', type=float, default=24.0)
     p.add_argument('--rate', type=float, default=100.0)
     p.add_argument('--seeds', type=int, default=1)
+    p.add_argument('--first-seed', type=int, default=1000)
     p.add_argument('--window', type=float, default=None, help='window, s (default: the rule)')
     p.add_argument('--no-walk', action='store_true', help='no rate random walk term')
     args = p.parse_args()
@@ -38,7 +39,7 @@ def main():
     alarms, axis_days = [], 0.0
     for seed in range(args.seeds):
         t0 = time.time()
-        data = simulate(model, n, args.rate, seed=1000 + seed)
+        data = simulate(model, n, args.rate, seed=args.first_seed + seed)
         dyn = dynamic_allan(data, args.rate, args.window, axes=model.axes)
         del data
         found = detect_changes(dyn)

@@ -83,6 +83,11 @@ def build_parser():
                         'mdev, tdev, hdev, ohdev, totdev, mtotdev, htotdev, theo1): the '
                         'others go into report.json and onto the plots')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
+    p.add_argument('--dynamic', nargs='?', const=0.0, default=None, metavar='WINDOW_S',
+                   type=bounded_float(0.0, 1e7),
+                   help='dynamic Allan deviation over sliding windows and a change test per '
+                        'axis (default window: the record / 24 in [60 s, 1 h]); with --out '
+                        'also dynamic_gyro.png and dynamic_accel.png')
     add_export_arguments(p)
     p.add_argument('--target', metavar='TERM=REL,...', default='',
                    help='precision targets of the recording advice: relative 68.3 %% '
@@ -126,7 +131,7 @@ def main(argv=None):
     from .batch import is_scan_folder, run_batch
     if len(args.inputs) == 1 and not (args.scheduler or args.db or
                                       is_scan_folder(args.inputs[0])):
-        steps = 2 + bool(args.denoise) + bool(args.out)  # read, estimate+fit, [denoise], [write]
+        steps = 2 + bool(args.denoise) + bool(args.out) + (args.dynamic is not None)
         progress = Progress(args.inputs[0], steps, enabled=not quiet)
         try:
             report, text = run_one(args.inputs[0], args, options, progress)

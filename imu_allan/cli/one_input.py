@@ -65,6 +65,18 @@ def run_one(path, args, options, progress=None, out_dir=None):
                 'adev': {'tau': denoised.result.tau.tolist(),
                          'adev': denoised.result.adev[:, j].tolist()}}
             for j, a in enumerate(denoised.axes)}
+    dynamic_text = ''
+    if args.dynamic is not None:
+        step('dynamic Allan deviation')
+        from ..report.dynamic_plots import (
+            analyze_dynamic,
+            dynamic_json,
+            dynamic_sentence,
+            write_dynamic_plots,
+        )
+        dyn, changes = analyze_dynamic(analysis, args.dynamic)
+        report['dynamic'] = dynamic_json(dyn, changes, analysis.warmup_s)
+        dynamic_text = '\n' + dynamic_sentence(dyn, changes)
     from ..report.temperature_report import add_temperature, temperature_sentence
     add_temperature(report, path, fmt, samples, analysis)
     if args.out:
@@ -80,8 +92,19 @@ def run_one(path, args, options, progress=None, out_dir=None):
             def write_bag(staging):
                 _write_denoised_bag(path, real_fmt, samples, den_samples, staging)
             extra = write_bag
+        if args.dynamic is not None:
+            extra = _also(extra, lambda staging: write_dynamic_plots(staging, dyn, changes))
         exports = (args.export, args.inflate, args.overbound, args.overbound_horizon)
         report['out_files'] = write_out_dir(out_dir, analysis, samples.data, denoised, report,
                                             extra=extra, exports=exports)
     return report, (console_summary(analysis) + '\n' + advice_sentence(advice)
-                    + temperature_sentence(report))
+                    + temperature_sentence(report) + dynamic_text)
+
+
+def _also(first, then):
+    """Return an ``extra`` writer that runs ``first`` (if any), then ``then``."""
+    def both(staging):
+        if first is not None:
+            first(staging)
+        then(staging)
+    return both

@@ -58,6 +58,7 @@ from .common import (
 )
 from ..core import health as hm
 from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
+from ..core.change_monitor import ChangeMonitor
 from ..core.model import NoiseModel
 from ..core.online import check_rate_options, OnlineAllan, StagedEstimate
 from ..core.streaming import parse_estimators
@@ -136,10 +137,20 @@ PARAMETERS = [
           (0.1, 86400.0)),
     Param('drain_period', 0.05, 'seconds between taking the queued messages (read-only)',
           (0.001, 1.0), read_only=True),
+    Param('change_window_s', 600.0, 'change test window, s: dynamic Allan variance over windows '
+                                    'of this length, step a quarter, each against the pooled '
+                                    'baseline before it (docs/online.md); 0 = off',
+          (0.0, 1.0e6)),
+    Param('change_hold_s', 0.0, 'seconds (of header stamps) a change WARN lasts; 0 = until '
+                                'change_reset is set', (0.0, 1.0e7)),
+    Param('change_reset', False, 'any set of this parameter (true or false) clears the change '
+                                 'WARNs and restarts the baselines'),
     Param('queue_depth', 5000, 'subscription queue depth, messages (read-only; >= rate x '
                                'drain_period x a margin)', (10, 1_000_000), read_only=True),
 ]
 _DEFAULTS = {p.name: p.default for p in PARAMETERS}
+#: Fewest samples in a change-test window (its longest tau is a tenth of it).
+CHANGE_MIN_SAMPLES = 100
 #: Longest stretch of publish-cycle work done in one drain callback, s (a step may overrun it).
 STEP_BUDGET_S = 0.02
 # Parameters whose change restarts the estimate.
@@ -177,6 +188,9 @@ def check_parameters(p):
     if p['rate_hz']:  # a measured rate is checked by OnlineAllan once it is known
         check_rate_options(p['rate_hz'], p['max_tau'], p['window_s'], p['min_clusters'],
                            p['gate_window_s'] if p['gate'] else None)
+        if 0 < p['change_window_s'] * p['rate_hz'] < CHANGE_MIN_SAMPLES:
+            raise InputError('change_window_s', f'too short: needs at least '
+                                                f'{CHANGE_MIN_SAMPLES} samples')
     from ..core.health import NoiseBudget
     from ..core.model import ModelError, NoiseModel
     parse_terms(p['terms'])
@@ -237,6 +251,7 @@ class AllanNode(Node):
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
             if self.params['covariance_topic'] else None
         self._cov_variance = None  # per-sample N^2 f per axis, once estimated
+        self._change = None  # the change test (core.change_monitor), once the rate is known
         self._plot = PlotPublisher(self)
         self._last_arrival = None
         self._cycle = None
@@ -279,6 +294,9 @@ class AllanNode(Node):
             self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
         if 'model_file' in changed:
             self._load_model()
+        if changed & {'change_window_s', 'change_hold_s', 'change_reset'} or changed & _RESTART:
+            self._change = None
+            self._start_change()  # a fresh baseline, OK until a new change
         if 'publish_period' in changed:
             self._publish_timer.cancel()
             self.destroy_timer(self._publish_timer)
@@ -309,12 +327,28 @@ class AllanNode(Node):
                 self.get_logger().info(
                     f'sample rate {self.pipeline.rate_hz:.6g} Hz ({self.pipeline.rate_source});'
                     f' estimator memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
+            self._feed_change(t, data)
             if self._pub_cov is not None:
                 self._republish(msgs)
         if self._cycle is not None:
             self._advance_cycle()
         elif self._advice is not None:
             self._advance_advice()
+
+    def _start_change(self):
+        """Start the change test once the sample rate is known (off at change_window_s 0)."""
+        if self._change is None and self.params['change_window_s'] and self.pipeline.rate_hz:
+            self._change = ChangeMonitor(self.pipeline.rate_hz, self.params['change_window_s'],
+                                         AXES, self.params['change_hold_s'])
+
+    def _feed_change(self, t, data):
+        """Feed the change test; log each change it finds."""
+        self._start_change()
+        if self._change is None:
+            return
+        for c in self._change.feed(t, data):
+            self.get_logger().warn(f'{c.axis}: {c.what} changed at stamp {c.t_s:.3f} s '
+                                   f'(ratio {c.ratio:.3g})')
 
     def publish(self):
         """Start a publish cycle: freeze the sums; the steps run between drains."""
@@ -424,6 +458,8 @@ class AllanNode(Node):
                 p.axes, p.estimator.n_used_axes, p.rejected_total) if r})
         records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
         records.append(self._advice_status)
+        if self._change is not None:
+            records += self._change.health(prefix)
         if self.model is not None:  # the discrepancy check: gap and effect per axis
             records += hm.discrepancy_health(self.model, result, AXES, prefix)
         array = DiagnosticArray()
