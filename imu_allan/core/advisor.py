@@ -40,10 +40,11 @@ from . import terms as _terms
 from .allan import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
 from .bisection import bisection, guided, log_ratio
 from .bounded_min import bounded_minimum
-from .edf import edf_oadev
+from .edf import CI_LEVEL, edf_oadev
 
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
 from .fit import (
+    coefficient_interval,
     deterministic_index,
     fit_terms,
     Problem,
@@ -199,10 +200,10 @@ def _nonlinear(axis_terms):
             if len(TERM_PARAMETERS[t]) > 1}
 
 
-def _rel_halfwidth(coef, sd):
-    """Relative half-width of sqrt(c) for the fit's interval [sqrt(c - sd), sqrt(c + sd)]."""
-    lo = math.sqrt(max(coef - sd, 0.0))
-    return (math.sqrt(coef + sd) - lo) / (2.0 * math.sqrt(coef))
+def _rel_halfwidth(coef, sd, deterministic=False):
+    """Relative half-width of sqrt(c) for the fit's 68.3 % interval (coefficient_interval)."""
+    lo, hi = coefficient_interval(coef, sd * sd, CI_LEVEL, deterministic)
+    return (hi - lo) / (2.0 * math.sqrt(coef))
 
 
 class _Forecast:
@@ -251,7 +252,8 @@ class _Forecast:
         for j, term in enumerate(names):
             value = axis_terms[term][_main_param(term)]
             sd = math.sqrt(max(cov[j, j], 0.0))
-            out[term] = _rel_halfwidth(value * value, sd) if value > 0 else math.inf
+            out[term] = (_rel_halfwidth(value * value, sd, term == 'rate_ramp') if value > 0
+                         else math.inf)
         return out
 
     def criterion_gap(self, n, truth, key, other_names, start=None):

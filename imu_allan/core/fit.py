@@ -35,7 +35,7 @@ import numpy as np
 from . import terms as _terms
 from .bisection import guided, log_ratio, run
 from .bounded_min import bounded_minimum
-from .edf import CI_LEVEL
+from .edf import _gammainccinv, CI_LEVEL
 from .model import NoiseModel
 from .nnls import nnls_scaled
 from .terms import TERMS
@@ -46,12 +46,6 @@ CORRELATION_WIDTH = {2: 0.41, 1: 0.41, 0: 0.41, -1: 0.58, -2: 1.08}
 #: Flicker noise also correlates estimates decades apart (0.06 at two decades): weight of a
 #: long-range exponential component exp(-|d log10 tau| / 3) per noise exponent.
 CORRELATION_TAIL = {-1: 0.1}
-#: White phase noise (quantization) correlates estimates at all averaging times alike: every
-#: squared second difference holds 6 x_k^2 of the same phase points, so for m != m' (not
-#: multiples) rho = 72 / (72 (1 + 2 (4/9) + 2 (1/36))) = 0.51; measured 0.52-0.58 (400
-#: records of 20000 samples, m = 1 .. 300).  Share of a constant component per exponent.
-#: Without it the quantization and white-noise intervals held the truth in ~55 % of cases.
-CORRELATION_PLATEAU = {2: 0.5}
 _MIN_EDF = 1.0
 #: Multiple of ln(T) charged per term in the selection criterion (BIC uses 1).  Measured on
 #: 16 simulated 2-h records x 6 axes (thesis and ADIS16448-like models): 1 -> 91 of 96 axes get
@@ -91,14 +85,12 @@ def correlation_matrix(tau, alpha):
     logt = np.log10(np.asarray(tau, dtype=float))
     width = np.array([CORRELATION_WIDTH.get(int(a), 0.5) for a in alpha])
     tail = np.sqrt([CORRELATION_TAIL.get(int(a), 0.0) for a in alpha])
-    plateau = np.sqrt([CORRELATION_PLATEAU.get(int(a), 0.0) for a in alpha])
     steps = np.diff(logt) / (0.5 * (width[1:] + width[:-1]))
     u = np.concatenate([[0.0], np.cumsum(steps)])
-    base = np.sqrt(1.0 - tail ** 2 - plateau ** 2)
+    base = np.sqrt(1.0 - tail ** 2)
     short = np.exp(-np.abs(u[:, None] - u[None, :]) ** 1.5)
     long = np.exp(-np.abs(logt[:, None] - logt[None, :]) / 3.0)
-    return (base[:, None] * base[None, :] * short + tail[:, None] * tail[None, :] * long
-            + plateau[:, None] * plateau[None, :])
+    return base[:, None] * base[None, :] * short + tail[:, None] * tail[None, :] * long
 
 
 class Problem:
@@ -272,7 +264,7 @@ def fit_terms(problem, names, profile_intervals=True):
         if not active[j]:
             continue
         value = math.sqrt(coef[j])
-        interval = (math.sqrt(max(coef[j] - sd[j], 0.0)), math.sqrt(coef[j] + sd[j]))
+        interval = coefficient_interval(coef[j], sd[j] ** 2, CI_LEVEL, name == 'rate_ramp')
         spec = TERMS[name]
         fit.terms[name] = spec.pack(value, nonlinear.get(name))
         position = None
@@ -380,10 +372,39 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LI
     return math.sqrt(math.exp(lo))
 
 
-def _normal_quantile(p):
-    """Return the standard normal quantile Phi^-1(p)."""
-    from scipy.special import ndtri
-    return float(ndtri(p))
+def coefficient_interval(c, var, level=CI_LEVEL, deterministic=False):
+    """
+    Two-sided ``level`` interval of sqrt(c) for a squared coefficient c with variance ``var``.
+
+    A noise term's c is a weighted sum of AVAR estimates, each chi-square distributed, so c is
+    about c_true chi^2_nu / nu with nu = 2 c^2 / var (Satterthwaite's effective degrees of
+    freedom): the interval is c nu / chi^2_nu quantiles, as SP1065 eq. 45 does for one AVAR
+    point.  With many degrees of freedom it is c +- z sd; with few (a random walk seen in the
+    last decade only) its upper side is the longer one, as the estimates' scatter is.  A
+    deterministic term (``deterministic``: the rate ramp), whose error is the noise's drift,
+    takes the normal interval c +- z sd.  Returns ``(lo, hi)`` of sqrt(c).
+    """
+    if not (var > 0 and c > 0):
+        return (math.sqrt(max(c, 0.0)),) * 2
+    p = 0.5 * (1.0 - level)
+    nu = 2.0 * c * c / var
+    # chi-square quantiles with upper tail q: 2 Q^-1(nu / 2, q) (scipy's chdtri(nu, q))
+    low_q = 2.0 * float(_gammainccinv(0.5 * nu, p))
+    high_q = 2.0 * float(_gammainccinv(0.5 * nu, 1.0 - p))
+    if deterministic or not high_q > 0.0:  # (a term with sd >> c: its quantile underflows)
+        z = two_sided_z(level)
+        sd = math.sqrt(var)
+        return math.sqrt(max(c - z * sd, 0.0)), math.sqrt(c + z * sd)
+    return math.sqrt(c * nu / low_q), math.sqrt(c * nu / high_q)
+
+
+def two_sided_z(level):
+    """
+    Return z with P(|Z| < z) = ``level`` for a standard normal Z: Phi^-1((1 + level) / 2).
+
+    z^2 is the chi-square(1) quantile with upper tail 1 - level (no scipy.special import).
+    """
+    return math.sqrt(2.0 * float(_gammainccinv(0.5, 1.0 - level)))
 
 
 class FittedModel:
@@ -414,10 +435,10 @@ class FittedModel:
         Return the two-sided ``level`` interval of a parameter, ``(nan, nan)`` if not detected.
 
         ``level`` defaults to 68.27 % (one standard deviation), the interval stored with the
-        fit.  Other levels: the normal quantile z = Phi^-1((1 + level) / 2) times the GLS
-        standard deviation of the squared coefficient, mapped through sqrt (the 68.27 %
-        interval is z = 1); for tau_c / f0 the stored profile interval's log half-widths
-        scaled by z.
+        fit.  Main parameters: :func:`coefficient_interval` from the squared coefficient and
+        its GLS variance (chi-square with Satterthwaite's degrees of freedom; normal for the
+        deterministic ramp); tau_c / f0: the stored profile interval's log half-widths scaled
+        by z = Phi^-1((1 + level) / 2).
         """
         stored = self.intervals.get(axis, {}).get(term, {}).get(param)
         if stored is None:
@@ -426,13 +447,13 @@ class FittedModel:
             raise ValueError(f'confidence level {level!r} must be between 0 and 1')
         if abs(level - CI_LEVEL) < 1e-12:
             return stored
-        z = _normal_quantile(0.5 + 0.5 * level)
         fit = self.fits[axis]
         value = self.model.value(axis, term, param)
         if param == TERMS[term].params[0] and term in fit.coef:
             j = list(fit.coef).index(term)
-            c, sd = fit.coef[term], math.sqrt(max(fit.cov[j, j], 0.0))
-            return (math.sqrt(max(c - z * sd, 0.0)), math.sqrt(c + z * sd))
+            return coefficient_interval(fit.coef[term], max(fit.cov[j, j], 0.0), level,
+                                        term == 'rate_ramp')
+        z = two_sided_z(level)
         lo, hi = stored
         return (value * (lo / value) ** z, value * (hi / value) ** z)
 

@@ -194,6 +194,8 @@ def summary(outcomes):
     return {'axes': len(rows),
             'exact': float(np.mean([r['exact'] for r in rows])),
             'among': float(np.mean([r['among'] or r['exact'] for r in rows])),
+            # share of axes whose true set is within a criterion margin of the best
+            'within': {m: float(np.mean([r['gap'] < m for r in rows])) for m in (2, 6, 10)},
             'cover': {t: (len(f), *np.mean(np.array(f, dtype=float), axis=0))
                       for t, f in cover.items()}}
 
@@ -223,4 +225,7 @@ if __name__ == '__main__':
     t0 = time.process_time()
     result = run(n_axes=axes, log=lambda s: print(s, file=sys.stderr, flush=True))
     print(table(result))
+    within = summary(result)['within']
+    print('\ntrue set within a criterion margin of the best: ' + ', '.join(
+        f'{m}: {100 * v:.1f} %' for m, v in within.items()))
     print(f'\n{time.process_time() - t0:.0f} s CPU', file=sys.stderr)
