@@ -126,10 +126,11 @@ def test_covariance_mode_overbound(ros_context):
     absorb it).  Every republished diagonal after the first estimate must be f N^2 with N^2 /
     tau at or above the published Allan variance at every published tau of one
     imu/allan_deviation table (the overbound holds above the upper 95 % bound, which lies
-    above the estimate itself), and within 4x of the largest tau ADEV^2 (the bound's margin at
-    the longest tau, EDF >= 10 there, is below 2x in variance); and above the raw N^2 f of a
-    published coefficient table, since bias instability lifts the white-only bound.  A value outside
-    raw, overbound is refused at start (exit 2, one line naming the parameter).
+    above the estimate itself), and within 4x of the largest tau x AVAR (the bound's margin
+    over the estimate, EDF >= 10 where it is largest, is below 2x in variance); and above the
+    raw N^2 f of a published coefficient table, since bias instability lifts the white-only
+    bound.  A value outside raw, overbound is refused at start (exit 2, one line naming the
+    parameter).
     """
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
     from sensor_msgs.msg import Imu
