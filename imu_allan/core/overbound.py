@@ -127,8 +127,13 @@ def upper_bound(result, axes, horizon_s=None, level=OVERBOUND_LEVEL):
 
 def _solve(columns, bound):
     """LP of the module docstring for fixed shapes; ``(x, objective)`` or None if infeasible."""
-    from scipy.optimize import linprog
     a = columns / bound[:, None]                      # model / bound per unit x_j
+    if a.shape[1] == 1:  # one term: the optimum is where its tightest constraint is met
+        if not np.all(a[:, 0] > 0):
+            return None
+        x = 1.0 / float(np.min(a[:, 0]))
+        return np.array([x]), float(np.mean(a[:, 0] * x))
+    from scipy.optimize import linprog
     scale = 1.0 / np.max(a, axis=0)                   # x_j = scale_j z_j: columns of max 1
     a = a * scale
     c = a.sum(axis=0)
