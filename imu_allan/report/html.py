@@ -294,13 +294,19 @@ def analysis_context(report, folder, figures=None):
     SVG); other PNG files in ``folder`` are shown as data: URIs.
     """
     folder = Path(folder)
-    svgs = [{'title': {'gyro': 'Gyroscopes', 'accel': 'Accelerometers'}.get(k, k),
-             'svg': svg_markup(fig), 'file': f'adev_{k}.png', 'caption': ADEV_CAPTION}
-            for k, fig in (figures or {}).items() if fig is not None]
-    pngs = [{'title': name[:-4].replace('_', ' '), 'uri': png_data_uri(folder / name),
-             'file': name, 'caption': PNG_CAPTIONS.get(name, '')}
-            for name in sorted(os.listdir(folder))
-            if name.endswith('.png') and not name.startswith('adev_')]
+    names = {'gyro': 'Gyroscopes', 'accel': 'Accelerometers', 'timeseries': 'Time series',
+             'dynamic_gyro': 'Dynamic Allan deviation, gyroscopes',
+             'dynamic_accel': 'Dynamic Allan deviation, accelerometers'}
+    figures = {k: f for k, f in (figures or {}).items() if hasattr(f, 'savefig')}
+    svgs = [{'title': names.get(k, k), 'svg': svg_markup(fig), 'file': f'adev_{k}.png',
+             'caption': ADEV_CAPTION} for k, fig in figures.items()]
+    # any other PNG (and an Allan plot whose Figure was not handed over) as a data: URI
+    shown = {f'adev_{k}.png' for k in figures}
+    pngs = [{'title': names.get(name[:-4].removeprefix('adev_'), name[:-4].replace('_', ' ')),
+             'uri': png_data_uri(folder / name), 'file': name,
+             'caption': ADEV_CAPTION if name.startswith('adev_') else PNG_CAPTIONS.get(name, '')}
+            for name in sorted(os.listdir(folder)) if name.endswith('.png') and name not in shown]
+    pngs.sort(key=lambda f: not f['file'].startswith('adev_'))
     verdict = report.get('verdict', {})
     return {
         'report': report, 'coefficients': coefficient_rows(report), 'limits': _limits(report),
