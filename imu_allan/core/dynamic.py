@@ -234,6 +234,8 @@ class BlockAllan:
 
 def _block_sum(ids, values, nb):
     """Return the sums of the rows of ``values`` per sorted block id 0 .. nb-1: (nb, A)."""
+    if nb == 1:  # the stream's usual batch: inside one block
+        return values.sum(axis=0, keepdims=True)
     starts = np.searchsorted(ids, np.arange(nb))
     out = np.zeros((nb, values.shape[1]))
     full = starts < ids.size
