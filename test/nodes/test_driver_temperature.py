@@ -117,7 +117,10 @@ def test_recorded_bag_gives_the_simulated_slope(node, procs, tmp_path):  # noqa:
     write_imu_bag(bag, Samples(t=t, data=data), topic='/imu/data_raw', extra_topics={
         '/imu/temperature': ('sensor_msgs/msg/Temperature', recorded)})
     out = tmp_path / 'report'
-    proc = subprocess.run([executable('analyze'), str(bag), '--out', str(out), '--quiet'],
+    # --allow-jumps: on a loaded machine a best-effort subscriber may miss a run of messages;
+    # that is no fault of the driver, and the slope needs no unbroken record.
+    proc = subprocess.run([executable('analyze'), str(bag), '--out', str(out), '--quiet',
+                           '--allow-jumps'],
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     section = json.loads((out / 'report.json').read_text())['temperature']
