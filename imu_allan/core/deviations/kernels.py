@@ -58,7 +58,7 @@ def _total_sum(xs, mid, n_phase, m):  # pragma: no cover - compiled; tested vs n
 
 
 def variance(kind, x, ms):
-    """Compute the adev, hdev, ohdev, mdev (or tdev), totdev variance (T, A) from x (A, N)."""
+    """Return the adev, hdev, ohdev, mdev (or tdev) or totdev variances (T, A) of x (A, N)."""
     x = np.ascontiguousarray(x, dtype=float)
     n_phase = x.shape[1]
     if kind == 'totdev':
