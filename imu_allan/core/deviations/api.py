@@ -80,7 +80,7 @@ def raw_variance(kind, x, ms, data=None, fast=True):
     Uncorrected variance (T, A) of ``kind`` from the phase ``x`` (A, N) in sample units.
 
     tdev gives MVAR (scaled afterwards); ``data`` (n, A), when given, lets oadev use the
-    package's compiled Allan kernel (:func:`imu_allan.core.allan.avar_function`); hdev,
+    package's compiled Allan kernel (:func:`imu_allan.core.allan.avar_function`); adev, hdev,
     ohdev, mdev, tdev and totdev run compiled (:mod:`.kernels`) from the same amount of work
     as the Allan kernel (:data:`imu_allan.core.allan.SMALL_WORK`), numpy below it.  mtotdev,
     htotdev and theo1 run compiled (:mod:`.total_kernel`; on long records with thinned window
@@ -90,7 +90,7 @@ def raw_variance(kind, x, ms, data=None, fast=True):
         if data is not None and fast:
             return _allan.avar_function(data.size * len(ms))(data, ms)
         return allan_family.variance_reference(kind, x, ms)
-    if kind in ('hdev', 'ohdev', 'mdev', 'tdev', 'totdev') and fast \
+    if kind in ('adev', 'hdev', 'ohdev', 'mdev', 'tdev', 'totdev') and fast \
             and x.size * len(ms) >= _allan.SMALL_WORK:
         try:
             from . import kernels
@@ -235,8 +235,7 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     raw = raw_variance(kind, x, ms, data)
     dmax, span = _NOISE_ID[kind]
     id_ms = np.maximum(np.round(ms * grid.tau_factor(kind)), 1).astype(np.int64)
-    y = np.diff(x, axis=1)
-    alpha = noise_id.identify(y, id_ms, dmax, span)
+    alpha = noise_id.identify_phase(x, id_ms, dmax, span)
     dev, low, high, dof = finish(kind, raw, ms, alpha, n + 1)
     tau = ms * grid.tau_factor(kind) / float(rate_hz)
     if kind == 'tdev':

@@ -1,5 +1,5 @@
 """
-Compiled sums of the O(N)-per-tau kinds (numba): hdev, ohdev, mdev/tdev, totdev.
+Compiled sums of the O(N)-per-tau kinds (numba): adev, hdev, ohdev, mdev/tdev, totdev.
 
 Each (axis, m) job is one pass over the phase with no temporaries (numpy makes three to five
 full-length arrays per averaging time), run on the package's thread pool
@@ -10,6 +10,17 @@ full-length arrays per averaging time), run on the package's thread pool
 import numpy as np
 
 from ..jit import jit, map_threads
+
+
+@jit(nogil=True, fastmath=True)
+def _allan_sum(x, m, stride):  # pragma: no cover - compiled; tested vs numpy
+    s = 0.0
+    count = 0
+    for k in range(0, x.shape[0] - 2 * m, stride):
+        d = x[k + 2 * m] - 2.0 * x[k + m] + x[k]
+        s += d * d
+        count += 1
+    return s, count
 
 
 @jit(nogil=True, fastmath=True)
@@ -47,7 +58,7 @@ def _total_sum(xs, mid, n_phase, m):  # pragma: no cover - compiled; tested vs n
 
 
 def variance(kind, x, ms):
-    """Compute the hdev, ohdev, mdev (also tdev) or totdev variance, (T, A), from x (A, N)."""
+    """Return the adev, hdev, ohdev, mdev (or tdev) or totdev variances (T, A) of x (A, N)."""
     x = np.ascontiguousarray(x, dtype=float)
     n_phase = x.shape[1]
     if kind == 'totdev':
@@ -57,6 +68,9 @@ def variance(kind, x, ms):
 
     def run(job):
         t, a, m = job
+        if kind == 'adev':
+            s, count = _allan_sum(x[a], m, m)
+            return s / (2.0 * m * m * count) if count else np.nan
         if kind in ('hdev', 'ohdev'):
             s, count = _hadamard_sum(x[a], m, m if kind == 'hdev' else 1)
             return s / (6.0 * m * m * count) if count else np.nan

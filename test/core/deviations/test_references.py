@@ -149,7 +149,7 @@ def test_thinned_windows_stay_close(kind):
     assert 1 < total_kernel.stride_for(kind, 1_000_001, 1000) <= 1000
 
 
-@pytest.mark.parametrize('kind', ['hdev', 'ohdev', 'mdev', 'totdev'])
+@pytest.mark.parametrize('kind', ['adev', 'hdev', 'ohdev', 'mdev', 'totdev'])
 def test_compiled_sums_equal_numpy(kind):
     from imu_allan.core.deviations import kernels
     x = _phase(RNG.standard_normal((3001, 2)) * [1.0, 1e-3] + [0.0, 9.8])
