@@ -227,6 +227,25 @@ def identify_noise(tau, avar):
     return out
 
 
+def checked_samples(data, rate_hz):
+    """
+    Return ``data`` as a float array (n_samples, n_axes); ValueError for what no estimator takes.
+
+    A 1-D array is one axis; ``rate_hz`` must be a positive finite number and every sample
+    finite (the estimators of :mod:`imu_allan.core.deviations` check the same way).
+    """
+    data = np.asarray(data, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    if data.ndim != 2:
+        raise ValueError('data must have shape (n_samples, n_axes)')
+    if not rate_hz or not math.isfinite(rate_hz) or rate_hz <= 0:
+        raise ValueError('rate_hz must be a positive number')
+    if not np.all(np.isfinite(data)):
+        raise ValueError('data contain NaN or inf')
+    return data
+
+
 def allan_deviation(data, rate_hz, taus=None, points_per_decade=DEFAULT_POINTS_PER_DECADE,
                     min_clusters=DEFAULT_MIN_CLUSTERS, axes=None, fast=True):
     """
@@ -254,16 +273,8 @@ def allan_deviation(data, rate_hz, taus=None, points_per_decade=DEFAULT_POINTS_P
     AllanResult
 
     """
-    data = np.asarray(data, dtype=float)
-    if data.ndim == 1:
-        data = data[:, None]
-    if data.ndim != 2:
-        raise ValueError('data must have shape (n_samples, n_axes)')
-    if not rate_hz or not math.isfinite(rate_hz) or rate_hz <= 0:
-        raise ValueError('rate_hz must be a positive number')
+    data = checked_samples(data, rate_hz)
     n = data.shape[0]
-    if not np.all(np.isfinite(data)):
-        raise ValueError('data contain NaN or inf')
     if taus is None:
         ms = tau_grid(n, points_per_decade, min_clusters)
         if ms.size == 0:

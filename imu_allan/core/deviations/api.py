@@ -9,7 +9,6 @@ chi-square interval (:func:`imu_allan.core.edf.chi2_interval`, SP1065 eq 45).
 """
 
 from dataclasses import dataclass
-import math
 
 import numpy as np
 
@@ -167,16 +166,7 @@ def finish(kind, raw, ms, alpha, n_phase):
 def _check(data, rate_hz, kind):
     if kind not in KINDS:
         raise ValueError(f'unknown deviation kind {kind!r} (known: {", ".join(KINDS)})')
-    data = np.asarray(data, dtype=float)
-    if data.ndim == 1:
-        data = data[:, None]
-    if data.ndim != 2:
-        raise ValueError('data must have shape (n_samples, n_axes)')
-    if not rate_hz or not math.isfinite(rate_hz) or rate_hz <= 0:
-        raise ValueError('rate_hz must be a positive number')
-    if not np.all(np.isfinite(data)):
-        raise ValueError('data contain NaN or inf')
-    return data
+    return _allan.checked_samples(data, rate_hz)
 
 
 def _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters):
