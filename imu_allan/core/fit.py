@@ -391,7 +391,9 @@ def coefficient_interval(c, var, level=CI_LEVEL, deterministic=False):
     # chi-square quantiles with upper tail q: 2 Q^-1(nu / 2, q) (scipy's chdtri(nu, q))
     low_q = 2.0 * float(_gammainccinv(0.5 * nu, p))
     high_q = 2.0 * float(_gammainccinv(0.5 * nu, 1.0 - p))
-    if deterministic or not high_q > 0.0:  # (a term with sd >> c: its quantile underflows)
+    c, var = float(c), float(var)
+    # (a term with sd >> c: its lower quantile underflows and the upper bound is not finite)
+    if deterministic or not (low_q > 0.0 and high_q > 0.0 and c * nu / high_q < 1e300):
         z = two_sided_z(level)
         sd = math.sqrt(var)
         return math.sqrt(max(c - z * sd, 0.0)), math.sqrt(c + z * sd)
