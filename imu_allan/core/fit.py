@@ -391,10 +391,11 @@ def coefficient_interval(c, var, level=CI_LEVEL, deterministic=False):
     # chi-square quantiles with upper tail q: 2 Q^-1(nu / 2, q) (scipy's chdtri(nu, q))
     low_q = 2.0 * float(_gammainccinv(0.5 * nu, p))
     high_q = 2.0 * float(_gammainccinv(0.5 * nu, 1.0 - p))
-    # A term with sd >> c (nu well below 1) has a chi-square so skewed that even its upper
-    # quantile lies below nu (the interval would exclude c) or its lower one underflows:
-    # there the normal interval is the honest statement.
-    if deterministic or not (high_q > 0.0 and low_q > nu):
+    c, var = float(c), float(var)
+    # A term with sd >> c (nu well below 1) has a chi-square so skewed that its upper quantile
+    # can lie below nu (the interval would exclude c), its lower one underflow or the upper
+    # bound overflow: there the normal interval is the honest statement.
+    if deterministic or not (low_q > nu and high_q > 0.0 and c * nu / high_q < 1e300):
         z = two_sided_z(level)
         sd = math.sqrt(var)
         return math.sqrt(max(c - z * sd, 0.0)), math.sqrt(c + z * sd)

@@ -13,7 +13,7 @@ import math
 from core.calibration_cases import run, summary
 from imu_allan import allan_deviation, fit_noise_model, NoiseModel, simulate
 from imu_allan.core.edf import CI_LEVEL
-from imu_allan.core.fit import Problem, ramp_drift_variance
+from imu_allan.core.fit import coefficient_interval, Problem, ramp_drift_variance
 import numpy as np
 import pytest
 
@@ -107,3 +107,12 @@ def test_ramp_drift_variance_is_the_noise_slope():
     assert var == pytest.approx(4 * 4.0 * 3600.0 / (3600.0 - 720.0) ** 2)
     no_length = Problem(tau, np.ones(40), np.full(40, 10.0), np.zeros(40), 100.0)
     assert ramp_drift_variance(no_length, {'rate_ramp': 4.0, 'rate_random_walk': 1.0}) == 0.0
+
+
+def test_coefficient_interval_of_an_unresolved_term_stays_finite():
+    """A term with sd >> c (chi-square quantiles underflow) gets the normal interval, finite."""
+    for c, var in ((1.0, 1e6), (1e-12, 1e-20), (1.0, 1e3)):
+        lo, hi = coefficient_interval(c, var)
+        assert lo == 0.0 and math.isfinite(hi) and hi > math.sqrt(c)
+    lo, hi = coefficient_interval(2.0, 0.5, 0.95)  # nu = 16: chi-square, longer upper side
+    assert hi - math.sqrt(2.0) > math.sqrt(2.0) - lo > 0
