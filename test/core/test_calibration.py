@@ -116,3 +116,19 @@ def test_coefficient_interval_of_an_unresolved_term_stays_finite():
         assert lo == 0.0 and math.isfinite(hi) and hi > math.sqrt(c)
     lo, hi = coefficient_interval(2.0, 0.5, 0.95)  # nu = 16: chi-square, longer upper side
     assert hi - math.sqrt(2.0) > math.sqrt(2.0) - lo > 0
+
+
+@pytest.mark.parametrize('sd_over_c', [0.1, 1.0, 3.0, 10.0, 100.0, 1e4])
+@pytest.mark.parametrize('level', [0.683, 0.95])
+def test_coefficient_interval_holds_the_value(sd_over_c, level):
+    """
+    The interval of sqrt(c) always holds sqrt(c), also where sd >> c.
+
+    With nu = 2 c^2 / var well below 1 the chi-square's upper quantile falls below nu, and the
+    chi-square interval would lie entirely above the value (the fleet page drew a negative
+    error bar from it); the normal interval takes over there.
+    """
+    c = 4.0e-6
+    lo, hi = coefficient_interval(c, (sd_over_c * c) ** 2, level)
+    assert lo <= math.sqrt(c) <= hi
+    assert math.isfinite(hi)
