@@ -53,16 +53,22 @@ def add_temperature(report, path, fmt, samples, analysis):
         return
     topic, t, celsius = reading
     samples.temperature = (t, celsius)
-    report['temperature'] = temperature_json(topic, t, celsius, samples.t, analysis)
+    report['temperature'] = temperature_json(topic, t, celsius, samples, analysis)
     relate_events(report)
 
 
-def temperature_json(topic, t, celsius, imu_t, analysis):
-    """Return the report section for temperatures ``(t, celsius)`` beside the record."""
+def temperature_json(topic, t, celsius, samples, analysis):
+    """
+    Return the report section for temperatures ``(t, celsius)`` beside the record.
+
+    The slopes are regressed on every sample read (``samples``), a warm-up the Allan estimate
+    left out included: where the bias settles with the temperature, that is the signal.
+    """
+    imu_t = samples.t
     inside = (t >= imu_t[0]) & (t <= imu_t[-1])
     shown = celsius[inside] if inside.any() else celsius
-    slopes, notes = bias_slopes(imu_t, analysis.data, analysis.rate_hz, analysis.axes, t,
-                                celsius)
+    slopes, notes = bias_slopes(imu_t, np.asarray(samples.data, dtype=float),
+                                analysis.rate_hz, analysis.axes, t, celsius)
     changes = temperature_changes(t - imu_t[0], celsius)
     return {'topic': topic, 'n_readings': int(t.size),
             'range_c': [float(np.min(shown)), float(np.max(shown))],

@@ -115,3 +115,27 @@ def test_topic_choice_and_coincidences():
     got = report['temperature']['coincidences']
     assert [g['temperature_change'] for g in got] == [0, None, 0]
     assert got[2]['event'] == 'warmup' and got[0]['axis'] == 'gyro_x'
+
+
+def test_slopes_use_the_warm_up_the_estimate_leaves_out(tmp_path):
+    """
+    A warm-up the Allan estimate leaves out (verdict.warmup_s > 0) still feeds the slopes.
+
+    1 h at 100 Hz, the bias following a 20 -> 40 deg C warm-up (time constant 300 s) at five
+    times SLOPES, large enough for core/warmup.py to call it one.  The settling is where the
+    temperature moves, so the slopes are regressed on every sample read: each within 3 of its
+    standard errors of the truth (a 99.7 % band for a normal error).
+    """
+    profile = 'warmup:20:40:300'
+    samples, temp_t, temp_c = recording(seconds=3600.0, seed=5, profile=profile)
+    prof = TemperatureProfile.parse(profile)
+    samples.data += 4.0 * np.outer(prof.at(samples.t - T0) - prof.start, SLOPES)
+    path = tmp_path / 'warm'
+    write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', extra_topics={
+        '/imu/temperature': ('sensor_msgs/msg/Temperature',
+                             temperature_messages(temp_t, temp_c))})
+    report, _ = analyze(path)
+    assert report['verdict']['warmup_s'] > 0
+    for j, axis in enumerate(AXES):
+        s = report['temperature']['slopes'][axis]
+        assert abs(s['value'] - 5.0 * SLOPES[j]) < 3 * s['stderr'], (axis, s)
