@@ -132,10 +132,11 @@ class ChangeMonitor:
                       'hold_s': self.hold_s}
             name = f'{prefix}{axis} change'
             if change is None:
-                ready = self.test.base_blocks[j] >= self.test.k
+                needed = self.test.baseline_blocks
+                ready = self.test.base_blocks[j] >= needed
                 message = ('no change against the baseline' if ready else
                            f'building the baseline ({values["baseline_s"]:.0f} of '
-                           f'{self.window_s:.0f} s)')
+                           f'{needed * self.step_s:.0f} s)')
                 records.append(Health(name, OK, message, values))
                 continue
             # Stamps as text with ns digits (a float would be shown with 6 significant ones).
