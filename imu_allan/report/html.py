@@ -206,8 +206,17 @@ def _limits(report):
     return out
 
 
-def advice_words(advice):
-    """Return the recording advice (the report's ``advice`` block) as sentences to act on."""
+def advice_words(advice, moving=(), alternatives=False):
+    """
+    Return the recording advice (the report's ``advice`` block) as sentences to act on.
+
+    Like the console's (:func:`imu_allan.report.advice.advice_sentence`), never "no need to
+    record longer" for a ``moving`` record (its moving axes) or while term sets remain that
+    the data cannot reject (``alternatives``, or an ``unresolved`` entry of the advice).
+    """
+    if moving:
+        return {'headline': 'The IMU moved during the record: record again at rest (on a still, '
+                            'vibration-free support) for the noise coefficients.', 'lines': []}
     if not advice:
         return {'headline': None, 'lines': []}
     targets = advice.get('targets', {})
@@ -237,6 +246,9 @@ def advice_words(advice):
         goal = ('meet every precision target and tell the terms apart'
                 if advice.get('unresolved') else 'meet every precision target')
         headline = f'Record {format_duration(more)} more (same rate and conditions) to {goal}.'
+    elif advice.get('unresolved') or alternatives:
+        headline = ('Every precision target is met, but the data cannot yet tell some term '
+                    'sets apart (below).')
     else:
         headline = 'Every precision target is met: no need to record longer.'
     return {'headline': headline, 'lines': items}
@@ -308,13 +320,14 @@ def analysis_context(report, folder, figures=None):
             for name in sorted(os.listdir(folder)) if name.endswith('.png') and name not in shown]
     pngs.sort(key=lambda f: not f['file'].startswith('adev_'))
     verdict = report.get('verdict', {})
+    moving = [a for a, m in (verdict.get('motion') or {}).items()
+              if isinstance(m, dict) and m.get('moving')]
+    alternatives = _alternatives(report)
     return {
         'report': report, 'coefficients': coefficient_rows(report), 'limits': _limits(report),
-        'advice': advice_words(report.get('advice')), 'svgs': svgs, 'pngs': pngs,
-        'files': _file_list(folder), 'alternatives': _alternatives(report),
-        'deviations': _deviations(report),
-        'moving': [a for a, m in (verdict.get('motion') or {}).items()
-                   if isinstance(m, dict) and m.get('moving')],
+        'advice': advice_words(report.get('advice'), moving, bool(alternatives)),
+        'svgs': svgs, 'pngs': pngs, 'files': _file_list(folder), 'alternatives': alternatives,
+        'deviations': _deviations(report), 'moving': moving,
     }
 
 
