@@ -26,13 +26,18 @@ def test_temperature_range_on_diagnostics(ros_context):
         pub = feed.node.create_publisher(type(temperature(0, 0)), 'imu/temperature', 10)
         assert feed.spin_until(lambda: pub.get_subscription_count() > 0, 30)
         values = [23.0, 21.5, 27.25, 24.0]
-        for _ in range(3):      # best-effort intake: each reading sent three times
+
+        def send():
             for i, c in enumerate(values):
                 pub.publish(temperature(1_700_000_000.0 + i, c))
-            feed.executor.spin_once(timeout_sec=0.05)
+        send()
+        feed.executor.spin_once(timeout_sec=0.05)
         feed.feed()
 
         def seen():
+            # best-effort intake (sensor-data QoS, depth 5): on a loaded machine a reading may
+            # be dropped, so the same readings are sent again until the status shows them
+            send()
             stream = status_values(feed.diags[-1][1], 'IMU stream') if feed.diags else None
             return bool(stream) and stream.get('temperature_max_c') == '27.25'
         assert feed.spin_until(seen, 30), feed.diags and status_values(feed.diags[-1][1],

@@ -126,8 +126,12 @@ def test_recorded_bag_gives_the_simulated_slope(node, procs, tmp_path):  # noqa:
     section = json.loads((out / 'report.json').read_text())['temperature']
     assert section['topic'] == '/imu/temperature'
     lo, hi = section['range_c']
-    # The first reading follows the driver's set-up, 1-3 s into the 0.67 deg C/s ramp.
-    assert lo < 23.0 and hi > 39.0
+    # The readings inside the record: the first one follows the driver's set-up (1-5 s into
+    # the 0.67 deg C/s ramp on a loaded machine), so the range is checked against what was
+    # recorded, and the ramp must span most of its 20 deg C.
+    celsius = [m.temperature for m in temps]
+    assert min(celsius) - 1e-9 <= lo < hi <= max(celsius) + 1e-9
+    assert hi - lo > 14.0 and hi > 39.0
     for axis, truth in (('gyro_x', 5e-4), ('gyro_y', -3e-4), ('gyro_z', 0.0)):
         s = section['slopes'][axis]
         assert abs(s['value'] - truth) < 3 * s['stderr'], (axis, s)
