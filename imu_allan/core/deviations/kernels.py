@@ -1,10 +1,14 @@
 """
 Compiled sums of the O(N)-per-tau kinds (numba): adev, hdev, ohdev, mdev/tdev, totdev.
 
-Each (axis, m) job is one pass over the phase with no temporaries (numpy makes three to five
-full-length arrays per averaging time), run on the package's thread pool
-(:func:`imu_allan.core.jit.map_threads`).  The numpy versions in :mod:`.allan_family`,
-:mod:`.modified` and :mod:`.total` are the oracles these are tested against.
+No temporaries (numpy makes three to five full-length arrays per averaging time), jobs run on
+the package's thread pool (:func:`imu_allan.core.jit.map_threads`).  adev and hdev (stride
+m: N / m terms) are one pass per (axis, m); ohdev and totdev (N terms per m) are summed block
+by block over the phase, every averaging time per 32 KiB block, as the Allan kernel
+(:mod:`..allan_kernel`): each phase point comes from memory once per axis.  mdev is
+Stable32's recursion, one pass per (axis, m).  The numpy versions in
+:mod:`.allan_family`, :mod:`.modified` and :mod:`.total` are the oracles these are tested
+against.
 """
 
 import numpy as np
@@ -42,8 +46,10 @@ def _modified_sum(x, m):  # pragma: no cover - compiled; tested vs numpy
     for i in range(m):
         v += x[i + 2 * m] - 2.0 * x[i + m] + x[i]
     s = v * v
+    # Views indexed from 0: numba then drops its negative-index checks (1.7-2x faster).
+    x3, x2, x1 = x[3 * m:], x[2 * m:], x[m:]
     for j in range(count - 1):
-        v += x[j + 3 * m] - 3.0 * x[j + 2 * m] + 3.0 * x[j + m] - x[j]
+        v += x3[j] - 3.0 * x2[j] + 3.0 * x1[j] - x[j]
         s += v * v
     return s, count
 
@@ -136,7 +142,6 @@ def _overlapping(kind, x, ms):
 def variance(kind, x, ms):
     """Return the adev, hdev, ohdev, mdev (or tdev) or totdev variances (T, A) of x (A, N)."""
     x = np.ascontiguousarray(x, dtype=float)
-    n_phase = x.shape[1]
     if kind in ('ohdev', 'totdev'):
         return _overlapping(kind, x, ms)
     jobs = [(t, a, int(m)) for t, m in enumerate(ms) for a in range(x.shape[0])]
@@ -149,7 +154,7 @@ def variance(kind, x, ms):
         if kind == 'hdev':
             s, count = _hadamard_sum(x[a], m, m)
             return s / (6.0 * m * m * count) if count else np.nan
-        if n_phase - 3 * m + 1 < 1:  # mdev, tdev
+        if x.shape[1] - 3 * m + 1 < 1:  # mdev, tdev
             return np.nan
         s, count = _modified_sum(x[a], m)
         return s / (2.0 * m ** 4 * count)
