@@ -144,10 +144,15 @@ def variance(kind, x, ms):
     x = np.ascontiguousarray(x, dtype=float)
     if kind in ('ohdev', 'totdev'):
         return _overlapping(kind, x, ms)
-    jobs = [(t, a, int(m)) for t, m in enumerate(ms) for a in range(x.shape[0])]
+    # One job per axis over all factors: the strided adev/hdev sums are short (N / m terms
+    # each; all factors together about 3 N), so one job per (axis, m) cost more in thread
+    # hand-offs than in sums.  mdev's one pass per (axis, m) is long enough to split so.
+    if kind in ('adev', 'hdev'):
+        jobs = [(None, a) for a in range(x.shape[0])]
+    else:
+        jobs = [(t, a) for t in range(len(ms)) for a in range(x.shape[0])]
 
-    def run(job):
-        t, a, m = job
+    def one(a, m):
         if kind == 'adev':
             s, count = _allan_sum(x[a], m, m)
             return s / (2.0 * m * m * count) if count else np.nan
@@ -159,8 +164,13 @@ def variance(kind, x, ms):
         s, count = _modified_sum(x[a], m)
         return s / (2.0 * m ** 4 * count)
 
-    values = map_threads(run, jobs)
+    def run(job):
+        t, a = job
+        if t is None:
+            return [one(a, int(m)) for m in ms]
+        return [one(a, int(ms[t]))]
+
     out = np.full((len(ms), x.shape[0]), np.nan)
-    for (t, a, _), v in zip(jobs, values):
-        out[t, a] = v
+    for (t, a), values in zip(jobs, map_threads(run, jobs)):
+        out[slice(None) if t is None else slice(t, t + 1), a] = values
     return out
