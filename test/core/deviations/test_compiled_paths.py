@@ -48,6 +48,13 @@ def test_allan_from_the_phase_equals_from_the_samples():
     np.testing.assert_array_equal(allan_kernel.phase_exact(y), allan._phase(y))
 
 
+@pytest.mark.parametrize('n_phase', [3, 4, 1001])
+def test_compiled_reflection_equals_numpy(n_phase):
+    from imu_allan.core.deviations import kernels, total
+    x = np.cumsum(RNG.standard_normal((2, n_phase)), axis=1)
+    np.testing.assert_array_equal(kernels._reflect(x), total.reflect(x))
+
+
 @pytest.mark.parametrize('kind', ['adev', 'oadev', 'mdev', 'tdev', 'hdev', 'ohdev', 'totdev'])
 def test_deviation_compiled_equals_numpy(kind, monkeypatch):
     # Not the random run: the compiled MDEV recursion (kernels._modified_sum, Stable32's) and
