@@ -149,6 +149,24 @@ def phase(data, a_lo=0, a_hi=None, means=None):
     return x
 
 
+def phase_exact(data):
+    """
+    Phase (A, n + 1) of rate samples (n, A), bit for bit ``allan._phase``: one compiled pass.
+
+    The same operations in the same order as numpy there (each column's mean by numpy's
+    pairwise sum, then one running sum per axis), without its transposed copy and temporaries:
+    for estimators whose recursions carry the phase's rounding into the result (the MDEV
+    running sum gives 1e-11 relative on a random walk between :func:`phase` and numpy's), so
+    that compiled and numpy paths agree to their own rounding.
+    """
+    y = np.ascontiguousarray(data, dtype=np.float64)
+    means = np.array([y[:, a].mean() for a in range(y.shape[1])])
+    x = np.empty((y.shape[1], y.shape[0] + 1))
+    x[:, 0] = 0.0
+    _integrate(y, 0, y.shape[1], means, 0, y.shape[0], x)
+    return x
+
+
 #: Axes integrated and summed together.  One at a time, the phase holds a sixth of the
 #: record's size instead of all of it, so ``analyze`` on 10 h of samples peaks at 1.46x the
 #: samples instead of 2x (3 at a time: 1.73x, bench/bench_memory.py); it costs four more
@@ -163,7 +181,24 @@ def avar(data, ms):
     ``ms``: averaging factors, 1 <= m <= n / 2, any order.
     """
     y = np.ascontiguousarray(data, dtype=np.float64)
-    n_axes, n_phase = y.shape[1], y.shape[0] + 1
+    means = column_means(y)  # once: each column's sum does not depend on the others
+    return _avar_groups(lambda a_lo, a_hi: phase(y, a_lo, a_hi, means), y.shape[1],
+                        y.shape[0] + 1, ms)
+
+
+def avar_phase(x, ms):
+    """
+    Overlapping AVAR (T, A) from the phase ``x`` (A, n + 1) of :func:`phase`: as :func:`avar`.
+
+    For callers that hold the phase already (:func:`imu_allan.deviation`): the same numbers
+    as :func:`avar` on the samples, without integrating them a second time.
+    """
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    return _avar_groups(lambda a_lo, a_hi: x[a_lo:a_hi], x.shape[0], x.shape[1], ms)
+
+
+def _avar_groups(phase_of, n_axes, n_phase, ms):
+    """AVAR (T, A) of ``n_axes`` phases of ``n_phase`` points, ``phase_of(a_lo, a_hi)``."""
     ms = np.asarray(ms, dtype=np.int64)
     order = np.argsort(ms)
     sms = np.ascontiguousarray(ms[order])
@@ -175,10 +210,9 @@ def avar(data, ms):
     chunks = -(-8 // n_axes)  # at least 8 jobs: balance on a shared machine
     cut = _cuts(k_max, chunks)
     part = np.zeros((n_axes, chunks, sms.size))
-    means = column_means(y)  # once: each column's sum does not depend on the others
     for a_lo in range(0, n_axes, AXIS_GROUP):
         a_hi = min(a_lo + AXIS_GROUP, n_axes)
-        x = phase(y, a_lo, a_hi, means)
+        x = phase_of(a_lo, a_hi)
 
         def job(index, x=x, a_lo=a_lo):
             a, c = divmod(index, chunks)

@@ -86,7 +86,10 @@ def raw_variance(kind, x, ms, data=None, fast=True):
     starts, exact whenever the work fits its budget); ``fast=False``: their numpy oracles.
     """
     if kind == 'oadev':
-        if data is not None and fast:
+        if data is not None and fast and _compiled(data.size * len(ms)):
+            from .. import allan_kernel
+            return allan_kernel.avar_phase(x, ms)  # the phase given, not integrated again
+        if data is not None and fast:  # short: numpy (no numba import); no numba: logged
             return _allan.avar_function(data.size * len(ms))(data, ms)
         return allan_family.variance_reference(kind, x, ms)
     if kind in ('adev', 'hdev', 'ohdev', 'mdev', 'tdev', 'totdev') and fast \
@@ -113,6 +116,38 @@ def raw_variance(kind, x, ms, data=None, fast=True):
             return raw_variance(kind, x, ms, data, fast=False)
         return total_kernel.variance(kind, x, ms)
     raise ValueError(f'unknown deviation kind {kind!r}')
+
+
+def _compiled(work):
+    """Whether ``work`` (samples x axes x averaging times) runs compiled: numba, and enough."""
+    if work < _allan.SMALL_WORK:
+        return False
+    try:
+        from .. import jit  # noqa: F401  (numba, optional)
+    except ImportError:
+        return False
+    return True
+
+
+def phase(data, ms):
+    """
+    Phase (A, n + 1) of the samples (n, A) that every kind and the noise identification share.
+
+    Integrated once per call: compiled (:func:`..allan_kernel.phase_exact`) when the deviation
+    runs compiled, numpy (``allan._phase``) otherwise; the two are equal bit for bit.
+    """
+    if _compiled(data.size * len(ms)):
+        from .. import allan_kernel
+        return allan_kernel.phase_exact(data)
+    return _allan._phase(data)
+
+
+def identify(x, ms, dmax, span):
+    """Alpha (T, A) per averaging factor: :func:`.noise_id.identify_phase`, compiled if long."""
+    if _compiled(x.size * len(ms)):
+        from . import noise_id_kernel
+        return noise_id_kernel.identify_phase(x, ms, dmax, span)
+    return noise_id.identify_phase(x, ms, dmax, span)
 
 
 def n_terms(kind, n_phase, m):
@@ -221,11 +256,11 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     data = _check(data, rate_hz, kind)
     ms = _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters)
     n = data.shape[0]
-    x = _allan._phase(data)
+    x = phase(data, ms)
     raw = raw_variance(kind, x, ms, data)
     dmax, span = _NOISE_ID[kind]
     id_ms = np.maximum(np.round(ms * grid.tau_factor(kind)), 1).astype(np.int64)
-    alpha = noise_id.identify_phase(x, id_ms, dmax, span)
+    alpha = identify(x, id_ms, dmax, span)
     dev, low, high, dof = finish(kind, raw, ms, alpha, n + 1)
     tau = ms * grid.tau_factor(kind) / float(rate_hz)
     if kind == 'tdev':

@@ -1,0 +1,70 @@
+"""
+The compiled phase, Allan sums and noise identification of ``deviation`` against numpy.
+
+``deviation`` switches to them above :data:`imu_allan.core.allan.SMALL_WORK`; here the
+threshold is moved so that the same short records run both ways.  The noise exponent must be
+identical (it is an integer chosen by thresholds the two summation orders cannot move on
+these records) and every number equal to 1e-12 relative (the two phases differ by rounding
+only, ~1e-16 of the phase).
+"""
+
+from imu_allan.core import allan
+from imu_allan.core.deviations import api, noise_id
+import numpy as np
+import pytest
+
+pytest.importorskip('numba')
+
+RNG = np.random.default_rng(20261125)
+
+
+def _power_laws(n):
+    """Columns: white PM, white FM, random-walk FM, random run, and a mix with an offset."""
+    w = RNG.standard_normal((n + 1, 5))
+    return np.column_stack([
+        np.diff(w[:, 0]), w[1:, 1], np.cumsum(w[1:, 2]), np.cumsum(np.cumsum(w[1:, 3])),
+        w[1:, 4] + np.cumsum(RNG.standard_normal(n)) * 0.05 + 9.8])
+
+
+@pytest.mark.parametrize('dmax', [2, 3])
+def test_compiled_noise_id_equals_numpy(dmax):
+    from imu_allan.core.deviations import noise_id_kernel
+    x = allan._phase(_power_laws(40_000))
+    ms = np.array([1, 2, 3, 5, 10, 30, 100, 300, 1000, 1300, 5000, 13_000])
+    span = (-4, 2) if dmax == 3 else (-2, 2)
+    expected = noise_id.identify_phase(x, ms, dmax, span)
+    np.testing.assert_array_equal(noise_id_kernel.identify_phase(x, ms, dmax, span), expected)
+    # the five columns are five different laws: the comparison sees more than one alpha
+    assert len(np.unique(expected[0])) >= 3
+
+
+def test_allan_from_the_phase_equals_from_the_samples():
+    from imu_allan.core import allan_kernel
+    y = _power_laws(20_001)
+    ms = np.array([1, 2, 7, 64, 333, 2000])
+    ours = allan_kernel.avar_phase(allan_kernel.phase(y), ms)
+    np.testing.assert_array_equal(ours, allan_kernel.avar(y, ms))
+    np.testing.assert_allclose(ours, allan.avar_reference(y, ms), rtol=1e-12)
+    np.testing.assert_array_equal(allan_kernel.phase_exact(y), allan._phase(y))
+
+
+@pytest.mark.parametrize('n_phase', [3, 4, 1001])
+def test_compiled_reflection_equals_numpy(n_phase):
+    from imu_allan.core.deviations import kernels, total
+    x = np.cumsum(RNG.standard_normal((2, n_phase)), axis=1)
+    np.testing.assert_array_equal(kernels._reflect(x), total.reflect(x))
+
+
+@pytest.mark.parametrize('kind', ['adev', 'oadev', 'mdev', 'tdev', 'hdev', 'ohdev', 'totdev'])
+def test_deviation_compiled_equals_numpy(kind, monkeypatch):
+    # Not the random run: the compiled MDEV recursion (kernels._modified_sum, Stable32's) and
+    # numpy's sums differ by ~1e-7 relative on a phase growing as n^2.5 (as before).
+    y = _power_laws(30_000)[:, [0, 1, 2, 4]]
+    monkeypatch.setattr(allan, 'SMALL_WORK', np.inf)
+    slow = api.deviation(y, 100.0, kind)
+    monkeypatch.setattr(allan, 'SMALL_WORK', 0)
+    fast = api.deviation(y, 100.0, kind)
+    np.testing.assert_array_equal(fast.alpha, slow.alpha)
+    for name in ('dev', 'ci_low', 'ci_high', 'edf'):
+        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=1e-12,
+                                   err_msg=name)
