@@ -40,3 +40,14 @@ def pooled_batch(segments, ms, rate_hz):
         count[fits] += k
     with np.errstate(invalid='ignore'):
         return total / (2.0 * ms.astype(float) ** 2 * count), count
+
+
+def feed_chunked(est, data, seed, use=None, brk=None):
+    """Feed ``data`` (and its masks) to a streaming estimator in seeded random chunks."""
+    rng = np.random.default_rng(seed)
+    i = 0
+    while i < data.shape[0]:
+        n = int(rng.integers(1, 3000))
+        est.update(data[i:i + n], None if use is None else use[i:i + n],
+                   None if brk is None else brk[i:i + n])
+        i += n

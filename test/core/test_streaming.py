@@ -1,33 +1,13 @@
 """The bounded-memory online Allan estimator against the batch overlapping estimator."""
 
-from core.segment_cases import pooled_batch, split_segments
+from core.segment_cases import feed_chunked, pooled_batch, split_segments
 from imu_allan.core.allan import allan_deviation
-from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.online import online_allan, OnlineAllan
-from imu_allan.core.simulate import simulate
 from imu_allan.core.streaming import factor_grid, StreamingAllan
 import numpy as np
 import pytest
 
 RATE = 100.0
-
-
-@pytest.fixture(scope='module')
-def record():
-    """40,000 samples (400 s) of the thesis 3DM-GX3-25 model, gravity on accel_z."""
-    data = simulate(thesis_gx3_25_model(), 40000, RATE, seed=5)
-    data[:, 5] += 9.80665
-    return data
-
-
-def _feed_chunked(est, data, seed, use=None, brk=None):
-    rng = np.random.default_rng(seed)
-    i = 0
-    while i < data.shape[0]:
-        n = int(rng.integers(1, 3000))
-        est.update(data[i:i + n], None if use is None else use[i:i + n],
-                   None if brk is None else brk[i:i + n])
-        i += n
 
 
 def _reference_sums(x_phase, m, stride=1, k_min=0):
@@ -53,7 +33,7 @@ def test_exact_mode_equals_batch_estimator(record):
     any statistical effect.
     """
     est = StreamingAllan(RATE, max_tau=400.0, exact=True, frame=777)
-    _feed_chunked(est, record, seed=1)
+    feed_chunked(est, record, seed=1)
     res = est.result()
     assert 3000 < res.m[-1] <= 4000  # up to n / min_clusters, like the batch grid
     batch = allan_deviation(record, RATE, taus=res.m / RATE)
@@ -66,7 +46,7 @@ def test_exact_mode_equals_batch_estimator(record):
 def test_default_mode_exact_up_to_base_and_strided_beyond(record):
     """Default mode: factors <= stride_base equal the batch; longer ones equal the strided sum."""
     est = StreamingAllan(RATE, max_tau=400.0)
-    _feed_chunked(est, record, seed=2)
+    feed_chunked(est, record, seed=2)
     ms, strides, acc, cnt = est.sums()
     assert strides[ms <= 256].max() == 1 and strides[-1] > 1
     assert np.all(ms % strides == 0) and np.all(ms // strides <= 256)
@@ -92,7 +72,7 @@ def test_any_chunking_gives_identical_numbers(record):
         if seed is None:
             est.update(record)
         else:
-            _feed_chunked(est, record, seed)
+            feed_chunked(est, record, seed)
         results.append((est.sums(), est.sums(window=True)))
     for other in results[1:]:
         for a, b in zip(results[0], other):
@@ -108,7 +88,7 @@ def test_excluded_spans_and_gaps_pool_segments(record):
     brk = np.zeros(len(data), bool)
     brk[8000] = True
     est = StreamingAllan(RATE, taus=[0.01, 0.05, 0.3, 1.0, 2.56], frame=500)
-    _feed_chunked(est, data, seed=5, use=use, brk=brk)
+    feed_chunked(est, data, seed=5, use=use, brk=brk)
     ms, _, acc, cnt = est.sums()
     segments = [data[:3000], data[3500:8000], data[8000:]]
     for f, m in enumerate(ms):
@@ -164,7 +144,7 @@ def test_sliding_window_shows_a_change():
                            3e-3 * rng.standard_normal((12000, 1))])
     est = StreamingAllan(RATE, axes=('gyro_x',), taus=[0.01, 0.1, 1.0], window_s=60.0,
                          window_buckets=12)
-    _feed_chunked(est, data, seed=8)
+    feed_chunked(est, data, seed=8)
     whole, window = est.result(), est.result(window=True)
     ratio_window = np.sqrt(window.avar[0, 0]) / (3e-3 / np.sqrt(1.0))
     ratio_whole = np.sqrt(whole.avar[0, 0]) / 3e-3
@@ -239,10 +219,10 @@ def test_per_axis_left_out_values(per_axis_case):
     dirty, clean, use2, use, brk = per_axis_case
     taus = [0.01, 0.05, 0.3, 1.0, 2.56]
     ref = StreamingAllan(RATE, taus=taus, frame=500)
-    _feed_chunked(ref, clean, seed=5, use=use, brk=brk)
+    feed_chunked(ref, clean, seed=5, use=use, brk=brk)
     est = StreamingAllan(RATE, taus=taus, frame=500)
     with np.errstate(all='raise'):
-        _feed_chunked(est, dirty, seed=6, use=use2, brk=brk)
+        feed_chunked(est, dirty, seed=6, use=use2, brk=brk)
     ms, _, acc, cnt = est.sums()
     _, _, acc_ref, cnt_ref = ref.sums()
     intact = [1, 2, 3, 5]
@@ -282,7 +262,7 @@ def test_per_axis_masks_any_chunking_identical(per_axis_case):
         if seed is None:
             est.update(dirty, use2, brk)
         else:
-            _feed_chunked(est, dirty, seed, use=use2, brk=brk)
+            feed_chunked(est, dirty, seed, use=use2, brk=brk)
         assert (est.strides > 1).any()
         results.append((est.sums(), est.sums(window=True), est.n_used_axes))
     for other in results[1:]:
@@ -298,8 +278,8 @@ def test_per_axis_window_and_strides_match_clean_axes(per_axis_case):
     kw = {'max_tau': 20.0, 'stride_base': 16, 'window_s': 30.0, 'window_buckets': 7,
           'frame': 700}
     est, ref = StreamingAllan(RATE, **kw), StreamingAllan(RATE, **kw)
-    _feed_chunked(est, dirty, 9, use=use2, brk=brk)
-    _feed_chunked(ref, clean, 10, use=use, brk=brk)
+    feed_chunked(est, dirty, 9, use=use2, brk=brk)
+    feed_chunked(ref, clean, 10, use=use, brk=brk)
     intact = [1, 2, 3, 5]
     for window in (False, True):
         for x, y in zip(est.sums(window)[2:], ref.sums(window)[2:]):

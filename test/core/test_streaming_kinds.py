@@ -9,10 +9,8 @@ samples (both variances ignore a constant rate), and allantools (``mdev``, ``ohd
 1e-10 relative is orders above rounding (measured 1e-14 .. 1e-12) and far below any statistic.
 """
 
-from core.segment_cases import split_segments
-from imu_allan.core.model import thesis_gx3_25_model
+from core.segment_cases import feed_chunked, split_segments
 from imu_allan.core.online import online_allan, OnlineAllan, StagedEstimate
-from imu_allan.core.simulate import simulate
 from imu_allan.core.streaming import parse_estimators, StreamingAllan
 from imu_allan.errors import InputError
 import numpy as np
@@ -20,24 +18,6 @@ import pytest
 
 RATE = 100.0
 KINDS = ('mdev', 'ohdev')
-
-
-@pytest.fixture(scope='module')
-def record():
-    """40,000 samples (400 s) of the thesis 3DM-GX3-25 model, gravity on accel_z."""
-    data = simulate(thesis_gx3_25_model(), 40000, RATE, seed=5)
-    data[:, 5] += 9.80665
-    return data
-
-
-def _feed_chunked(est, data, seed, use=None, brk=None):
-    rng = np.random.default_rng(seed)
-    i = 0
-    while i < data.shape[0]:
-        n = int(rng.integers(1, 3000))
-        est.update(data[i:i + n], None if use is None else use[i:i + n],
-                   None if brk is None else brk[i:i + n])
-        i += n
 
 
 def reference_sums(data, m, kind, stride=1, dtype=np.float64, k_min=0):
@@ -79,7 +59,7 @@ def test_exact_mode_equals_reference_and_allantools(record):
     record = record[:20000]
     est = StreamingAllan(RATE, max_tau=20.0, exact=True, frame=777,
                          estimators='oadev,mdev,ohdev')
-    _feed_chunked(est, record, seed=1)
+    feed_chunked(est, record, seed=1)
     for kind in KINDS:
         ms, strides, acc, cnt = est.sums(kind=kind)
         assert (strides == 1).all() and ms[-1] == 2000
@@ -114,7 +94,7 @@ def test_exact_mode_equals_package_deviation(record):
     from imu_allan import deviation
     record = record[:20000]
     est = StreamingAllan(RATE, max_tau=20.0, exact=True, estimators='mdev,ohdev')
-    _feed_chunked(est, record, seed=12)
+    feed_chunked(est, record, seed=12)
     for kind in KINDS:
         dev = est.deviation(kind)
         batch = deviation(record, RATE, kind=kind, taus=dev.tau)
@@ -128,7 +108,7 @@ def test_default_mode_exact_up_to_base_strided_beyond(record):
     """Default mode: m <= 256 every term; longer factors equal the strided reference sums."""
     record = record[:20000]
     est = StreamingAllan(RATE, max_tau=100.0, estimators=['mdev', 'ohdev'])
-    _feed_chunked(est, record, seed=2)
+    feed_chunked(est, record, seed=2)
     for kind in KINDS:
         ms, strides, acc, cnt = est.sums(kind=kind)
         assert strides[ms <= 256].max() == 1 and strides[-1] > 1
@@ -142,8 +122,8 @@ def test_oadev_bit_identical_with_or_without_extra_kinds(record):
     """Adding mdev and ohdev changes nothing in the AVAR sums (the node's oadev numbers)."""
     plain = StreamingAllan(RATE, max_tau=100.0, window_s=60.0)
     more = StreamingAllan(RATE, max_tau=100.0, window_s=60.0, estimators='mdev,ohdev')
-    _feed_chunked(plain, record, seed=3)
-    _feed_chunked(more, record, seed=4)
+    feed_chunked(plain, record, seed=3)
+    feed_chunked(more, record, seed=4)
     for window in (False, True):
         for x, y in zip(plain.sums(window), more.sums(window)):
             np.testing.assert_array_equal(x, y)
@@ -186,8 +166,8 @@ def test_segments_and_per_axis_masks_pool_segments(per_axis_case):
     kw = {'max_tau': 20.0, 'stride_base': 16, 'estimators': 'mdev,ohdev', 'frame': 500}
     est, ref = StreamingAllan(RATE, **kw), StreamingAllan(RATE, **kw)
     with np.errstate(all='raise'):
-        _feed_chunked(est, dirty, seed=6, use=use2, brk=brk)
-    _feed_chunked(ref, clean, seed=5, use=use, brk=brk)
+        feed_chunked(est, dirty, seed=6, use=use2, brk=brk)
+    feed_chunked(ref, clean, seed=5, use=use, brk=brk)
     intact = [1, 2, 3, 5]
     for kind in KINDS:
         ms, strides, acc, cnt = est.sums(kind=kind)
@@ -226,7 +206,7 @@ def test_any_chunking_identical_with_window_and_masks(per_axis_case):
         if seed is None:
             est.update(dirty, use2, brk)
         else:
-            _feed_chunked(est, dirty, seed, use=use2, brk=brk)
+            feed_chunked(est, dirty, seed, use=use2, brk=brk)
         results.append([est.sums(window, kind=kind) for window in (False, True)
                         for kind in est.kinds])
     for other in results[1:]:
@@ -242,7 +222,7 @@ def test_window_sums_are_the_newest_terms():
                            3e-3 * rng.standard_normal((12000, 1))])
     est = StreamingAllan(RATE, axes=('gyro_x',), taus=[0.01, 0.1, 1.0], window_s=60.0,
                          window_buckets=12, estimators='mdev,ohdev')
-    _feed_chunked(est, data, seed=8)
+    feed_chunked(est, data, seed=8)
     bucket_len = 500  # 60 s x 100 Hz / 12
     first = (len(data) - 1) // bucket_len * bucket_len - 11 * bucket_len
     for kind in KINDS:
