@@ -48,6 +48,17 @@ def test_allan_from_the_phase_equals_from_the_samples():
     np.testing.assert_array_equal(allan_kernel.phase_exact(y), allan._phase(y))
 
 
+@pytest.mark.parametrize('n', [1, 7, 8, 128, 129, 1000, 8193, 40_001])
+def test_one_pass_means_equal_numpy_bit_for_bit(n):
+    # numpy's pairwise tree changes shape at 8 and 128 values and splits at multiples of 8:
+    # lengths around each boundary; a large offset makes every rounding visible.
+    from imu_allan.core import allan_kernel
+    y = RNG.standard_normal((n, 6)) * 1e-3 + 9.80665
+    expected = np.array([y[:, a].mean() for a in range(6)])
+    np.testing.assert_array_equal(allan_kernel.means_exact(y), expected)
+    np.testing.assert_array_equal(allan_kernel.means_exact(y[:, :1].copy()), expected[:1])
+
+
 @pytest.mark.parametrize('n_phase', [3, 4, 1001])
 def test_compiled_reflection_equals_numpy(n_phase):
     from imu_allan.core.deviations import kernels, total
