@@ -3,9 +3,9 @@ Compiled sums of the O(N)-per-tau kinds (numba): adev, hdev, ohdev, mdev/tdev, t
 
 No temporaries (numpy makes three to five full-length arrays per averaging time), jobs run on
 the package's thread pool (:func:`imu_allan.core.jit.map_threads`).  adev and hdev (stride
-m: N / m terms) are one pass per (axis, m); ohdev and totdev (N terms per m) are summed block
-by block over the phase, every averaging time per 32 KiB block, as the Allan kernel
-(:mod:`..allan_kernel`): each phase point comes from memory once per axis.  mdev is
+m: N / m terms), ohdev and totdev (N terms per m) are summed block by block over the phase,
+every averaging time per 32 KiB block, as the Allan kernel (:mod:`..allan_kernel`): each
+phase point comes from memory once per axis.  mdev is
 Stable32's recursion, one pass per (axis, m).  The numpy versions in
 :mod:`.allan_family`, :mod:`.modified` and :mod:`.total` are the oracles these are tested
 against.
@@ -14,28 +14,6 @@ against.
 import numpy as np
 
 from ..jit import jit, map_threads
-
-
-@jit(nogil=True, fastmath=True)
-def _allan_sum(x, m, stride):  # pragma: no cover - compiled; tested vs numpy
-    s = 0.0
-    count = 0
-    for k in range(0, x.shape[0] - 2 * m, stride):
-        d = x[k + 2 * m] - 2.0 * x[k + m] + x[k]
-        s += d * d
-        count += 1
-    return s, count
-
-
-@jit(nogil=True, fastmath=True)
-def _hadamard_sum(x, m, stride):  # pragma: no cover - compiled; tested vs numpy
-    s = 0.0
-    count = 0
-    for k in range(0, x.shape[0] - 3 * m, stride):
-        d = x[k + 3 * m] - 3.0 * x[k + 2 * m] + 3.0 * x[k + m] - x[k]
-        s += d * d
-        count += 1
-    return s, count
 
 
 @jit(nogil=True, fastmath=False)
@@ -77,6 +55,40 @@ def _centred_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
         d = lo[i] - 2.0 * mid[i] + hi[i]
         s += d * d
     return s
+
+
+@jit(fastmath=True, nogil=True, inline='never')
+def _stride_one(xa, m, d, q0, q1):  # pragma: no cover - compiled; tested vs numpy
+    # Squared d-th differences (2: Allan, 3: Hadamard) ending at q = q0, q0 + m, ... < q1,
+    # in allan_family's order of operations (x_{k+2m} - 2 x_{k+m} + x_k, and the third).
+    s = 0.0
+    if d == 2:
+        for q in range(q0, q1, m):
+            e = xa[q] - 2.0 * xa[q - m] + xa[q - 2 * m]
+            s += e * e
+    else:
+        for q in range(q0, q1, m):
+            e = xa[q] - 3.0 * xa[q - m] + 3.0 * xa[q - 2 * m] - xa[q - 3 * m]
+            s += e * e
+    return s
+
+
+@jit(nogil=True)
+def _stride_blocks(xa, ms, d, acc):  # pragma: no cover - compiled
+    # acc[t] += the squared non-overlapping d-th differences at stride ms[t] (adev, hdev):
+    # block by block over the phase, every averaging time per block, each difference taken
+    # where its last point x_q (q a multiple of m, q >= d m) lies.  One pass per m streamed
+    # the whole phase from memory once per m below the cache line (8 points) and touched a
+    # new line per term above it; here the block is in L1 and the d m points behind each term
+    # in L2 (m up to a block) or few (m beyond it: one term per block at most).
+    n = xa.shape[0]
+    for b0 in range(0, n, BLOCK):
+        b1 = min(b0 + BLOCK, n)
+        for t in range(ms.shape[0]):
+            m = ms[t]
+            q0 = max(d * m, (b0 + m - 1) // m * m)
+            if q0 < b1:
+                acc[t] += _stride_one(xa, m, d, q0, b1)
 
 
 @jit(nogil=True)
@@ -163,33 +175,36 @@ def variance(kind, x, ms):
     x = np.ascontiguousarray(x, dtype=float)
     if kind in ('ohdev', 'totdev'):
         return _overlapping(kind, x, ms)
-    # One job per axis over all factors: the strided adev/hdev sums are short (N / m terms
-    # each; all factors together about 3 N), so one job per (axis, m) cost more in thread
-    # hand-offs than in sums.  mdev's one pass per (axis, m) is long enough to split so.
     if kind in ('adev', 'hdev'):
-        jobs = [(None, a) for a in range(x.shape[0])]
-    else:
-        jobs = [(t, a) for t in range(len(ms)) for a in range(x.shape[0])]
+        return _strided(kind, x, ms)
+    jobs = [(t, a) for t in range(len(ms)) for a in range(x.shape[0])]
 
-    def one(a, m):
-        if kind == 'adev':
-            s, count = _allan_sum(x[a], m, m)
-            return s / (2.0 * m * m * count) if count else np.nan
-        if kind == 'hdev':
-            s, count = _hadamard_sum(x[a], m, m)
-            return s / (6.0 * m * m * count) if count else np.nan
+    def run(job):
+        t, a = job
+        m = int(ms[t])
         if x.shape[1] - 3 * m + 1 < 1:  # mdev, tdev
             return np.nan
         s, count = _modified_sum(x[a], m)
         return s / (2.0 * m ** 4 * count)
 
-    def run(job):
-        t, a = job
-        if t is None:
-            return [one(a, int(m)) for m in ms]
-        return [one(a, int(ms[t]))]
-
     out = np.full((len(ms), x.shape[0]), np.nan)
-    for (t, a), values in zip(jobs, map_threads(run, jobs)):
-        out[slice(None) if t is None else slice(t, t + 1), a] = values
+    for (t, a), value in zip(jobs, map_threads(run, jobs)):
+        out[t, a] = value
+    return out
+
+
+def _strided(kind, x, ms):
+    """AVAR or HVAR, non-overlapping (T, A): one blocked pass per axis (nan: no term)."""
+    from .allan_family import SPEC, terms
+    d, _, norm = SPEC[kind]
+    n_phase = x.shape[1]
+    ms = np.asarray(ms, dtype=np.int64)
+    out = np.full((ms.size, x.shape[0]), np.nan)
+    ok = n_phase - d * ms >= 1
+    if ok.any():
+        use = np.ascontiguousarray(ms[ok])
+        acc = np.zeros((x.shape[0], use.size))
+        map_threads(lambda a: _stride_blocks(x[a], use, d, acc[a]), list(range(x.shape[0])))
+        count = np.array([terms(kind, n_phase, int(m)) for m in use], dtype=float)
+        out[ok] = acc.T / (norm * use * use * count)[:, None]
     return out
