@@ -105,34 +105,111 @@ def _hadamard_blocks(xa, ms, k_lo, k_hi, acc):  # pragma: no cover - compiled
                 acc[t] += _third_one(xa, ms[t], k0, k1t)
 
 
-@jit(nogil=True)
-def _total_blocks(xs, ms, i_lo, i_hi, acc):  # pragma: no cover - compiled
-    # acc[t] += sum over centres i in [i_lo, i_hi) of (x*_{i-m} - 2 x*_i + x*_{i+m})^2 at
-    # ms[t], on the reflected phase x*: block by block, as _hadamard_blocks.
-    for i0 in range(i_lo, i_hi, BLOCK):
-        i1 = min(i0 + BLOCK, i_hi)
-        for t in range(ms.shape[0]):
-            acc[t] += _centred_one(xs, ms[t], i0, i1)
+@jit(fastmath=True, nogil=True, inline='never')
+def _centred_four(xa, ma, mb, mc, md, i0, i1):  # pragma: no cover - compiled
+    # Four factors in one loop, as allan_kernel._sum_four: x_c loaded once for the four.
+    mid = xa[i0:]
+    la, ha = xa[i0 - ma:], xa[i0 + ma:]
+    lb, hb = xa[i0 - mb:], xa[i0 + mb:]
+    lc, hc = xa[i0 - mc:], xa[i0 + mc:]
+    ld, hd = xa[i0 - md:], xa[i0 + md:]
+    sa = sb = sc = sd = 0.0
+    for i in range(i1 - i0):
+        v = 2.0 * mid[i]
+        da = la[i] - v + ha[i]
+        db = lb[i] - v + hb[i]
+        dc = lc[i] - v + hc[i]
+        dd = ld[i] - v + hd[i]
+        sa += da * da
+        sb += db * db
+        sc += dc * dc
+        sd += dd * dd
+    return sa, sb, sc, sd
+
+
+@jit(fastmath=True, nogil=True, inline='never')
+def _left_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
+    # Centres c < m (c + m inside): x*_{c-m} = 2 x_0 - x_{m-c}, as total.reflect computes it.
+    x0 = xa[0]
+    s = 0.0
+    for c in range(i0, i1):
+        d = (2.0 * x0 - xa[m - c]) - 2.0 * xa[c] + xa[c + m]
+        s += d * d
+    return s
+
+
+@jit(fastmath=True, nogil=True, inline='never')
+def _right_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
+    # Centres c + m > N - 1 (c - m inside): x*_{c+m} = 2 x_{N-1} - x_{2N-2-c-m}.
+    n = xa.shape[0]
+    xn = xa[n - 1]
+    s = 0.0
+    for c in range(i0, i1):
+        d = xa[c - m] - 2.0 * xa[c] + (2.0 * xn - xa[2 * n - 2 - c - m])
+        s += d * d
+    return s
 
 
 @jit(nogil=True)
-def _reflect_row(x, out):  # pragma: no cover - compiled; tested vs numpy (total.reflect)
-    # total.reflect for one row, written in one pass: x*[mid - j] = 2 x_0 - x_j on the left,
-    # x itself in the middle, 2 x_{N-1} - x_{N-1-j} on the right (SP1065 eq 25).
-    n = x.shape[0]
-    for j in range(1, n - 1):
-        out[n - 2 - j] = 2.0 * x[0] - x[j]
-    for j in range(n):
-        out[n - 2 + j] = x[j]
-    for j in range(1, n - 1):
-        out[2 * n - 3 + j] = 2.0 * x[n - 1] - x[n - 1 - j]
+def _both_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
+    # Centres reflected at both ends (explicit factors m > (N - 1) / 2 only).
+    n = xa.shape[0]
+    s = 0.0
+    for c in range(i0, i1):
+        d = (2.0 * xa[0] - xa[m - c]) - 2.0 * xa[c] + (2.0 * xa[n - 1] - xa[2 * n - 2 - c - m])
+        s += d * d
+    return s
 
 
-def _reflect(x):
-    """:func:`.total.reflect` (A, 3N - 4), compiled, one row per thread."""
-    out = np.empty((x.shape[0], 3 * x.shape[1] - 4))
-    map_threads(lambda a: _reflect_row(x[a], out[a]), list(range(x.shape[0])))
-    return out
+@jit(nogil=True)
+def _total_blocks(xa, ms, c_lo, c_hi, acc):  # pragma: no cover - compiled
+    # acc[t] += sum over centres c in [c_lo, c_hi) of (x*_{c-m} - 2 x_c + x*_{c+m})^2 at
+    # ms[t] (ascending), x* the reflected phase of total.reflect (SP1065 eq 25), block by
+    # block as _hadamard_blocks, without its 3N-point copy: the centres whose neighbours are
+    # both inside the record four factors at a time (_centred_four, as the Allan kernel), the
+    # ones within m of an end with the reflected value computed on the fly.
+    n = xa.shape[0]
+    n_tau = ms.shape[0]
+    for c0 in range(c_lo, c_hi, BLOCK):
+        c1 = min(c0 + BLOCK, c_hi)
+        for i0 in range(0, n_tau, 4):
+            top = min(i0 + 4, n_tau)
+            lo4 = hi4 = c1  # the group's common inside range [lo4, hi4)
+            if top - i0 == 4:
+                lo4 = max(c0, ms[i0 + 3])
+                hi4 = min(c1, n - ms[i0 + 3])
+                if lo4 < hi4:
+                    sa, sb, sc, sd = _centred_four(xa, ms[i0], ms[i0 + 1], ms[i0 + 2],
+                                                   ms[i0 + 3], lo4, hi4)
+                    acc[i0] += sa
+                    acc[i0 + 1] += sb
+                    acc[i0 + 2] += sc
+                    acc[i0 + 3] += sd
+                else:
+                    lo4 = hi4 = c1
+            for t in range(i0, top):
+                m = ms[t]
+                a = max(c0, m)  # inside: [a, b)
+                b = min(c1, n - m)
+                s = 0.0
+                if a < b:
+                    if lo4 < hi4:  # what the group did not sum
+                        if a < lo4:
+                            s += _centred_one(xa, m, a, lo4)
+                        if hi4 < b:
+                            s += _centred_one(xa, m, hi4, b)
+                    else:
+                        s += _centred_one(xa, m, a, b)
+                left = min(c1, m, n - m)
+                if c0 < left:
+                    s += _left_one(xa, m, c0, left)
+                right = max(c0, m, n - m)
+                if right < c1:
+                    s += _right_one(xa, m, right, c1)
+                both0, both1 = max(c0, n - m), min(c1, m)
+                if both0 < both1:
+                    s += _both_one(xa, m, both0, both1)
+                acc[t] += s
 
 
 def _blocked(kernel, rows, ms, lo, hi):
@@ -162,11 +239,11 @@ def _overlapping(kind, x, ms):
         return out
     ok = (ms <= n_phase - 2) & (n_phase >= 3)
     if ok.any():
-        use = np.ascontiguousarray(ms[ok])
-        mid = n_phase - 2  # index of x_1 (0-based x[0]) in x*
-        sums = _blocked(_total_blocks, _reflect(x), use, mid + 1,
-                        mid + n_phase - 1)
-        out[ok] = sums / (2.0 * use * use * (n_phase - 2))[:, None]
+        order = np.argsort(ms[ok], kind='stable')  # _total_blocks groups ascending factors
+        use = np.ascontiguousarray(ms[ok][order])
+        sums = np.empty((use.size, x.shape[0]))
+        sums[order] = _blocked(_total_blocks, x, use, 1, n_phase - 1)  # centres 1 .. N-2
+        out[ok] = sums / (2.0 * ms[ok] * ms[ok] * (n_phase - 2))[:, None]
     return out
 
 
