@@ -6,7 +6,7 @@ the package's thread pool (:func:`imu_allan.core.jit.map_threads`).  adev and hd
 m: N / m terms), ohdev and totdev (N terms per m) are summed block by block over the phase,
 every averaging time per 32 KiB block, as the Allan kernel (:mod:`..allan_kernel`): each
 phase point comes from memory once per axis.  mdev is
-Stable32's recursion, one pass per (axis, m).  The numpy versions in
+Stable32's recursion, one pass per (m, three axes).  The numpy versions in
 :mod:`.allan_family`, :mod:`.modified` and :mod:`.total` are the oracles these are tested
 against.
 """
@@ -30,6 +30,31 @@ def _modified_sum(x, m):  # pragma: no cover - compiled; tested vs numpy
         v += x3[j] - 3.0 * x2[j] + 3.0 * x1[j] - x[j]
         s += v * v
     return s, count
+
+
+@jit(nogil=True, fastmath=False)
+def _modified_three(xa, xb, xc, m):  # pragma: no cover - compiled; tested vs numpy
+    # _modified_sum of three axes in one loop, each in its own order of operations (the same
+    # sums bit for bit): the recursion is one dependent chain of adds per axis, and one chain
+    # left the core's other adders idle (1.2-1.35x faster here, 1.7 M points).
+    count = xa.shape[0] - 3 * m + 1
+    va = vb = vc = 0.0
+    for i in range(m):
+        va += xa[i + 2 * m] - 2.0 * xa[i + m] + xa[i]
+        vb += xb[i + 2 * m] - 2.0 * xb[i + m] + xb[i]
+        vc += xc[i + 2 * m] - 2.0 * xc[i + m] + xc[i]
+    sa, sb, sc = va * va, vb * vb, vc * vc
+    a3, a2, a1 = xa[3 * m:], xa[2 * m:], xa[m:]
+    b3, b2, b1 = xb[3 * m:], xb[2 * m:], xb[m:]
+    c3, c2, c1 = xc[3 * m:], xc[2 * m:], xc[m:]
+    for j in range(count - 1):
+        va += a3[j] - 3.0 * a2[j] + 3.0 * a1[j] - xa[j]
+        vb += b3[j] - 3.0 * b2[j] + 3.0 * b1[j] - xb[j]
+        vc += c3[j] - 3.0 * c2[j] + 3.0 * c1[j] - xc[j]
+        sa += va * va
+        sb += vb * vb
+        sc += vc * vc
+    return sa, sb, sc
 
 
 #: Phase points per block of the overlapping sums (as :data:`..allan_kernel.BLOCK`: 32 KiB).
@@ -254,19 +279,25 @@ def variance(kind, x, ms):
         return _overlapping(kind, x, ms)
     if kind in ('adev', 'hdev'):
         return _strided(kind, x, ms)
-    jobs = [(t, a) for t in range(len(ms)) for a in range(x.shape[0])]
+    # mdev, tdev: one job per (m, three axes), N - 3m + 1 steps each.
+    groups = [tuple(range(a, min(a + 3, x.shape[0]))) for a in range(0, x.shape[0], 3)]
+    jobs = [(t, g) for t in range(len(ms)) for g in groups]
 
     def run(job):
-        t, a = job
+        t, axes = job
         m = int(ms[t])
-        if x.shape[1] - 3 * m + 1 < 1:  # mdev, tdev
-            return np.nan
-        s, count = _modified_sum(x[a], m)
-        return s / (2.0 * m ** 4 * count)
+        count = x.shape[1] - 3 * m + 1
+        if count < 1:
+            return [np.nan] * len(axes)
+        if len(axes) == 3:
+            sums = _modified_three(x[axes[0]], x[axes[1]], x[axes[2]], m)
+        else:
+            sums = [_modified_sum(x[a], m)[0] for a in axes]
+        return [s / (2.0 * m ** 4 * count) for s in sums]
 
     out = np.full((len(ms), x.shape[0]), np.nan)
-    for (t, a), value in zip(jobs, map_threads(run, jobs)):
-        out[t, a] = value
+    for (t, axes), values in zip(jobs, map_threads(run, jobs)):
+        out[t, list(axes)] = values
     return out
 
 
