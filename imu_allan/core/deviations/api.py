@@ -8,7 +8,7 @@ they share, picks the averaging factors (:mod:`.grid`), identifies the noise per
 chi-square interval (:func:`imu_allan.core.edf.chi2_interval`, SP1065 eq 45).
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -263,13 +263,23 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     alpha = identify(x, id_ms, dmax, span)
     dev, low, high, dof = finish(kind, raw, ms, alpha, n + 1)
     tau = ms * grid.tau_factor(kind) / float(rate_hz)
-    if kind == 'tdev':
-        scale = modified.tdev_scale(tau)[:, None]
-        dev, low, high = dev * scale, low * scale, high * scale
     axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]
     counts = np.array([n_terms(kind, n + 1, int(m)) for m in ms], dtype=np.int64)
-    return DeviationResult(kind, tau, ms, dev, low, high, dof, alpha, counts, axes,
-                           float(rate_hz), n)
+    result = DeviationResult('mdev' if kind == 'tdev' else kind, tau, ms, dev, low, high, dof,
+                             alpha, counts, axes, float(rate_hz), n)
+    return tdev_of(result) if kind == 'tdev' else result
+
+
+def tdev_of(mdev):
+    """
+    TDEV from an MDEV result: the same estimate, EDF and noise, scaled by tau / sqrt(3).
+
+    SP1065 eq 15; ``deviation(..., 'tdev')`` is this of ``deviation(..., 'mdev')`` with the
+    same arguments, so a caller that wants both computes the modified variance once.
+    """
+    scale = modified.tdev_scale(mdev.tau)[:, None]
+    return replace(mdev, kind='tdev', dev=mdev.dev * scale, ci_low=mdev.ci_low * scale,
+                   ci_high=mdev.ci_high * scale)
 
 
 def parse_kinds(text, where='--estimators'):
@@ -292,12 +302,22 @@ def extra_deviations(data, rate_hz, kinds, axes, points_per_decade, min_clusters
     record is usable at all).
     """
     out = {}
+    modified_result = []  # mdev and tdev share one modified variance (:func:`tdev_of`)
     for kind in kinds:
         if kind == 'oadev':
             continue
         try:
-            out[kind] = deviation(data, rate_hz, kind, points_per_decade=points_per_decade,
-                                  min_clusters=min_clusters, axes=axes)
+            if kind in ('mdev', 'tdev') and modified_result:
+                out[kind] = modified_result[0] if kind == 'mdev' else tdev_of(
+                    modified_result[0])
+                continue
+            result = deviation(data, rate_hz, 'mdev' if kind == 'tdev' else kind,
+                               points_per_decade=points_per_decade,
+                               min_clusters=min_clusters, axes=axes)
         except ValueError:
             continue
+        if kind in ('mdev', 'tdev'):
+            modified_result.append(result)
+            result = result if kind == 'mdev' else tdev_of(result)
+        out[kind] = result
     return out
