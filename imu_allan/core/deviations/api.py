@@ -199,9 +199,29 @@ def finish(kind, raw, ms, alpha, n_phase):
 
 
 def _check(data, rate_hz, kind):
+    """
+    ``data`` as a float array (n, A), the kind and rate checked; finiteness later (:func:`_finite`).
+
+    A NaN or inf sample makes every phase value NaN (the mean is NaN or inf), so the phase's
+    last value tells whether to look at the samples at all: a separate pass over them (a
+    boolean copy of the record) cost 10 ms of adev's 100 on 1.7 M x 6.
+    """
     if kind not in KINDS:
         raise ValueError(f'unknown deviation kind {kind!r} (known: {", ".join(KINDS)})')
-    return _allan.checked_samples(data, rate_hz)
+    if not rate_hz or not np.isfinite(rate_hz) or rate_hz <= 0:
+        raise ValueError('rate_hz must be a positive number')
+    data = np.asarray(data, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    if data.ndim != 2:
+        raise ValueError('data must have shape (n_samples, n_axes)')
+    return data
+
+
+def _finite(data, rate_hz, x):
+    """Raise :func:`..allan.checked_samples`' error if the phase ``x`` shows a NaN or inf."""
+    if not np.all(np.isfinite(x[:, -1])):
+        _allan.checked_samples(data, rate_hz)  # raises unless huge finite samples overflowed
 
 
 def _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters):
@@ -257,6 +277,7 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     ms = _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters)
     n = data.shape[0]
     x = phase(data, ms)
+    _finite(data, rate_hz, x)
     raw = raw_variance(kind, x, ms, data)
     dmax, span = _NOISE_ID[kind]
     id_ms = np.maximum(np.round(ms * grid.tau_factor(kind)), 1).astype(np.int64)

@@ -34,10 +34,12 @@ def _gather(xa, ms, ks, offs, out):  # pragma: no cover - compiled; tested vs nu
         for t in range(ms.shape[0]):
             m = ms[t]
             stop = min(b1, ks[t] * m + 1)
-            q = (b0 + m - 1) // m * m
-            base = offs[t]
+            j = (b0 + m - 1) // m  # the first point of this block (no division per point)
+            q = j * m
+            at = offs[t] + j
             while q < stop:
-                out[base + q // m] = xa[q]
+                out[at] = xa[q]
+                at += 1
                 q += m
 
 
