@@ -142,6 +142,22 @@ def phase(data, ms):
     return _allan._phase(data)
 
 
+def raw_and_alpha(kind, x, ms, data):
+    """
+    Raw variance (:func:`raw_variance`) and noise alpha (:func:`identify`), both (T, A).
+
+    adev and hdev, compiled: one pass per axis for both (:func:`.kernels.strided_and_alpha`),
+    their sums being cheaper than reading the phase twice.
+    """
+    dmax, span = _NOISE_ID[kind]
+    if kind in ('adev', 'hdev') and _compiled(x.size * len(ms)):
+        from . import kernels
+        return kernels.strided_and_alpha(kind, x, ms, dmax, span)
+    raw = raw_variance(kind, x, ms, data)
+    id_ms = np.maximum(np.round(ms * grid.tau_factor(kind)), 1).astype(np.int64)
+    return raw, identify(x, id_ms, dmax, span)
+
+
 def identify(x, ms, dmax, span):
     """Alpha (T, A) per averaging factor: :func:`.noise_id.identify_phase`, compiled if long."""
     if _compiled(x.size * len(ms)):
@@ -278,10 +294,7 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     n = data.shape[0]
     x = phase(data, ms)
     _finite(data, rate_hz, x)
-    raw = raw_variance(kind, x, ms, data)
-    dmax, span = _NOISE_ID[kind]
-    id_ms = np.maximum(np.round(ms * grid.tau_factor(kind)), 1).astype(np.int64)
-    alpha = identify(x, id_ms, dmax, span)
+    raw, alpha = raw_and_alpha(kind, x, ms, data)
     dev, low, high, dof = finish(kind, raw, ms, alpha, n + 1)
     tau = ms * grid.tau_factor(kind) / float(rate_hz)
     axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]

@@ -99,21 +99,32 @@ def _stride_one(xa, m, d, q0, q1):  # pragma: no cover - compiled; tested vs num
 
 
 @jit(nogil=True)
-def _stride_blocks(xa, ms, d, acc):  # pragma: no cover - compiled
+def _stride_blocks(xa, ms, d, acc, ks, offs, points):  # pragma: no cover - compiled
     # acc[t] += the squared non-overlapping d-th differences at stride ms[t] (adev, hdev):
     # block by block over the phase, every averaging time per block, each difference taken
     # where its last point x_q (q a multiple of m, q >= d m) lies.  One pass per m streamed
     # the whole phase from memory once per m below the cache line (8 points) and touched a
     # new line per term above it; here the block is in L1 and the d m points behind each term
-    # in L2 (m up to a block) or few (m beyond it: one term per block at most).
+    # in L2 (m up to a block) or few (m beyond it: one term per block at most).  The same
+    # pass gathers the noise identification's points x_{jm}, j <= ks[t], into
+    # points[offs[t] + j] (noise_id_kernel.layout; ks[t] = 0: none), the lines it just read.
     n = xa.shape[0]
     for b0 in range(0, n, BLOCK):
         b1 = min(b0 + BLOCK, n)
         for t in range(ms.shape[0]):
             m = ms[t]
-            q0 = max(d * m, (b0 + m - 1) // m * m)
+            j = (b0 + m - 1) // m
+            q0 = max(d * m, j * m)
             if q0 < b1:
                 acc[t] += _stride_one(xa, m, d, q0, b1)
+            if ks[t] > 0:
+                stop = min(b1, ks[t] * m + 1)
+                q = j * m
+                at = offs[t] + j
+                while q < stop:
+                    points[at] = xa[q]
+                    at += 1
+                    q += m
 
 
 @jit(nogil=True)
@@ -312,7 +323,38 @@ def _strided(kind, x, ms):
     if ok.any():
         use = np.ascontiguousarray(ms[ok])
         acc = np.zeros((x.shape[0], use.size))
-        map_threads(lambda a: _stride_blocks(x[a], use, d, acc[a]), list(range(x.shape[0])))
+        none = np.zeros(use.size + 1, dtype=np.int64)  # no points gathered
+        map_threads(lambda a: _stride_blocks(x[a], use, d, acc[a], none, none, acc[a]),
+                    list(range(x.shape[0])))
         count = np.array([terms(kind, n_phase, int(m)) for m in use], dtype=float)
         out[ok] = acc.T / (norm * use * use * count)[:, None]
     return out
+
+
+def strided_and_alpha(kind, x, ms, dmax, alpha_range):
+    """
+    adev or hdev variance (T, A) and the noise alpha (T, A) from one blocked pass per axis.
+
+    The pass of :func:`variance` also gathers the points of the noise identification at the
+    same factors (:func:`.noise_id_kernel.identify_phase` gathers them in a pass of its own);
+    every factor must have a difference (``deviation``'s grids and checked taus do).
+    """
+    from . import noise_id_kernel
+    from .allan_family import SPEC, terms
+    d, _, norm = SPEC[kind]
+    n_phase = x.shape[1]
+    ms = np.ascontiguousarray(ms, dtype=np.int64)
+    if np.any(n_phase - d * ms < 1):
+        raise ValueError(f'a factor of {list(ms)} leaves no {kind} difference')
+    ks, offs = noise_id_kernel.layout(n_phase - 1, ms)
+    points = np.empty((x.shape[0], int(offs[-1])))
+    acc = np.zeros((x.shape[0], ms.size))
+    acf = np.zeros((x.shape[0], ms.size), dtype=np.int64)
+
+    def job(a):
+        _stride_blocks(x[a], ms, d, acc[a], ks, offs, points[a])
+        noise_id_kernel._acf_axis(points[a], ms, ks, offs, dmax, acf[a])
+    map_threads(job, list(range(x.shape[0])))
+    count = np.array([terms(kind, n_phase, int(m)) for m in ms], dtype=float)
+    var = acc.T / (norm * ms * ms * count)[:, None]
+    return var, noise_id_kernel.alphas(points, ms, ks, offs, acf, alpha_range)

@@ -92,29 +92,57 @@ def _acf_alpha(p, m, k, dmax, z):  # pragma: no cover - compiled; tested vs nump
 
 
 @jit(nogil=True)
-def _axis(xa, ms, ks, offs, dmax, points, alpha):  # pragma: no cover - compiled
-    # Gather one axis's points, then alpha[t] for every averaging time with >= 30 means.
-    _gather(xa, ms, ks, offs, points)
+def _acf_axis(points, ms, ks, offs, dmax, alpha):  # pragma: no cover - compiled
+    # alpha[t] for every averaging time with >= 30 means, from one axis's gathered points.
     z = np.empty(max(1, ks.max()))
     for t in range(ms.shape[0]):
         if ks[t] >= MIN_ACF_POINTS:
             alpha[t] = _acf_alpha(points[offs[t]:], ms[t], ks[t], dmax, z)
 
 
+@jit(nogil=True)
+def _axis(xa, ms, ks, offs, dmax, points, alpha):  # pragma: no cover - compiled
+    # Gather one axis's points, then identify every averaging time of it.
+    _gather(xa, ms, ks, offs, points)
+    _acf_axis(points, ms, ks, offs, dmax, alpha)
+
+
+def layout(n, ms):
+    """
+    Means per averaging factor and where their points go: ``ks`` (T,), ``offs`` (T + 1,).
+
+    K = min(n // m, :data:`.noise_id.MAX_POINTS`) block means need the phase points
+    x_0, x_m, .., x_{K m}, stored at ``offs[t]`` .. ``offs[t] + K``; none (K = 0) where fewer
+    than 3 means remain (those averaging times take the previous alpha).
+    """
+    ms = np.asarray(ms, dtype=np.int64)
+    ks = np.array([min(n // int(m), MAX_POINTS) for m in ms], dtype=np.int64)
+    ks = np.where(ks >= 3, ks, 0)
+    offs = np.concatenate([[0], np.cumsum(ks + 1)]).astype(np.int64)
+    return ks, offs
+
+
 def identify_phase(x, ms, dmax=2, alpha_range=(-2, 2)):
     """:func:`.noise_id.identify_phase`, the ACF steps compiled: alpha (T, A) from x (A, N+1)."""
     x = np.ascontiguousarray(x, dtype=float)
-    n = x.shape[1] - 1
     ms = np.asarray(ms, dtype=np.int64)
-    ks = np.array([min(n // int(m), MAX_POINTS) for m in ms], dtype=np.int64)
-    ks = np.where(ks >= 3, ks, 0)  # fewer than 3 means: the previous alpha, no points
-    offs = np.concatenate([[0], np.cumsum(ks + 1)]).astype(np.int64)
+    ks, offs = layout(x.shape[1] - 1, ms)
     points = np.empty((x.shape[0], int(offs[-1])))
     acf = np.zeros((x.shape[0], ms.size), dtype=np.int64)
     map_threads(lambda a: _axis(x[a], ms, ks, offs[:-1], dmax, points[a], acf[a]),
                 list(range(x.shape[0])))
-    out = np.zeros((len(ms), x.shape[0]), dtype=int)
-    last = np.zeros(x.shape[0], dtype=int)
+    return alphas(points, ms, ks, offs, acf, alpha_range)
+
+
+def alphas(points, ms, ks, offs, acf, alpha_range):
+    """
+    Alpha (T, A) from the gathered points (A, P) and the ACF results ``acf`` (A, T).
+
+    The B1 ratio where 3 <= K < 30 (:func:`.noise_id.b1_alpha`, numpy: a few averaging
+    times), the previous alpha where K < 3, clipped to ``alpha_range``.
+    """
+    out = np.zeros((len(ms), points.shape[0]), dtype=int)
+    last = np.zeros(points.shape[0], dtype=int)
     for t, (m, k) in enumerate(zip(ms, ks)):
         if k >= MIN_ACF_POINTS:
             last = acf[:, t].astype(int)
