@@ -216,7 +216,7 @@ def finish(kind, raw, ms, alpha, n_phase):
 
 def _check(data, rate_hz, kind):
     """
-    ``data`` as a float array (n, A), the kind and rate checked; finiteness later (:func:`_finite`).
+    Return ``data`` as a float array (n, A), kind and rate checked (finiteness: :func:`_finite`).
 
     A NaN or inf sample makes every phase value NaN (the mean is NaN or inf), so the phase's
     last value tells whether to look at the samples at all: a separate pass over them (a

@@ -333,7 +333,7 @@ def _strided(kind, x, ms):
 
 def strided_and_alpha(kind, x, ms, dmax, alpha_range):
     """
-    adev or hdev variance (T, A) and the noise alpha (T, A) from one blocked pass per axis.
+    Return the adev or hdev variance (T, A) and noise alpha (T, A): one blocked pass per axis.
 
     The pass of :func:`variance` also gathers the points of the noise identification at the
     same factors (:func:`.noise_id_kernel.identify_phase` gathers them in a pass of its own);
