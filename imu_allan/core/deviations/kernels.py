@@ -3,10 +3,10 @@ Compiled sums of the O(N)-per-tau kinds (numba): adev, hdev, ohdev, mdev/tdev, t
 
 No temporaries (numpy makes three to five full-length arrays per averaging time), jobs run on
 the package's thread pool (:func:`imu_allan.core.jit.map_threads`).  adev and hdev (stride
-m: N / m terms) are one pass per (axis, m); ohdev and totdev (N terms per m) are summed block
-by block over the phase, every averaging time per 32 KiB block, as the Allan kernel
-(:mod:`..allan_kernel`): each phase point comes from memory once per axis.  mdev is
-Stable32's recursion, one pass per (axis, m).  The numpy versions in
+m: N / m terms), ohdev and totdev (N terms per m) are summed block by block over the phase,
+every averaging time per 32 KiB block, as the Allan kernel (:mod:`..allan_kernel`): each
+phase point comes from memory once per axis.  mdev is
+Stable32's recursion, one pass per (m, three axes).  The numpy versions in
 :mod:`.allan_family`, :mod:`.modified` and :mod:`.total` are the oracles these are tested
 against.
 """
@@ -14,28 +14,6 @@ against.
 import numpy as np
 
 from ..jit import jit, map_threads
-
-
-@jit(nogil=True, fastmath=True)
-def _allan_sum(x, m, stride):  # pragma: no cover - compiled; tested vs numpy
-    s = 0.0
-    count = 0
-    for k in range(0, x.shape[0] - 2 * m, stride):
-        d = x[k + 2 * m] - 2.0 * x[k + m] + x[k]
-        s += d * d
-        count += 1
-    return s, count
-
-
-@jit(nogil=True, fastmath=True)
-def _hadamard_sum(x, m, stride):  # pragma: no cover - compiled; tested vs numpy
-    s = 0.0
-    count = 0
-    for k in range(0, x.shape[0] - 3 * m, stride):
-        d = x[k + 3 * m] - 3.0 * x[k + 2 * m] + 3.0 * x[k + m] - x[k]
-        s += d * d
-        count += 1
-    return s, count
 
 
 @jit(nogil=True, fastmath=False)
@@ -52,6 +30,31 @@ def _modified_sum(x, m):  # pragma: no cover - compiled; tested vs numpy
         v += x3[j] - 3.0 * x2[j] + 3.0 * x1[j] - x[j]
         s += v * v
     return s, count
+
+
+@jit(nogil=True, fastmath=False)
+def _modified_three(xa, xb, xc, m):  # pragma: no cover - compiled; tested vs numpy
+    # _modified_sum of three axes in one loop, each in its own order of operations (the same
+    # sums bit for bit): the recursion is one dependent chain of adds per axis, and one chain
+    # left the core's other adders idle (1.2-1.35x faster here, 1.7 M points).
+    count = xa.shape[0] - 3 * m + 1
+    va = vb = vc = 0.0
+    for i in range(m):
+        va += xa[i + 2 * m] - 2.0 * xa[i + m] + xa[i]
+        vb += xb[i + 2 * m] - 2.0 * xb[i + m] + xb[i]
+        vc += xc[i + 2 * m] - 2.0 * xc[i + m] + xc[i]
+    sa, sb, sc = va * va, vb * vb, vc * vc
+    a3, a2, a1 = xa[3 * m:], xa[2 * m:], xa[m:]
+    b3, b2, b1 = xb[3 * m:], xb[2 * m:], xb[m:]
+    c3, c2, c1 = xc[3 * m:], xc[2 * m:], xc[m:]
+    for j in range(count - 1):
+        va += a3[j] - 3.0 * a2[j] + 3.0 * a1[j] - xa[j]
+        vb += b3[j] - 3.0 * b2[j] + 3.0 * b1[j] - xb[j]
+        vc += c3[j] - 3.0 * c2[j] + 3.0 * c1[j] - xc[j]
+        sa += va * va
+        sb += vb * vb
+        sc += vc * vc
+    return sa, sb, sc
 
 
 #: Phase points per block of the overlapping sums (as :data:`..allan_kernel.BLOCK`: 32 KiB).
@@ -79,6 +82,51 @@ def _centred_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
     return s
 
 
+@jit(fastmath=True, nogil=True, inline='never')
+def _stride_one(xa, m, d, q0, q1):  # pragma: no cover - compiled; tested vs numpy
+    # Squared d-th differences (2: Allan, 3: Hadamard) ending at q = q0, q0 + m, ... < q1,
+    # in allan_family's order of operations (x_{k+2m} - 2 x_{k+m} + x_k, and the third).
+    s = 0.0
+    if d == 2:
+        for q in range(q0, q1, m):
+            e = xa[q] - 2.0 * xa[q - m] + xa[q - 2 * m]
+            s += e * e
+    else:
+        for q in range(q0, q1, m):
+            e = xa[q] - 3.0 * xa[q - m] + 3.0 * xa[q - 2 * m] - xa[q - 3 * m]
+            s += e * e
+    return s
+
+
+@jit(nogil=True)
+def _stride_blocks(xa, ms, d, acc, ks, offs, points):  # pragma: no cover - compiled
+    # acc[t] += the squared non-overlapping d-th differences at stride ms[t] (adev, hdev):
+    # block by block over the phase, every averaging time per block, each difference taken
+    # where its last point x_q (q a multiple of m, q >= d m) lies.  One pass per m streamed
+    # the whole phase from memory once per m below the cache line (8 points) and touched a
+    # new line per term above it; here the block is in L1 and the d m points behind each term
+    # in L2 (m up to a block) or few (m beyond it: one term per block at most).  The same
+    # pass gathers the noise identification's points x_{jm}, j <= ks[t], into
+    # points[offs[t] + j] (noise_id_kernel.layout; ks[t] = 0: none), the lines it just read.
+    n = xa.shape[0]
+    for b0 in range(0, n, BLOCK):
+        b1 = min(b0 + BLOCK, n)
+        for t in range(ms.shape[0]):
+            m = ms[t]
+            j = (b0 + m - 1) // m
+            q0 = max(d * m, j * m)
+            if q0 < b1:
+                acc[t] += _stride_one(xa, m, d, q0, b1)
+            if ks[t] > 0:
+                stop = min(b1, ks[t] * m + 1)
+                q = j * m
+                at = offs[t] + j
+                while q < stop:
+                    points[at] = xa[q]
+                    at += 1
+                    q += m
+
+
 @jit(nogil=True)
 def _hadamard_blocks(xa, ms, k_lo, k_hi, acc):  # pragma: no cover - compiled
     # acc[t] += sum of squared third differences at ms[t] for k in [k_lo, k_hi), k + 3m < N:
@@ -93,34 +141,111 @@ def _hadamard_blocks(xa, ms, k_lo, k_hi, acc):  # pragma: no cover - compiled
                 acc[t] += _third_one(xa, ms[t], k0, k1t)
 
 
-@jit(nogil=True)
-def _total_blocks(xs, ms, i_lo, i_hi, acc):  # pragma: no cover - compiled
-    # acc[t] += sum over centres i in [i_lo, i_hi) of (x*_{i-m} - 2 x*_i + x*_{i+m})^2 at
-    # ms[t], on the reflected phase x*: block by block, as _hadamard_blocks.
-    for i0 in range(i_lo, i_hi, BLOCK):
-        i1 = min(i0 + BLOCK, i_hi)
-        for t in range(ms.shape[0]):
-            acc[t] += _centred_one(xs, ms[t], i0, i1)
+@jit(fastmath=True, nogil=True, inline='never')
+def _centred_four(xa, ma, mb, mc, md, i0, i1):  # pragma: no cover - compiled
+    # Four factors in one loop, as allan_kernel._sum_four: x_c loaded once for the four.
+    mid = xa[i0:]
+    la, ha = xa[i0 - ma:], xa[i0 + ma:]
+    lb, hb = xa[i0 - mb:], xa[i0 + mb:]
+    lc, hc = xa[i0 - mc:], xa[i0 + mc:]
+    ld, hd = xa[i0 - md:], xa[i0 + md:]
+    sa = sb = sc = sd = 0.0
+    for i in range(i1 - i0):
+        v = 2.0 * mid[i]
+        da = la[i] - v + ha[i]
+        db = lb[i] - v + hb[i]
+        dc = lc[i] - v + hc[i]
+        dd = ld[i] - v + hd[i]
+        sa += da * da
+        sb += db * db
+        sc += dc * dc
+        sd += dd * dd
+    return sa, sb, sc, sd
+
+
+@jit(fastmath=True, nogil=True, inline='never')
+def _left_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
+    # Centres c < m (c + m inside): x*_{c-m} = 2 x_0 - x_{m-c}, as total.reflect computes it.
+    x0 = xa[0]
+    s = 0.0
+    for c in range(i0, i1):
+        d = (2.0 * x0 - xa[m - c]) - 2.0 * xa[c] + xa[c + m]
+        s += d * d
+    return s
+
+
+@jit(fastmath=True, nogil=True, inline='never')
+def _right_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
+    # Centres c + m > N - 1 (c - m inside): x*_{c+m} = 2 x_{N-1} - x_{2N-2-c-m}.
+    n = xa.shape[0]
+    xn = xa[n - 1]
+    s = 0.0
+    for c in range(i0, i1):
+        d = xa[c - m] - 2.0 * xa[c] + (2.0 * xn - xa[2 * n - 2 - c - m])
+        s += d * d
+    return s
 
 
 @jit(nogil=True)
-def _reflect_row(x, out):  # pragma: no cover - compiled; tested vs numpy (total.reflect)
-    # total.reflect for one row, written in one pass: x*[mid - j] = 2 x_0 - x_j on the left,
-    # x itself in the middle, 2 x_{N-1} - x_{N-1-j} on the right (SP1065 eq 25).
-    n = x.shape[0]
-    for j in range(1, n - 1):
-        out[n - 2 - j] = 2.0 * x[0] - x[j]
-    for j in range(n):
-        out[n - 2 + j] = x[j]
-    for j in range(1, n - 1):
-        out[2 * n - 3 + j] = 2.0 * x[n - 1] - x[n - 1 - j]
+def _both_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
+    # Centres reflected at both ends (explicit factors m > (N - 1) / 2 only).
+    n = xa.shape[0]
+    s = 0.0
+    for c in range(i0, i1):
+        d = (2.0 * xa[0] - xa[m - c]) - 2.0 * xa[c] + (2.0 * xa[n - 1] - xa[2 * n - 2 - c - m])
+        s += d * d
+    return s
 
 
-def _reflect(x):
-    """:func:`.total.reflect` (A, 3N - 4), compiled, one row per thread."""
-    out = np.empty((x.shape[0], 3 * x.shape[1] - 4))
-    map_threads(lambda a: _reflect_row(x[a], out[a]), list(range(x.shape[0])))
-    return out
+@jit(nogil=True)
+def _total_blocks(xa, ms, c_lo, c_hi, acc):  # pragma: no cover - compiled
+    # acc[t] += sum over centres c in [c_lo, c_hi) of (x*_{c-m} - 2 x_c + x*_{c+m})^2 at
+    # ms[t] (ascending), x* the reflected phase of total.reflect (SP1065 eq 25), block by
+    # block as _hadamard_blocks, without its 3N-point copy: the centres whose neighbours are
+    # both inside the record four factors at a time (_centred_four, as the Allan kernel), the
+    # ones within m of an end with the reflected value computed on the fly.
+    n = xa.shape[0]
+    n_tau = ms.shape[0]
+    for c0 in range(c_lo, c_hi, BLOCK):
+        c1 = min(c0 + BLOCK, c_hi)
+        for i0 in range(0, n_tau, 4):
+            top = min(i0 + 4, n_tau)
+            lo4 = hi4 = c1  # the group's common inside range [lo4, hi4)
+            if top - i0 == 4:
+                lo4 = max(c0, ms[i0 + 3])
+                hi4 = min(c1, n - ms[i0 + 3])
+                if lo4 < hi4:
+                    sa, sb, sc, sd = _centred_four(xa, ms[i0], ms[i0 + 1], ms[i0 + 2],
+                                                   ms[i0 + 3], lo4, hi4)
+                    acc[i0] += sa
+                    acc[i0 + 1] += sb
+                    acc[i0 + 2] += sc
+                    acc[i0 + 3] += sd
+                else:
+                    lo4 = hi4 = c1
+            for t in range(i0, top):
+                m = ms[t]
+                a = max(c0, m)  # inside: [a, b)
+                b = min(c1, n - m)
+                s = 0.0
+                if a < b:
+                    if lo4 < hi4:  # what the group did not sum
+                        if a < lo4:
+                            s += _centred_one(xa, m, a, lo4)
+                        if hi4 < b:
+                            s += _centred_one(xa, m, hi4, b)
+                    else:
+                        s += _centred_one(xa, m, a, b)
+                left = min(c1, m, n - m)
+                if c0 < left:
+                    s += _left_one(xa, m, c0, left)
+                right = max(c0, m, n - m)
+                if right < c1:
+                    s += _right_one(xa, m, right, c1)
+                both0, both1 = max(c0, n - m), min(c1, m)
+                if both0 < both1:
+                    s += _both_one(xa, m, both0, both1)
+                acc[t] += s
 
 
 def _blocked(kernel, rows, ms, lo, hi):
@@ -150,11 +275,11 @@ def _overlapping(kind, x, ms):
         return out
     ok = (ms <= n_phase - 2) & (n_phase >= 3)
     if ok.any():
-        use = np.ascontiguousarray(ms[ok])
-        mid = n_phase - 2  # index of x_1 (0-based x[0]) in x*
-        sums = _blocked(_total_blocks, _reflect(x), use, mid + 1,
-                        mid + n_phase - 1)
-        out[ok] = sums / (2.0 * use * use * (n_phase - 2))[:, None]
+        order = np.argsort(ms[ok], kind='stable')  # _total_blocks groups ascending factors
+        use = np.ascontiguousarray(ms[ok][order])
+        sums = np.empty((use.size, x.shape[0]))
+        sums[order] = _blocked(_total_blocks, x, use, 1, n_phase - 1)  # centres 1 .. N-2
+        out[ok] = sums / (2.0 * ms[ok] * ms[ok] * (n_phase - 2))[:, None]
     return out
 
 
@@ -163,33 +288,73 @@ def variance(kind, x, ms):
     x = np.ascontiguousarray(x, dtype=float)
     if kind in ('ohdev', 'totdev'):
         return _overlapping(kind, x, ms)
-    # One job per axis over all factors: the strided adev/hdev sums are short (N / m terms
-    # each; all factors together about 3 N), so one job per (axis, m) cost more in thread
-    # hand-offs than in sums.  mdev's one pass per (axis, m) is long enough to split so.
     if kind in ('adev', 'hdev'):
-        jobs = [(None, a) for a in range(x.shape[0])]
-    else:
-        jobs = [(t, a) for t in range(len(ms)) for a in range(x.shape[0])]
-
-    def one(a, m):
-        if kind == 'adev':
-            s, count = _allan_sum(x[a], m, m)
-            return s / (2.0 * m * m * count) if count else np.nan
-        if kind == 'hdev':
-            s, count = _hadamard_sum(x[a], m, m)
-            return s / (6.0 * m * m * count) if count else np.nan
-        if x.shape[1] - 3 * m + 1 < 1:  # mdev, tdev
-            return np.nan
-        s, count = _modified_sum(x[a], m)
-        return s / (2.0 * m ** 4 * count)
+        return _strided(kind, x, ms)
+    # mdev, tdev: one job per (m, three axes), N - 3m + 1 steps each.
+    groups = [tuple(range(a, min(a + 3, x.shape[0]))) for a in range(0, x.shape[0], 3)]
+    jobs = [(t, g) for t in range(len(ms)) for g in groups]
 
     def run(job):
-        t, a = job
-        if t is None:
-            return [one(a, int(m)) for m in ms]
-        return [one(a, int(ms[t]))]
+        t, axes = job
+        m = int(ms[t])
+        count = x.shape[1] - 3 * m + 1
+        if count < 1:
+            return [np.nan] * len(axes)
+        if len(axes) == 3:
+            sums = _modified_three(x[axes[0]], x[axes[1]], x[axes[2]], m)
+        else:
+            sums = [_modified_sum(x[a], m)[0] for a in axes]
+        return [s / (2.0 * m ** 4 * count) for s in sums]
 
     out = np.full((len(ms), x.shape[0]), np.nan)
-    for (t, a), values in zip(jobs, map_threads(run, jobs)):
-        out[slice(None) if t is None else slice(t, t + 1), a] = values
+    for (t, axes), values in zip(jobs, map_threads(run, jobs)):
+        out[t, list(axes)] = values
     return out
+
+
+def _strided(kind, x, ms):
+    """AVAR or HVAR, non-overlapping (T, A): one blocked pass per axis (nan: no term)."""
+    from .allan_family import SPEC, terms
+    d, _, norm = SPEC[kind]
+    n_phase = x.shape[1]
+    ms = np.asarray(ms, dtype=np.int64)
+    out = np.full((ms.size, x.shape[0]), np.nan)
+    ok = n_phase - d * ms >= 1
+    if ok.any():
+        use = np.ascontiguousarray(ms[ok])
+        acc = np.zeros((x.shape[0], use.size))
+        none = np.zeros(use.size + 1, dtype=np.int64)  # no points gathered
+        map_threads(lambda a: _stride_blocks(x[a], use, d, acc[a], none, none, acc[a]),
+                    list(range(x.shape[0])))
+        count = np.array([terms(kind, n_phase, int(m)) for m in use], dtype=float)
+        out[ok] = acc.T / (norm * use * use * count)[:, None]
+    return out
+
+
+def strided_and_alpha(kind, x, ms, dmax, alpha_range):
+    """
+    Return the adev or hdev variance (T, A) and noise alpha (T, A): one blocked pass per axis.
+
+    The pass of :func:`variance` also gathers the points of the noise identification at the
+    same factors (:func:`.noise_id_kernel.identify_phase` gathers them in a pass of its own);
+    every factor must have a difference (``deviation``'s grids and checked taus do).
+    """
+    from . import noise_id_kernel
+    from .allan_family import SPEC, terms
+    d, _, norm = SPEC[kind]
+    n_phase = x.shape[1]
+    ms = np.ascontiguousarray(ms, dtype=np.int64)
+    if np.any(n_phase - d * ms < 1):
+        raise ValueError(f'a factor of {list(ms)} leaves no {kind} difference')
+    ks, offs = noise_id_kernel.layout(n_phase - 1, ms)
+    points = np.empty((x.shape[0], int(offs[-1])))
+    acc = np.zeros((x.shape[0], ms.size))
+    acf = np.zeros((x.shape[0], ms.size), dtype=np.int64)
+
+    def job(a):
+        _stride_blocks(x[a], ms, d, acc[a], ks, offs, points[a])
+        noise_id_kernel._acf_axis(points[a], ms, ks, offs, dmax, acf[a])
+    map_threads(job, list(range(x.shape[0])))
+    count = np.array([terms(kind, n_phase, int(m)) for m in ms], dtype=float)
+    var = acc.T / (norm * ms * ms * count)[:, None]
+    return var, noise_id_kernel.alphas(points, ms, ks, offs, acf, alpha_range)

@@ -136,6 +136,15 @@ def _chunks(count, m, budget=4_000_000):
     return [(lo, min(lo + step, count)) for lo in range(0, count, step)]
 
 
+def _window_sums(z, m):
+    """Sum over every 3m-window start of ``z`` (A, L) of its reflected terms (A,), chunked."""
+    total = np.zeros(z.shape[0])
+    for lo, hi in _chunks(z.shape[1] - 3 * m + 1, m):
+        w = _detrended_windows(z[:, lo:hi + 3 * m - 1], m)
+        total += np.sum(_reflected_terms(w, m), axis=1)
+    return total
+
+
 def mtotvar(x, ms):
     """MTOTVAR (T, A), SP1065 eq 27, uncorrected (as Stable32); O(N m) per m."""
     n_phase = x.shape[1]
@@ -143,13 +152,8 @@ def mtotvar(x, ms):
     for i, m in enumerate(ms):
         m = int(m)
         count = n_phase - 3 * m + 1
-        if count < 1:
-            continue
-        total = np.zeros(x.shape[0])
-        for lo, hi in _chunks(count, m):
-            w = _detrended_windows(x[:, lo:hi + 3 * m - 1], m)
-            total += np.sum(_reflected_terms(w, m), axis=1)
-        out[i] = total / (2.0 * m * m * count)
+        if count >= 1:
+            out[i] = _window_sums(x, m) / (2.0 * m * m * count)
     return out
 
 
@@ -165,13 +169,8 @@ def htotvar(x, ms):
             out[i] = variance_reference('ohdev', x, [1])[0]
             continue
         count = n_rate - 3 * m + 1
-        if count < 1:
-            continue
-        total = np.zeros(x.shape[0])
-        for lo, hi in _chunks(count, m):
-            w = _detrended_windows(y[:, lo:hi + 3 * m - 1], m)
-            total += np.sum(_reflected_terms(w, m), axis=1)
-        out[i] = total / (6.0 * count)
+        if count >= 1:
+            out[i] = _window_sums(y, m) / (6.0 * count)
     return out
 
 

@@ -56,6 +56,17 @@ def test_tdev_is_scaled_mdev():
     np.testing.assert_allclose(tdev.ci_high / tdev.dev, mdev.ci_high / mdev.dev)
 
 
+def test_mdev_and_tdev_together_share_one_estimate():
+    # analyze --estimators mdev,tdev: one modified variance, the same numbers as two calls.
+    both = imu_allan.core.deviations.extra_deviations(DATA, 100.0, ('tdev', 'mdev'), None,
+                                                      5, 10)
+    for kind in ('mdev', 'tdev'):
+        alone = imu_allan.deviation(DATA, 100.0, kind, points_per_decade=5)
+        assert both[kind].kind == kind
+        for name in ('dev', 'ci_low', 'ci_high', 'edf', 'alpha', 'tau', 'n_terms'):
+            np.testing.assert_array_equal(getattr(both[kind], name), getattr(alone, name))
+
+
 def test_hadamard_ignores_a_rate_ramp():
     # A linear drift of the rate (rate ramp) adds tau^2 R^2/2 to AVAR but nothing to HVAR:
     # the reason ohdev separates rate random walk from rate ramp.

@@ -48,11 +48,33 @@ def test_allan_from_the_phase_equals_from_the_samples():
     np.testing.assert_array_equal(allan_kernel.phase_exact(y), allan._phase(y))
 
 
-@pytest.mark.parametrize('n_phase', [3, 4, 1001])
-def test_compiled_reflection_equals_numpy(n_phase):
+@pytest.mark.parametrize('n', [1, 7, 8, 128, 129, 1000, 8193, 40_001])
+def test_one_pass_means_equal_numpy_bit_for_bit(n):
+    # numpy's pairwise tree changes shape at 8 and 128 values and splits at multiples of 8:
+    # lengths around each boundary; a large offset makes every rounding visible.
+    from imu_allan.core import allan_kernel
+    y = np.random.default_rng(n).standard_normal((n, 6)) * 1e-3 + 9.80665
+    expected = np.array([y[:, a].mean() for a in range(6)])
+    np.testing.assert_array_equal(allan_kernel.means_exact(y), expected)
+    np.testing.assert_array_equal(allan_kernel.means_exact(y[:, :1].copy()), expected[:1])
+
+
+@pytest.mark.parametrize('n_phase', [3, 4, 1001, 9001])
+def test_compiled_totvar_reflects_like_numpy(n_phase):
+    # The compiled TOTVAR reflects the phase on the fly near the ends (numpy: a 3N-point
+    # copy, total.reflect): every factor up to N - 2, where both ends are reflected at once,
+    # and records longer than a block (4096 points).  (A generator of its own: the module's
+    # draws stay those of the tests below.)
     from imu_allan.core.deviations import kernels, total
-    x = np.cumsum(RNG.standard_normal((2, n_phase)), axis=1)
-    np.testing.assert_array_equal(kernels._reflect(x), total.reflect(x))
+    x = np.cumsum(np.random.default_rng(n_phase).standard_normal((2, n_phase)), axis=1)
+    if n_phase < 9001:
+        RNG.standard_normal((2, n_phase))  # the draws this test made before (same data below)
+    ms = np.unique(np.round(np.geomspace(1, n_phase - 2, 40))).astype(np.int64)
+    np.testing.assert_allclose(kernels.variance('totdev', x, ms), total.totvar(x, ms),
+                               rtol=1e-12)
+    # the factors in any order (the kernel groups them ascending)
+    np.testing.assert_allclose(kernels.variance('totdev', x, ms[::-1]),
+                               total.totvar(x, ms[::-1]), rtol=1e-12)
 
 
 @pytest.mark.parametrize('kind', ['adev', 'oadev', 'mdev', 'tdev', 'hdev', 'ohdev', 'totdev'])
