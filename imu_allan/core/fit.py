@@ -74,6 +74,8 @@ class AxisFit:
     cov: np.ndarray = None
     #: (criterion, term names) of every candidate term set, best first (automatic selection)
     candidates: list = field(default_factory=list)
+    #: what another curve said about the open term sets (:func:`.hadamard_check.check`)
+    evidence: list = field(default_factory=list)
 
 
 class FitError(ValueError):
@@ -476,10 +478,38 @@ class FittedModel:
             return [selected]
         best = fit.candidates[0][0]
         out = [selected]
+        rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
         for crit, names in fit.candidates:
-            if crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected):
+            if (crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected)
+                    and frozenset(names) not in rejected):
                 out.append(list(names))
         return out
+
+    def rejected(self, axis):
+        """
+        Term sets the Allan fit left open but another curve contradicts (JSON-ready).
+
+        ``[{'terms': [...], 'by': curve, 'deviance': d}]``: so far the Hadamard check of a rate
+        random walk against a rate ramp (:mod:`.hadamard_check`, curve ``'ohdev'``; d: the
+        deviance above the best open set's).
+        """
+        fit = self.fits.get(axis)
+        return [{'terms': e['terms'], 'by': e['curve'], 'deviance': e['deviance']}
+                for e in (fit.evidence if fit is not None else []) if e['rejected']]
+
+    def decided_by(self, axis):
+        """
+        Name the curves that decided the term set of ``axis``; None while alternatives remain.
+
+        ``'oadev'`` when the Allan fit alone leaves no alternative; ``'oadev+ohdev'`` when the
+        Hadamard curve rejected the last ones; None when the terms were named or nothing fitted.
+        """
+        fit = self.fits.get(axis)
+        if (fit is None or not fit.terms or not fit.candidates
+                or len(self.alternatives(axis)) > 1):
+            return None
+        curves = ['oadev'] + sorted({e['curve'] for e in fit.evidence if e['rejected']})
+        return '+'.join(curves)
 
     def upper_limit(self, axis, term):
         """
@@ -524,7 +554,7 @@ class FittedModel:
         return out
 
 
-def fit_noise_model(result, terms=None, axes=None):
+def fit_noise_model(result, terms=None, axes=None, deviations=None):
     """
     Fit noise terms to every axis of an :class:`~imu_allan.core.allan.AllanResult`.
 
@@ -537,6 +567,10 @@ def fit_noise_model(result, terms=None, axes=None):
         automatic selection among the five IEEE terms by BIC.
     axes : sequence of str, optional
         Axes to fit (default all).
+    deviations : dict, optional
+        ``{kind: DeviationResult}`` of the same record (:func:`imu_allan.deviation`).  With
+        ``'ohdev'`` and automatic selection, the Hadamard curve decides between a rate random
+        walk and a rate ramp where the Allan fit cannot (:mod:`.hadamard_check`).
 
     Returns
     -------
@@ -551,4 +585,13 @@ def fit_noise_model(result, terms=None, axes=None):
         fits[axis] = fit_axis(result.tau, result.avar[:, j], result.edf[:, j],
                               result.alpha[:, j], result.rate_hz, terms,
                               result.n_samples / result.rate_hz)
+        ohdev = (deviations or {}).get('ohdev')
+        if terms is None and ohdev is not None and axis in ohdev.axes:
+            from . import hadamard_check  # (it builds on this module)
+            hadamard = hadamard_check.hadamard_problem(ohdev, axis, fits[axis].coef)
+            if hadamard is not None:
+                allan = Problem(result.tau, result.avar[:, j], result.edf[:, j],
+                                result.alpha[:, j], result.rate_hz,
+                                result.n_samples / result.rate_hz)
+                fits[axis] = hadamard_check.decide(fits[axis], allan, hadamard)
     return FittedModel(fits, result.rate_hz, result)

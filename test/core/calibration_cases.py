@@ -29,6 +29,7 @@ import sys
 import time
 
 from imu_allan.core.allan import AllanResult, avar_fast, tau_grid
+from imu_allan.core.deviations import deviation
 from imu_allan.core.edf import CI_LEVEL
 from imu_allan.core.fit import fit_noise_model
 from imu_allan.core.simulate import simulate_axis
@@ -117,12 +118,13 @@ def package_axis(truth, n, rate_hz, rng):
 GENERATORS = {'independent': independent_axis, 'package': package_axis}
 
 
-def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6):
+def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6, hadamard=False):
     """
     Simulate and fit ``n_axes`` axes; return ``[(truth, fitted, axis), ...]``.
 
     Axes are generated ``chunk`` (at most 6: the package's axis names) at a time into one
-    (n, chunk) array, their Allan variances computed in one call and fitted together.
+    (n, chunk) array, their Allan variances computed in one call and fitted together; with
+    ``hadamard`` the fit also sees the OHDEV curve (:mod:`imu_allan.core.hadamard_check`).
     """
     rng = np.random.default_rng(seed)
     n = int(round(hours * 3600.0 * rate_hz))
@@ -136,8 +138,10 @@ def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6):
             truths.append(draw_truth(scenario, rng, n, rate_hz))
             data[:, j] = GENERATORS[generator](truths[-1], n, rate_hz, rng)
         result = AllanResult.from_avar(ms, avar_fast(data, ms), n, rate_hz, axes=AXES[:count])
+        curves = ({'ohdev': deviation(data, rate_hz, 'ohdev', axes=AXES[:count])}
+                  if hadamard else None)
         del data
-        fitted = fit_noise_model(result)
+        fitted = fit_noise_model(result, deviations=curves)
         out += [(truth, fitted, axis) for truth, axis in zip(truths, AXES)]
     return out
 
@@ -154,7 +158,11 @@ def score(cases, levels=(CI_LEVEL, 0.95)):
         row = {'exact': chosen == set(truth),
                'gap': crits.get(frozenset(truth), math.inf) - best,
                'among': any(a == set(truth) for a in alternatives),
-               'n_alternatives': len(alternatives), 'cover': {}}
+               'n_alternatives': len(alternatives), 'cover': {},
+               # the Hadamard check: ran (open sets differing in K), rejected the true set
+               'checked': bool(fit.evidence),
+               'truth_rejected': any(set(e['terms']) == set(truth) and e['rejected']
+                                     for e in fit.evidence)}
         for term, value in truth.items():
             if term not in chosen:
                 continue
@@ -173,12 +181,12 @@ CELLS = [(s, g, h, r) for s in SCENARIOS for g in GENERATORS for h, r in
          ((1.0, 100.0), (3.0, 100.0), (1.0, 400.0))]
 
 
-def run(cells=CELLS, n_axes=24, seed=1, log=None):
+def run(cells=CELLS, n_axes=24, seed=1, log=None, hadamard=False):
     """Return ``{cell: rows}`` for every (scenario, generator, hours, rate) cell."""
     out = {}
     for k, cell in enumerate(cells):
         t0 = time.process_time()
-        out[cell] = score(batch(*cell, n_axes, seed + 1000 * k))
+        out[cell] = score(batch(*cell, n_axes, seed + 1000 * k, hadamard=hadamard))
         if log:
             log(f'{cell}: {time.process_time() - t0:.1f} s CPU')
     return out
