@@ -37,6 +37,8 @@ MARGIN = 10.0
 #: Name of the curve in the fit's evidence (the deviation kind, as report.json names it).
 CURVE = 'ohdev'
 _WALK = 'rate_random_walk'
+#: Averaging times with fewer non-overlapping clusters are left out (as the Allan grid does).
+MIN_CLUSTERS = 10
 
 
 class HadamardProblem(Problem):
@@ -72,6 +74,7 @@ def hadamard_problem(ohdev, axis, coef=None):
         alpha = np.array([ID_ALPHA[names[k]] for k in dominant])
         edf = np.array([edf_greenhall(int(a), 3, int(m), ohdev.n_samples + 1, True, False)
                         for a, m in zip(alpha, ohdev.m)])
+    edf = np.where(ohdev.m * MIN_CLUSTERS <= ohdev.n_samples, edf, np.nan)
     problem = HadamardProblem(tau, ohdev.dev[:, j] ** 2, edf, alpha, ohdev.rate_hz)
     return problem if problem.tau.size >= 4 else None
 
