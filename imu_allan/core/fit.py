@@ -82,11 +82,18 @@ class FitError(ValueError):
     """The curve cannot be fitted (no usable averaging times)."""
 
 
-def correlation_matrix(tau, alpha):
-    """Correlation of AVAR estimates between averaging times (see module docstring)."""
+def correlation_matrix(tau, alpha, widths=None, tails=None):
+    """
+    Correlation of AVAR estimates between averaging times (see module docstring).
+
+    ``widths``, ``tails``: per noise exponent, default :data:`CORRELATION_WIDTH` and
+    :data:`CORRELATION_TAIL` (another variance has its own, e.g. the Hadamard one).
+    """
+    widths = CORRELATION_WIDTH if widths is None else widths
+    tails = CORRELATION_TAIL if tails is None else tails
     logt = np.log10(np.asarray(tau, dtype=float))
-    width = np.array([CORRELATION_WIDTH.get(int(a), 0.5) for a in alpha])
-    tail = np.sqrt([CORRELATION_TAIL.get(int(a), 0.0) for a in alpha])
+    width = np.array([widths.get(int(a), 0.5) for a in alpha])
+    tail = np.sqrt([tails.get(int(a), 0.0) for a in alpha])
     steps = np.diff(logt) / (0.5 * (width[1:] + width[:-1]))
     u = np.concatenate([[0.0], np.cumsum(steps)])
     base = np.sqrt(1.0 - tail ** 2)
@@ -105,6 +112,10 @@ class Problem:
     problem, and each IRLS step is one small matrix product instead of a factorisation.
     """
 
+    #: correlation widths and long-range shares of the estimates (:func:`correlation_matrix`)
+    correlation_widths = CORRELATION_WIDTH
+    correlation_tails = CORRELATION_TAIL
+
     def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None):
         """
         Keep the usable averaging times of one axis (s, AVAR in SI units squared, EDF).
@@ -118,7 +129,8 @@ class Problem:
         self.avar = avar[ok]
         self.edf = edf[ok]
         self.rate_hz = rate_hz
-        corr = correlation_matrix(self.tau, alpha[ok]) + 1e-9 * np.eye(ok.sum())
+        corr = correlation_matrix(self.tau, alpha[ok], self.correlation_widths,
+                                  self.correlation_tails) + 1e-9 * np.eye(ok.sum())
         self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(corr)))
         self._rel_sd = np.sqrt(2.0 / self.edf)
         self._columns = {}
@@ -489,20 +501,23 @@ class FittedModel:
         """
         Term sets the Allan fit left open but another curve contradicts (JSON-ready).
 
-        ``[{'terms': [...], 'by': curve, 'deviance': d}]``: so far the Hadamard check of a rate
-        random walk against a rate ramp (:mod:`.hadamard_check`, curve ``'ohdev'``; d: the
-        deviance above the best open set's).
+        ``[{'terms': [...], 'by': curve, ...}]``; so far only the Hadamard check of a rate
+        random walk against a rate ramp (:mod:`.hadamard_check`, curve ``'ohdev'``, with its
+        ``gain``, ``walk_min`` and ``walk_max``), run when :func:`fit_noise_model` is given
+        the OHDEV curve.
         """
         fit = self.fits.get(axis)
-        return [{'terms': e['terms'], 'by': e['curve'], 'deviance': e['deviance']}
+        return [{'terms': e['terms'], 'by': e['curve'],
+                 **{k: v for k, v in e.items() if k not in ('terms', 'curve', 'rejected')}}
                 for e in (fit.evidence if fit is not None else []) if e['rejected']]
 
     def decided_by(self, axis):
         """
         Name the curves that decided the term set of ``axis``; None while alternatives remain.
 
-        ``'oadev'`` when the Allan fit alone leaves no alternative; ``'oadev+ohdev'`` when the
-        Hadamard curve rejected the last ones; None when the terms were named or nothing fitted.
+        ``'oadev'`` when the Allan fit alone leaves no alternative, ``'oadev+ohdev'`` when the
+        Hadamard curve rejected the last ones; None when the terms were named or nothing was
+        fitted.
         """
         fit = self.fits.get(axis)
         if (fit is None or not fit.terms or not fit.candidates
