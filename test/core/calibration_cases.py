@@ -20,8 +20,10 @@ are drawn within the measured span (see :data:`CROSSINGS`).
 
 For every axis: is the selected term set the true one; is the true one selected or among the
 alternatives; and per true term (when selected), does its 68.3 % / 95 % interval hold the
-truth.  ``python test/core/calibration_cases.py [axes per cell]`` prints the full table of
-docs/method.md; test_calibration.py runs a smaller batch and checks the goals.
+truth.  ``python test/core/calibration_cases.py [axes per cell] [--hadamard]`` prints the full
+table of docs/method.md (``--hadamard``: with the Hadamard check of
+:mod:`imu_allan.core.hadamard_check`); test_calibration.py runs a smaller batch and checks the
+goals.
 """
 
 import math
@@ -229,10 +231,17 @@ def table(outcomes):
 
 
 if __name__ == '__main__':
-    axes = int(sys.argv[1]) if len(sys.argv) > 1 else 24
+    # python test/core/calibration_cases.py [axes per cell] [--hadamard]
+    args = [a for a in sys.argv[1:] if a != '--hadamard']
+    axes = int(args[0]) if args else 24
     t0 = time.process_time()
-    result = run(n_axes=axes, log=lambda s: print(s, file=sys.stderr, flush=True))
+    result = run(n_axes=axes, log=lambda s: print(s, file=sys.stderr, flush=True),
+                 hadamard='--hadamard' in sys.argv)
     print(table(result))
+    rows = [r for rs in result.values() for r in rs]
+    if any(r['checked'] for r in rows):
+        print(f'\nHadamard check ran on {sum(r["checked"] for r in rows)} axes, rejected the '
+              f'true set on {sum(r["truth_rejected"] for r in rows)}')
     within = summary(result)['within']
     print('\ntrue set within a criterion margin of the best: ' + ', '.join(
         f'{m}: {100 * v:.1f} %' for m, v in within.items()))
