@@ -90,3 +90,26 @@ def test_the_check_contradicts_a_walk_where_a_ramp_rises(seed, slow):
         assert verdict[NBK]['walk_min'] > 1.5 * verdict[NBK]['walk_max']
     else:
         assert not verdict[NBK]['rejected']
+
+
+def test_the_advice_leaves_out_a_contradicted_set():
+    """
+    A set the fit's evidence rejects is no unresolved pair of the recording advice.
+
+    Seed 3 of the clear ramp record leaves N K R selected and N B R open (the advisor then
+    reports the B / K swap as unresolved); with that set marked contradicted it is gone.
+    """
+    from imu_allan.core.advisor import advise
+    model = NoiseModel.from_dict({'gyro': {'white_noise': 2e-3, 'bias_instability': 2e-4,
+                                           'rate_ramp': 3e-6}})
+    data = simulate(model, 360_000, 100.0, seed=3, axes=['gyro_x'])
+    result = allan_deviation(data, 100.0, axes=['gyro_x'])
+    fitted = fit_noise_model(result)
+    others = fitted.alternatives('gyro_x')[1:]
+    assert others, 'the record should leave an alternative open'
+    before = {frozenset(u.alternative) for u in advise(result, fitted).unresolved}
+    assert frozenset(others[0]) in before
+    fitted.fits['gyro_x'].evidence = [{'terms': others[0], 'curve': 'ohdev', 'gain': 0.0,
+                                       'rejected': True}]
+    after = {frozenset(u.alternative) for u in advise(result, fitted).unresolved}
+    assert frozenset(others[0]) not in after
