@@ -422,7 +422,11 @@ class _AxisAdvisor:
         _, crit = self._data_criterion(chosen)
         alternatives = getattr(self.fitted, 'alternatives', None)
         listed = {frozenset(a) for a in (alternatives(self.axis)[1:] if alternatives else [])}
+        rejected = getattr(self.fitted, 'rejected', None)  # sets another curve contradicts
+        contradicted = {frozenset(r['terms']) for r in (rejected(self.axis) if rejected else [])}
         for pair, alt_names in self._candidates(chosen):
+            if frozenset(alt_names) in contradicted:  # decided (the Hadamard check)
+                continue
             alt_fit, alt_crit = self._data_criterion(alt_names)
             yield
             # an alternative the fit lists stays open whatever this refit says

@@ -74,17 +74,26 @@ class AxisFit:
     cov: np.ndarray = None
     #: (criterion, term names) of every candidate term set, best first (automatic selection)
     candidates: list = field(default_factory=list)
+    #: what another curve said about the open term sets (:func:`.hadamard_check.check`)
+    evidence: list = field(default_factory=list)
 
 
 class FitError(ValueError):
     """The curve cannot be fitted (no usable averaging times)."""
 
 
-def correlation_matrix(tau, alpha):
-    """Correlation of AVAR estimates between averaging times (see module docstring)."""
+def correlation_matrix(tau, alpha, widths=None, tails=None):
+    """
+    Correlation of AVAR estimates between averaging times (see module docstring).
+
+    ``widths``, ``tails``: per noise exponent, default :data:`CORRELATION_WIDTH` and
+    :data:`CORRELATION_TAIL` (another variance has its own, e.g. the Hadamard one).
+    """
+    widths = CORRELATION_WIDTH if widths is None else widths
+    tails = CORRELATION_TAIL if tails is None else tails
     logt = np.log10(np.asarray(tau, dtype=float))
-    width = np.array([CORRELATION_WIDTH.get(int(a), 0.5) for a in alpha])
-    tail = np.sqrt([CORRELATION_TAIL.get(int(a), 0.0) for a in alpha])
+    width = np.array([widths.get(int(a), 0.5) for a in alpha])
+    tail = np.sqrt([tails.get(int(a), 0.0) for a in alpha])
     steps = np.diff(logt) / (0.5 * (width[1:] + width[:-1]))
     u = np.concatenate([[0.0], np.cumsum(steps)])
     base = np.sqrt(1.0 - tail ** 2)
@@ -103,6 +112,10 @@ class Problem:
     problem, and each IRLS step is one small matrix product instead of a factorisation.
     """
 
+    #: correlation widths and long-range shares of the estimates (:func:`correlation_matrix`)
+    correlation_widths = CORRELATION_WIDTH
+    correlation_tails = CORRELATION_TAIL
+
     def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None):
         """
         Keep the usable averaging times of one axis (s, AVAR in SI units squared, EDF).
@@ -116,7 +129,8 @@ class Problem:
         self.avar = avar[ok]
         self.edf = edf[ok]
         self.rate_hz = rate_hz
-        corr = correlation_matrix(self.tau, alpha[ok]) + 1e-9 * np.eye(ok.sum())
+        corr = correlation_matrix(self.tau, alpha[ok], self.correlation_widths,
+                                  self.correlation_tails) + 1e-9 * np.eye(ok.sum())
         self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(corr)))
         self._rel_sd = np.sqrt(2.0 / self.edf)
         self._columns = {}
@@ -476,10 +490,41 @@ class FittedModel:
             return [selected]
         best = fit.candidates[0][0]
         out = [selected]
+        rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
         for crit, names in fit.candidates:
-            if crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected):
+            if (crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected)
+                    and frozenset(names) not in rejected):
                 out.append(list(names))
         return out
+
+    def rejected(self, axis):
+        """
+        Term sets the Allan fit left open but another curve contradicts (JSON-ready).
+
+        ``[{'terms': [...], 'by': curve, ...}]``; so far only the Hadamard check of a rate
+        random walk against a rate ramp (:mod:`.hadamard_check`, curve ``'ohdev'``, with its
+        ``gain``, ``walk_min`` and ``walk_max``), run when :func:`fit_noise_model` is given
+        the OHDEV curve.
+        """
+        fit = self.fits.get(axis)
+        return [{'terms': e['terms'], 'by': e['curve'],
+                 **{k: v for k, v in e.items() if k not in ('terms', 'curve', 'rejected')}}
+                for e in (fit.evidence if fit is not None else []) if e['rejected']]
+
+    def decided_by(self, axis):
+        """
+        Name the curves that decided the term set of ``axis``; None while alternatives remain.
+
+        ``'oadev'`` when the Allan fit alone leaves no alternative, ``'oadev+ohdev'`` when the
+        Hadamard curve rejected the last ones; None when the terms were named or nothing was
+        fitted.
+        """
+        fit = self.fits.get(axis)
+        if (fit is None or not fit.terms or not fit.candidates
+                or len(self.alternatives(axis)) > 1):
+            return None
+        curves = ['oadev'] + sorted({e['curve'] for e in fit.evidence if e['rejected']})
+        return '+'.join(curves)
 
     def upper_limit(self, axis, term):
         """
@@ -524,7 +569,7 @@ class FittedModel:
         return out
 
 
-def fit_noise_model(result, terms=None, axes=None):
+def fit_noise_model(result, terms=None, axes=None, deviations=None):
     """
     Fit noise terms to every axis of an :class:`~imu_allan.core.allan.AllanResult`.
 
@@ -537,6 +582,10 @@ def fit_noise_model(result, terms=None, axes=None):
         automatic selection among the five IEEE terms by BIC.
     axes : sequence of str, optional
         Axes to fit (default all).
+    deviations : dict, optional
+        ``{kind: DeviationResult}`` of the same record (:func:`imu_allan.deviation`).  With
+        ``'ohdev'`` and automatic selection, the Hadamard curve decides between a rate random
+        walk and a rate ramp where the Allan fit cannot (:mod:`.hadamard_check`).
 
     Returns
     -------
@@ -551,4 +600,13 @@ def fit_noise_model(result, terms=None, axes=None):
         fits[axis] = fit_axis(result.tau, result.avar[:, j], result.edf[:, j],
                               result.alpha[:, j], result.rate_hz, terms,
                               result.n_samples / result.rate_hz)
+        ohdev = (deviations or {}).get('ohdev')
+        if terms is None and ohdev is not None and axis in ohdev.axes:
+            from . import hadamard_check  # (it builds on this module)
+            hadamard = hadamard_check.hadamard_problem(ohdev, axis, fits[axis].coef)
+            if hadamard is not None:
+                allan = Problem(result.tau, result.avar[:, j], result.edf[:, j],
+                                result.alpha[:, j], result.rate_hz,
+                                result.n_samples / result.rate_hz)
+                fits[axis] = hadamard_check.decide(fits[axis], allan, hadamard)
     return FittedModel(fits, result.rate_hz, result)

@@ -20,8 +20,10 @@ are drawn within the measured span (see :data:`CROSSINGS`).
 
 For every axis: is the selected term set the true one; is the true one selected or among the
 alternatives; and per true term (when selected), does its 68.3 % / 95 % interval hold the
-truth.  ``python test/core/calibration_cases.py [axes per cell]`` prints the full table of
-docs/method.md; test_calibration.py runs a smaller batch and checks the goals.
+truth.  ``python test/core/calibration_cases.py [axes per cell] [--hadamard]`` prints the full
+table of docs/method.md (``--hadamard``: with the Hadamard check of
+:mod:`imu_allan.core.hadamard_check`); test_calibration.py runs a smaller batch and checks the
+goals.
 """
 
 import math
@@ -29,6 +31,7 @@ import sys
 import time
 
 from imu_allan.core.allan import AllanResult, avar_fast, tau_grid
+from imu_allan.core.deviations import deviation
 from imu_allan.core.edf import CI_LEVEL
 from imu_allan.core.fit import fit_noise_model
 from imu_allan.core.simulate import simulate_axis
@@ -117,12 +120,13 @@ def package_axis(truth, n, rate_hz, rng):
 GENERATORS = {'independent': independent_axis, 'package': package_axis}
 
 
-def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6):
+def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6, hadamard=False):
     """
     Simulate and fit ``n_axes`` axes; return ``[(truth, fitted, axis), ...]``.
 
     Axes are generated ``chunk`` (at most 6: the package's axis names) at a time into one
-    (n, chunk) array, their Allan variances computed in one call and fitted together.
+    (n, chunk) array, their Allan variances computed in one call and fitted together; with
+    ``hadamard`` the fit also sees the OHDEV curve (:mod:`imu_allan.core.hadamard_check`).
     """
     rng = np.random.default_rng(seed)
     n = int(round(hours * 3600.0 * rate_hz))
@@ -136,8 +140,10 @@ def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6):
             truths.append(draw_truth(scenario, rng, n, rate_hz))
             data[:, j] = GENERATORS[generator](truths[-1], n, rate_hz, rng)
         result = AllanResult.from_avar(ms, avar_fast(data, ms), n, rate_hz, axes=AXES[:count])
+        curves = ({'ohdev': deviation(data, rate_hz, 'ohdev', axes=AXES[:count])}
+                  if hadamard else None)
         del data
-        fitted = fit_noise_model(result)
+        fitted = fit_noise_model(result, deviations=curves)
         out += [(truth, fitted, axis) for truth, axis in zip(truths, AXES)]
     return out
 
@@ -154,7 +160,11 @@ def score(cases, levels=(CI_LEVEL, 0.95)):
         row = {'exact': chosen == set(truth),
                'gap': crits.get(frozenset(truth), math.inf) - best,
                'among': any(a == set(truth) for a in alternatives),
-               'n_alternatives': len(alternatives), 'cover': {}}
+               'n_alternatives': len(alternatives), 'cover': {},
+               # the Hadamard check: ran (open sets differing in K), rejected the true set
+               'checked': bool(fit.evidence),
+               'truth_rejected': any(set(e['terms']) == set(truth) and e['rejected']
+                                     for e in fit.evidence)}
         for term, value in truth.items():
             if term not in chosen:
                 continue
@@ -173,12 +183,12 @@ CELLS = [(s, g, h, r) for s in SCENARIOS for g in GENERATORS for h, r in
          ((1.0, 100.0), (3.0, 100.0), (1.0, 400.0))]
 
 
-def run(cells=CELLS, n_axes=24, seed=1, log=None):
+def run(cells=CELLS, n_axes=24, seed=1, log=None, hadamard=False):
     """Return ``{cell: rows}`` for every (scenario, generator, hours, rate) cell."""
     out = {}
     for k, cell in enumerate(cells):
         t0 = time.process_time()
-        out[cell] = score(batch(*cell, n_axes, seed + 1000 * k))
+        out[cell] = score(batch(*cell, n_axes, seed + 1000 * k, hadamard=hadamard))
         if log:
             log(f'{cell}: {time.process_time() - t0:.1f} s CPU')
     return out
@@ -221,10 +231,17 @@ def table(outcomes):
 
 
 if __name__ == '__main__':
-    axes = int(sys.argv[1]) if len(sys.argv) > 1 else 24
+    # python test/core/calibration_cases.py [axes per cell] [--hadamard]
+    args = [a for a in sys.argv[1:] if a != '--hadamard']
+    axes = int(args[0]) if args else 24
     t0 = time.process_time()
-    result = run(n_axes=axes, log=lambda s: print(s, file=sys.stderr, flush=True))
+    result = run(n_axes=axes, log=lambda s: print(s, file=sys.stderr, flush=True),
+                 hadamard='--hadamard' in sys.argv)
     print(table(result))
+    rows = [r for rs in result.values() for r in rs]
+    if any(r['checked'] for r in rows):
+        print(f'\nHadamard check ran on {sum(r["checked"] for r in rows)} axes, rejected the '
+              f'true set on {sum(r["truth_rejected"] for r in rows)}')
     within = summary(result)['within']
     print('\ntrue set within a criterion margin of the best: ' + ', '.join(
         f'{m}: {100 * v:.1f} %' for m, v in within.items()))
