@@ -223,14 +223,16 @@ def analyze_samples(samples, options=None):
         result = allan_deviation(data, rate, taus=taus,
                                  points_per_decade=options.points_per_decade,
                                  min_clusters=options.min_clusters, axes=samples.axes)
-    try:
-        fit = fit_noise_model(result, terms=options.terms)
-    except FitError as exc:
-        raise InputError(where, str(exc)) from None
-    upper = _kalibr_upper_limits(fit)
     from .deviations import extra_deviations
     deviations = extra_deviations(data, rate, options.estimators, samples.axes,
                                   options.points_per_decade, options.min_clusters)
+    try:
+        # With OHDEV asked for, its curve decides a rate random walk against a rate ramp
+        # where the Allan fit alone cannot (core/hadamard_check.py).
+        fit = fit_noise_model(result, terms=options.terms, deviations=deviations)
+    except FitError as exc:
+        raise InputError(where, str(exc)) from None
+    upper = _kalibr_upper_limits(fit)
     outliers, static, motion = pending.result()
     if not static:
         moving = [a for a, d in motion.items() if d['moving']]

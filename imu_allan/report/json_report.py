@@ -40,7 +40,9 @@ def analysis_to_json(analysis, samples=None):
                      'edf': _floats(res.edf[:, j])},
             'terms': analysis.fit.term_report(axis),
             'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis]),
-                    'alternatives': analysis.fit.alternatives(axis)},
+                    'alternatives': analysis.fit.alternatives(axis),
+                    'rejected': analysis.fit.rejected(axis),
+                    'decided_by': analysis.fit.decided_by(axis)},
         }
         if getattr(analysis, 'deviations', None):
             axes[axis]['deviations'] = {

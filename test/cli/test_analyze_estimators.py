@@ -52,3 +52,35 @@ def test_unknown_estimator_is_one_line_exit_2(short_csv):
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and 'foodev' in lines[0] and '--estimators' in lines[0]
+
+
+def test_ohdev_decides_a_walk_against_a_ramp(tmp_path):
+    """
+    ``--estimators ohdev``: the Hadamard curve rejects the rate random walk the Allan fit left open.
+
+    gyro_x: 1 h at 100 Hz of N 2e-3, B 2e-4 and a rate ramp of 3e-6 rad/s^2 (seed 6 of
+    test/core/test_hadamard_check.py: the Allan fit leaves N K R and N B R open; the walk
+    N K R needs is at least 1.36x the most the Hadamard curve allows, so rounding the CSV to
+    9 digits cannot undo the decision).  Without OHDEV the pair stays open and is said so.
+    """
+    from imu_allan import NoiseModel
+    n = 360_000
+    ramp = NoiseModel.from_dict({'gyro': {'white_noise': 2e-3, 'bias_instability': 2e-4,
+                                          'rate_ramp': 3e-6}})
+    data = simulate(thesis_gx3_25_model(), n, 100.0, seed=1)
+    data[:, 0] = simulate(ramp, n, 100.0, seed=6, axes=['gyro_x'])[:, 0]
+    data[:, 5] += 9.80665
+    path = tmp_path / 'ramp.csv'
+    write_csv(path, Samples(t=np.arange(n) / 100.0, data=data))
+    nkr = ['white_noise', 'rate_random_walk', 'rate_ramp']
+    plain = run_command('analyze', path, '--json')
+    assert plain.returncode == 0, plain.stderr
+    fit = json.loads(plain.stdout)['axes']['gyro_x']['fit']
+    assert nkr in fit['alternatives'] and fit['rejected'] == [] and fit['decided_by'] is None
+    checked = run_command('analyze', path, '--estimators', 'oadev,ohdev', '--json')
+    assert checked.returncode == 0, checked.stderr
+    fit = json.loads(checked.stdout)['axes']['gyro_x']['fit']
+    assert [r['terms'] for r in fit['rejected']] == [nkr]
+    assert fit['rejected'][0]['by'] == 'ohdev'
+    assert nkr not in fit['alternatives']
+    assert fit['decided_by'] == 'oadev+ohdev'
