@@ -16,6 +16,7 @@ once numba is loaded (:func:`compiled_walk`); numba is optional, without it the 
 reads.
 """
 
+import os
 import struct
 import threading
 
@@ -31,6 +32,7 @@ _SERIAL_SIZE = np.array([0, 1, 2, 3, 4, 6, 8, 8, 0, 0, -1, -1], dtype=np.int64)
 #: table (np.isin hashes its arguments on every call: a table lookup is several times faster).
 _INTEGER_SERIAL = np.isin(np.arange(256), [1, 2, 3, 4, 5, 6, 8, 9])
 _PAGE_BATCH = 512  # leaf pages decoded per numpy batch (bounds the index arrays' memory)
+_INDEX_CHUNK = 1024  # index pages copied (:meth:`SqlitePages._pages_copy`) and walked at a time
 
 
 #: Multipliers of the row digest (:func:`row_digests`): odd 64-bit constants (the golden
@@ -370,18 +372,22 @@ class SqlitePages:
             if seen > self.npages or ((level < 1) | (level > self.npages)).any():
                 return None
             if kernel is not None:  # the compiled walk of the level (same digest, ~10x faster)
-                hdr = (level - 1) * ps + np.where(level == 1, 100, 0)
-                inner = u8[hdr] == 0x02
-                room = int((u8[hdr + 3][inner].astype(np.int64) * 256 + u8[hdr + 4][inner]
-                            + 1).sum())
-                digest = np.zeros(2, dtype=np.uint64)
-                children = np.empty(room, dtype=np.int64)
-                n = kernel.sqlite_index_level(u8, level, ps, digest, children)
-                if n < 0:
-                    return None
-                total += digest[:1]
-                count += int(digest[1])
-                level = children[:n]
+                nxt = []
+                for c0 in range(0, level.size, _INDEX_CHUNK):
+                    buf, local = self._pages_copy(level[c0:c0 + _INDEX_CHUNK])
+                    hdr = (local - 1) * ps
+                    inner = buf[hdr] == 0x02
+                    room = int((buf[hdr + 3][inner].astype(np.int64) * 256 + buf[hdr + 4][inner]
+                                + 1).sum())
+                    digest = np.zeros(2, dtype=np.uint64)
+                    children = np.empty(room, dtype=np.int64)
+                    n = kernel.sqlite_index_level(buf, local, ps, digest, children)
+                    if n < 0:
+                        return None
+                    total += digest[:1]
+                    count += int(digest[1])
+                    nxt.append(children[:n])
+                level = np.concatenate(nxt)
                 continue
             nxt = []
             for b0 in range(0, level.size, _PAGE_BATCH):
@@ -395,6 +401,28 @@ class SqlitePages:
                 nxt.append(children)
             level = np.concatenate(nxt)
         return total[0], count
+
+    def _pages_copy(self, pages):
+        """
+        Read ``pages`` (numbers) into a private buffer; return it and their numbers in it.
+
+        The index walk reads its pages with ``pread``, not through the map: its pages lie
+        scattered between the table's, and each fault on the map brings the neighbouring
+        pages (already cached by the table walk) into this process as well (the kernel's
+        fault-around), which took the 10 h bag's peak resident memory from 0.4 GB to 1.25 GB.
+        Page k of ``pages`` sits at page k + 2 of the buffer (page 1, whose B-tree header
+        starts at byte 100, is left empty: a copy of it is no index page either way).
+        """
+        ps = self.page_size
+        fd = os.open(self.path, os.O_RDONLY)
+        try:
+            parts = [bytes(ps)] + [os.pread(fd, ps, (no - 1) * ps) for no in pages.tolist()]
+        finally:
+            os.close(fd)
+        if any(len(part) != ps for part in parts):
+            raise ValueError('index page beyond the end of the file')  # (cut meanwhile)
+        return (np.frombuffer(b''.join(parts), dtype=np.uint8),
+                np.arange(2, pages.size + 2, dtype=np.int64))
 
     def _index_batch(self, u8, ps, pages):
         """Digest, entry count and child pages of a batch of index pages (None if damaged)."""
