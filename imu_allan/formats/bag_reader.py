@@ -471,7 +471,7 @@ class _SqliteSource:
             except (struct.error, ValueError, IndexError, Unsupported) as err:
                 self.warnings.append(f'{self.path.name}: malformed SQLite page '
                                      f'({one_line(err)}): the rest is skipped')
-            problem = '' if pg.damaged else pg.index_problem()
+            problem = '' if pg.damaged else pg.index_problem() or pg.structure_problem()
             if problem:
                 self.warnings.append(f'{self.path.name}: damaged sqlite3 file ({problem}): '
                                      'messages may be missing, misplaced or changed')

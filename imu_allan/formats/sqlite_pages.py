@@ -26,6 +26,8 @@ from .imu_cdr import compiled_walks, decode_at, map_file, release
 from ..errors import InputError
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
+#: The columns of rosbag2's messages table, in the order the walks decode its rows.
+MESSAGE_COLUMNS = ('id', 'topic_id', 'timestamp', 'data')
 
 _SERIAL_SIZE = np.array([0, 1, 2, 3, 4, 6, 8, 8, 0, 0, -1, -1], dtype=np.int64)
 #: Serial types that hold an integer (1-6 sized, 8 and 9 the constants 0 and 1), as a lookup
@@ -176,7 +178,10 @@ class SqlitePages:
         self.lost_pages = 0  # referenced pages beyond the end of the file or not B-tree pages
         # (digest, count) of the message rows walked, every topic (:func:`row_digests`)
         self.digest = np.zeros(2, dtype=np.uint64)
+        #: table-leaf pages walked whose free-space accounting fails (:meth:`space_failures`)
+        self.space_pages = 0
         self.indexes = {}  # index name -> (table name, root page), from sqlite_schema
+        self.sql = []  # (kind, name, table, CREATE statement): sqlite_schema's tables, indexes
         self._index = None  # the thread digesting the index, then its result
 
     def close(self):
@@ -343,7 +348,63 @@ class SqlitePages:
                 out[vals[1]] = vals[3]
             elif len(vals) >= 4 and vals[0] == 'index' and isinstance(vals[3], int):
                 self.indexes[vals[1]] = (vals[2], vals[3])
+            if len(vals) >= 4 and vals[0] in ('table', 'index'):
+                self.sql.append((*vals[:3], vals[4] if len(vals) > 4 else None))
         return out
+
+    def schema_problem(self):
+        """
+        Words when the schema's SQL is damaged or not the layout the walk assumes, else ''.
+
+        SQLite parses the CREATE statements of sqlite_schema before any query and calls a
+        file whose text it cannot parse malformed; here they are replayed into an empty
+        in-memory database (SQLite's own parser, about a millisecond), then the messages
+        table's columns are compared with the rosbag2 row the walk decodes.
+        """
+        import sqlite3
+        con = sqlite3.connect(':memory:')
+        try:
+            # Every object of the file's schema, its automatic indexes (a PRIMARY KEY or
+            # UNIQUE that is no rowid alias) included, must come out of its statements.
+            want = {(typ, str(name).lower(), str(table).lower())
+                    for typ, name, table, _ in self.sql
+                    if not str(name).startswith('sqlite_stat')}
+            for kind in ('table', 'index'):  # (the tables first: an index names one)
+                for typ, name, _, sql in self.sql:
+                    if typ != kind or str(name).startswith('sqlite_'):
+                        continue  # SQLite's own tables and automatic indexes
+                    try:
+                        con.execute(sql if isinstance(sql, str) else '')
+                    except (sqlite3.Error, ValueError):
+                        return f'the schema SQL of {name!s:.40} is damaged'
+            made = {(typ, name.lower(), table.lower()) for typ, name, table in con.execute(
+                "SELECT type, name, tbl_name FROM sqlite_master WHERE type IN ('table', "
+                "'index')")}
+            info = con.execute('PRAGMA table_info(messages)').fetchall()
+        finally:
+            con.close()
+        if made != want:  # the statements name other objects than their schema rows
+            return 'the schema SQL names other tables or indexes than the schema rows'
+        cols = [str(row[1]).lower() for row in info]
+        if cols != list(MESSAGE_COLUMNS):
+            return (f'the messages table\'s columns are ({", ".join(cols)[:80]}), not '
+                    f'rosbag2\'s ({", ".join(MESSAGE_COLUMNS)})')
+        if str(info[0][2]).upper() != 'INTEGER' or info[0][5] != 1:
+            # only "id INTEGER PRIMARY KEY" makes id the rowid, stored as NULL in the rows
+            return "the messages table's id is no INTEGER PRIMARY KEY in its schema SQL"
+        return ''
+
+    def structure_problem(self):
+        """
+        Words on damage that SQLite would see beside the rows' own checks, or ''.
+
+        Call after :meth:`read_messages`: the free-space accounting of the pages walked
+        (:meth:`space_failures`), then the schema's SQL (:meth:`schema_problem`).
+        """
+        if self.space_pages:
+            return (f'the free space of {self.space_pages} page(s) of the message table does '
+                    'not add up')
+        return self.schema_problem()
 
     def topics(self, root):
         """Return [(topic id, name, type)] from rosbag2's topics table."""
@@ -556,12 +617,13 @@ class SqlitePages:
         slow = np.empty((cells, 2), dtype=np.int64)
         if self._views is None:
             self._views = kernel.byte_views(u8)
-        kept, nslow, lost = kernel.sqlite_walk(
+        kept, nslow, lost, space = kernel.sqlite_walk(
             u8, *self._views, pages, ps, self.usable, wanted, order, stamp, off, length, ok, t,
             data, slow, self.digest)
         if kept < 0:
             return False
         self.lost_pages += lost
+        self.space_pages += space
         t, data = t[:kept], data[:kept]
         if nslow:  # the slow cells' parts go first (as in _batch) into the reserved places
             t, data = t.copy(), data.copy()
@@ -595,9 +657,7 @@ class SqlitePages:
         if not good_page.all():
             self.lost_pages += int((~good_page).sum())
             base, hdr, ncell = base[good_page], hdr[good_page], ncell[good_page]
-        if ncell.sum() == 0:
-            return
-        maxc = int(ncell.max())
+        maxc = int(ncell.max()) if ncell.size else 0
         j = np.arange(maxc)
         mask = j[None, :] < ncell[:, None]
         pp = (hdr[:, None] + 8 + 2 * j[None, :])[mask]
@@ -608,6 +668,10 @@ class SqlitePages:
         # Cell layout: payload size, rowid, record header (size, 4 serial types), values.
         p, n1 = _varints(u8, cell)
         rowid, n2 = _varints(u8, cell + n1)
+        self.space_pages += self.space_failures(u8, base, hdr, ncell, ptr,
+                                                self.cell_sizes(p, n1, n2))
+        if ncell.sum() == 0:
+            return
         rec = cell + n1 + n2
         hs, s0, s1, s2, s3, fits = _record_headers(u8, rec)
         fast = (inside & fits & (s0 == 0) & _INTEGER_SERIAL[np.clip(s1, 0, 255)]
@@ -643,6 +707,64 @@ class SqlitePages:
             for i in np.nonzero(~ok)[0].tolist():
                 t[i], data[i] = coll.generic(blob_of(i))
             coll.add_part(order[sel], stamp[sel], t, data, blob_of)
+
+    def cell_sizes(self, p, n1, n2):
+        """
+        Bytes each table-leaf cell takes on its page (-1: payload size out of range).
+
+        SQLite's ``cellSizePtr``: the varints of payload size (``n1`` bytes) and rowid
+        (``n2``), the payload's local part (all ``p`` bytes up to ``usable - 35``, else the
+        share kept on the page by the file format's overflow rule) and a 4-byte overflow page
+        number; at least 4 bytes.  (:func:`.bag_kernels.cell_size` for one cell.)
+        """
+        usable = self.usable
+        x = usable - 35
+        m = ((usable - 12) * 32 // 255) - 23
+        ok = (p >= 0) & (p < 1 << 31)
+        q = np.where(ok, p, 0)
+        k = m + (q - m) % (usable - 4)
+        local = np.where(q <= x, q, np.where(k <= x, k, m) + 4)
+        return np.where(ok, np.maximum(n1 + n2 + local, 4), -1)
+
+    def space_failures(self, u8, base, hdr, ncell, ptr, size):
+        """
+        Count the table-leaf pages whose free-space accounting fails.
+
+        The cell content area (from the header's content start to the usable end) must be
+        exactly the cells, the freeblocks (a chain of increasing offsets inside the area) and
+        the fragmented bytes the header counts: SQLite's integrity_check ("Fragmentation of
+        ... reported as ...").  A cell before the content start or past the usable end, or of
+        a payload size out of range (``size`` -1), fails its page.  ``base`` / ``hdr``: the
+        pages' offsets in ``u8``; ``ptr`` / ``size``: their cells, page by page.
+        (:func:`.bag_kernels.space_adds_up` in the compiled walk.)
+        """
+        if not ncell.size:
+            return 0
+        usable = self.usable
+        content = u8[hdr + 5].astype(np.int64) * 256 + u8[hdr + 6]
+        content = np.where(content == 0, 65536, content)
+        page = np.repeat(np.arange(ncell.size), ncell)
+        stray = (size < 0) | (ptr < content[page]) | (ptr + size > usable)
+        used = np.zeros(ncell.size, dtype=np.int64)
+        np.add.at(used, page, size)
+        bad = np.zeros(ncell.size, dtype=bool)
+        bad[page[stray]] = True
+        first = u8[hdr + 1].astype(np.int64) * 256 + u8[hdr + 2]
+        free = np.zeros(ncell.size, dtype=np.int64)
+        for i in np.flatnonzero(first).tolist():  # freeblocks: rare in a bag (no deletes)
+            fb, b0 = int(first[i]), int(base[i])
+            while fb:
+                if fb < content[i] or fb + 4 > usable:
+                    bad[i] = True
+                    break
+                nxt = int(u8[b0 + fb]) * 256 + int(u8[b0 + fb + 1])
+                free[i] += int(u8[b0 + fb + 2]) * 256 + int(u8[b0 + fb + 3])
+                if nxt and nxt <= fb:
+                    bad[i] = True
+                    break
+                fb = nxt
+        bad |= usable - content != used + free + u8[hdr + 7]
+        return int(bad.sum())
 
     def _slow_cell(self, cell, page_base, wanted, coll):
         if not page_base <= cell < page_base + self.page_size - 4:
