@@ -33,6 +33,9 @@ _SERIAL_SIZE = np.array([0, 1, 2, 3, 4, 6, 8, 8, 0, 0, -1, -1], dtype=np.int64)
 #: Serial types that hold an integer (1-6 sized, 8 and 9 the constants 0 and 1), as a lookup
 #: table (np.isin hashes its arguments on every call: a table lookup is several times faster).
 _INTEGER_SERIAL = np.isin(np.arange(256), [1, 2, 3, 4, 5, 6, 8, 9])
+#: Leaf pages of a table other than ``messages`` beyond which its rows are not checked
+#: against its columns (a rosbag2 bag's small tables take a page or a few).
+SMALL_TABLE_PAGES = 256
 _PAGE_BATCH = 512  # leaf pages decoded per numpy batch (bounds the index arrays' memory)
 _INDEX_CHUNK = 1024  # index pages copied (:meth:`SqlitePages._pages_copy`) and walked at a time
 
@@ -178,10 +181,14 @@ class SqlitePages:
         self.lost_pages = 0  # referenced pages beyond the end of the file or not B-tree pages
         # (digest, count) of the message rows walked, every topic (:func:`row_digests`)
         self.digest = np.zeros(2, dtype=np.uint64)
-        #: table-leaf pages walked whose free-space accounting fails (:meth:`space_failures`)
+        #: table-leaf pages walked whose free space does not add up (:meth:`space_failures`)
+        #: or, in the small tables, with a record that does not fill its payload
         self.space_pages = 0
         self.indexes = {}  # index name -> (table name, root page), from sqlite_schema
         self.sql = []  # (kind, name, table, CREATE statement): sqlite_schema's tables, indexes
+        self.schema_kinds = []  # the type column of every sqlite_schema row
+        self.schema_roots = []  # (kind, root page) of its tables and indexes
+        self.schema_roots_by_name = []  # (name, root page) of the same
         self._index = None  # the thread digesting the index, then its result
 
     def close(self):
@@ -330,14 +337,32 @@ class SqlitePages:
         return vals
 
     def table_rows(self, root):
-        """All rows of a small table as (rowid, values) (Python, not for ``messages``)."""
+        """
+        All rows of a small table as (rowid, values) (Python, not for ``messages``).
+
+        Its pages' free space and records are checked as the message table's
+        (:meth:`space_failures`; a record that does not fill its payload): a failure counts
+        in :attr:`space_pages`.
+        """
         rows = []
         for no in self.leaf_pages(root):
             base, hdr = self._page(no)
             ncell = int(self.u8[hdr + 3]) * 256 + int(self.u8[hdr + 4])
-            for ptr in self._ptrs(hdr, ncell, 0).tolist():
+            ptrs = self._ptrs(hdr, ncell, 0)
+            p, n1 = _varints(self.u8, base + ptrs)
+            n2 = _varints(self.u8, base + ptrs + n1)[1]
+            bad = self.space_failures(self.u8, np.array([base]), np.array([hdr]),
+                                      np.array([ncell]), ptrs, self.cell_sizes(p, n1, n2))
+            for ptr in ptrs.tolist():
                 rowid, payload = self._payload(base + ptr, base)
-                rows.append((rowid, self._record(payload)))
+                try:
+                    vals = self._record(payload, exact=True)
+                except Unsupported:
+                    bad, vals = 1, self._record(payload)
+                if rows and rowid <= rows[-1][0]:
+                    bad = 1  # rowids increase along a table (SQLite: "out of order")
+                rows.append((rowid, vals))
+            self.space_pages += bad
         return rows
 
     def schema(self):
@@ -348,6 +373,10 @@ class SqlitePages:
                 out[vals[1]] = vals[3]
             elif len(vals) >= 4 and vals[0] == 'index' and isinstance(vals[3], int):
                 self.indexes[vals[1]] = (vals[2], vals[3])
+            self.schema_kinds.append(vals[0] if vals else None)
+            if len(vals) >= 4 and vals[0] in ('table', 'index'):
+                self.schema_roots.append((vals[0], vals[3]))
+                self.schema_roots_by_name.append((str(vals[1]), vals[3]))
             if len(vals) >= 4 and vals[0] in ('table', 'index'):
                 self.sql.append((*vals[:3], vals[4] if len(vals) > 4 else None))
         return out
@@ -362,6 +391,17 @@ class SqlitePages:
         table's columns are compared with the rosbag2 row the walk decodes.
         """
         import sqlite3
+        odd = set(map(str, self.schema_kinds)) - {'table', 'index', 'view', 'trigger'}
+        if odd:
+            return f'a schema row of unknown type {sorted(odd)[0]:.20}'
+        roots = [(typ, root) for typ, root in self.schema_roots if root]  # (views have 0)
+        kinds = {'table': (0x0D, 0x05), 'index': (0x0A, 0x02)}
+        for typ, root in roots:
+            loc = self._page(root) if isinstance(root, int) and root > 1 else None  # 1: schema
+            if loc is None or self.u8[loc[1]] not in kinds[typ]:
+                return f'a {typ} of the schema has root page {root!s:.12}, no {typ} page'
+        if len({root for _, root in roots}) != len(roots):
+            return 'two tables or indexes of the schema share a root page'
         con = sqlite3.connect(':memory:')
         try:
             # Every object of the file's schema, its automatic indexes (a PRIMARY KEY or
@@ -381,6 +421,13 @@ class SqlitePages:
                 "SELECT type, name, tbl_name FROM sqlite_master WHERE type IN ('table', "
                 "'index')")}
             info = con.execute('PRAGMA table_info(messages)').fetchall()
+            for typ, name, _, _ in self.sql:  # the small tables' rows fit their columns
+                name = str(name)
+                if typ == 'table' and name != 'messages' and not name.startswith('sqlite_'):
+                    quoted = name.replace('"', '""')
+                    ncol = len(con.execute(f'PRAGMA table_info("{quoted}")').fetchall())
+                    if not self._rows_fit(dict(self.schema_roots_by_name).get(name), ncol):
+                        return f'the rows of table {name:.40} do not fit its columns'
         finally:
             con.close()
         if made != want:  # the statements name other objects than their schema rows
@@ -394,6 +441,15 @@ class SqlitePages:
             return "the messages table's id is no INTEGER PRIMARY KEY in its schema SQL"
         return ''
 
+    def _rows_fit(self, root, ncol):
+        """Return True if the rows of a small table have ``ncol`` values (or it is too large)."""
+        try:
+            if len(self.leaf_pages(root)) > SMALL_TABLE_PAGES:
+                return True
+            return all(len(vals) == ncol for _, vals in self.table_rows(root))
+        except (Unsupported, IndexError, struct.error, ValueError, TypeError):
+            return False
+
     def structure_problem(self):
         """
         Words on damage that SQLite would see beside the rows' own checks, or ''.
@@ -401,10 +457,11 @@ class SqlitePages:
         Call after :meth:`read_messages`: the free-space accounting of the pages walked
         (:meth:`space_failures`), then the schema's SQL (:meth:`schema_problem`).
         """
+        schema = self.schema_problem()  # (reads the small tables: their pages count too)
         if self.space_pages:
-            return (f'the free space of {self.space_pages} page(s) of the message table does '
-                    'not add up')
-        return self.schema_problem()
+            return (f'the cells and free space of {self.space_pages} table page(s) do not '
+                    'add up')
+        return schema
 
     def topics(self, root):
         """Return [(topic id, name, type)] from rosbag2's topics table."""

@@ -15,8 +15,12 @@ freeblock chain or content start that no longer account for its free space ("Fra
 of ... reported as ..."), and schema SQL text it cannot parse ("malformed database schema").
 The walk checks those too, at no extra pass: each table-leaf page's cells, freeblocks and
 fragment count must fill its content area exactly (:meth:`SqlitePages.space_failures`, in
-both walks), and the schema's CREATE statements are replayed into an in-memory database
-(:meth:`SqlitePages.schema_problem`).  Such a copy gives the same samples with a warning.
+both walks, and the small tables' pages with their records and rowid order), and the
+schema is checked as SQLite reads it (:meth:`SqlitePages.schema_problem`): row types, root
+pages (in the file, of the right kind, one per object, not page 1), the CREATE statements
+replayed into an in-memory database to the same objects, the messages row layout, and the
+small tables' rows against their columns.  Such a copy gives the same samples with a
+warning (or, where the schema no longer leads to the rows, one clean line).
 """
 
 import sqlite3
@@ -199,13 +203,14 @@ def test_schema_sql_damage_is_reported(bag, tmp_path, statement):
     Flipped bits in a schema's CREATE statement: what SQLite calls damaged, the reader too.
 
     Whenever SQLite calls the file damaged (or cannot open it), the reader warns or refuses
-    in one line.  Every byte of the statement up to its first ')', one seeded bit each.
+    in one line.  Every byte of the statement up to its first ')' and 60 bytes beyond (the
+    next schema row's cell), one seeded bit each.
     """
     raw, ref = bag
     start = raw.index(statement)
     rng = np.random.default_rng(5)
     counts = {'warned': 0, 'refused': 0, 'accepted': 0}
-    for k in range(raw.index(b')', start) + 1 - start):
+    for k in range(raw.index(b')', start) + 61 - start):
         buf = bytearray(raw)
         buf[start + k] ^= 1 << int(rng.integers(0, 8))
         path = tmp_path / f'sql{k}.db3'
