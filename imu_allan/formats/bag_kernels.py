@@ -284,7 +284,8 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
 
 
 @jit(nogil=True)
-def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no cover - compiled
+def sqlite_index_level(u8, pages, page_size, usable, digest,
+                       children):  # pragma: no cover - compiled
     """
     Digest the entries of one level of a ``(timestamp)`` index B-tree; list the next level.
 
@@ -292,12 +293,14 @@ def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no co
     (timestamp, rowid) adds :func:`row_digest` to ``digest[0]`` and 1 to ``digest[1]``; the
     child pages of interior pages go to ``children``.  Returns the number of children, -1 for
     damage (a page that is no index page, a cell outside its page, a record that is not two
-    integers) or -2 when ``children`` is too short.
+    integers, cells and free space that do not fill the page's content area as
+    :func:`space_adds_up` checks) or -2 when ``children`` is too short.
     """
     last = u8.shape[0] - 1
     nchild = 0
     total = np.uint64(0)
     count = 0
+    max_local = ((usable - 12) * 64 // 255) - 23   # larger payloads would overflow
     for i in range(pages.shape[0]):
         base = (pages[i] - 1) * page_size
         hdr = base + 100 if pages[i] == 1 else base
@@ -309,6 +312,8 @@ def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no co
         ncell = np.int64(u8[hdr + 3]) * 256 + np.int64(u8[hdr + 4])
         if hdr + head + 2 * ncell > base + page_size:
             return -1
+        content = _get2(u8, hdr + 5)
+        used = np.int64(0)
         for j in range(ncell):
             pp = hdr + head + 2 * j
             ptr = np.int64(u8[pp]) * 256 + np.int64(u8[pp + 1])
@@ -326,6 +331,10 @@ def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no co
             if (hs != n2 + a + b or z0 < 0 or z1 < 0 or p < hs
                     or rec + p > base + page_size):
                 return -1
+            size = max(rec + p - cell, np.int64(4))  # (left child,) payload size, payload
+            if p > max_local or ptr < (content if content else 65536) or ptr + size > usable:
+                return -1
+            used += size
             total += row_digest(_be_int(u8, rec + hs, s0), _be_int(u8, rec + hs + z0, s1))
             count += 1
             if interior:
@@ -340,6 +349,8 @@ def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no co
             children[nchild] = ((np.int64(u8[hdr + 8]) << 24) | (np.int64(u8[hdr + 9]) << 16)
                                 | (np.int64(u8[hdr + 10]) << 8) | np.int64(u8[hdr + 11]))
             nchild += 1
+        if not space_adds_up(u8, base, hdr, usable, used):
+            return -1
     digest[0] += total
     digest[1] += np.uint64(count)
     return nchild

@@ -478,8 +478,9 @@ class SqlitePages:
         Every page of the tree is visited level by level (interior index pages hold entries
         too); each entry is a record (timestamp, rowid), digested as the table's rows are
         (:func:`row_digests`).  Any page that is not an index page, a cell pointer outside its
-        page, a record that is not two integers, or more pages than the file holds (a loop)
-        is damage: None.
+        page, a record that is not two integers, cells and free space that do not fill the
+        page's content area (:meth:`space_failures`: SQLite's "Multiple uses for byte" and
+        "Fragmentation" lines), or more pages than the file holds (a loop) is damage: None.
         """
         u8, ps = self.u8, self.page_size
         level = np.array([root], dtype=np.int64)
@@ -499,7 +500,8 @@ class SqlitePages:
                                 + 1).sum())
                     digest = np.zeros(2, dtype=np.uint64)
                     children = np.empty(room, dtype=np.int64)
-                    n = kernel.sqlite_index_level(buf, local, ps, digest, children)
+                    n = kernel.sqlite_index_level(buf, local, ps, self.usable, digest,
+                                                  children)
                     if n < 0:
                         return None
                     total += digest[:1]
@@ -574,6 +576,11 @@ class SqlitePages:
               & _INTEGER_SERIAL[np.clip(s1, 0, 255)] & (s1 < 10) & (p >= hs)
               & (rec + p <= cbase + ps))
         if not ok.all():
+            return None
+        # (left child,) payload size and payload: the cells must fill the content area
+        usable = self.usable
+        size = np.where(p > ((usable - 12) * 64 // 255) - 23, -1, np.maximum(rec + p - cell, 4))
+        if self.space_failures(u8, base, hdr, ncell, ptr, size):
             return None
         ts = _be_ints(u8, rec + hs, s0)
         rowid = _be_ints(u8, rec + hs + _SERIAL_SIZE[s0], s1)
