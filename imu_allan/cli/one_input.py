@@ -49,9 +49,7 @@ def run_one(path, args, options, progress=None, out_dir=None):
         write_csv(args.export_samples, samples)
     step('Allan deviation and fit')
     analysis = analyze_samples(samples, options)
-    if analysis.t.size != samples.n:  # isolated stamp faults dropped: the same rows here
-        from ..core.stamp_order import drop_isolated, without_dropped
-        samples = without_dropped(samples, drop_isolated(samples.t)[0])
+    samples = analysis.samples  # without the isolated stamp faults the analysis dropped
     denoised = None
     report = analysis_to_json(analysis, samples)
     from ..report.advice import advice_sentence, advice_to_json, compute_advice

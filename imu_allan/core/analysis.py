@@ -76,6 +76,10 @@ class Analysis:
     allow_motion: bool = False
     #: Extra deviations asked for (``AnalysisOptions.estimators``): kind -> DeviationResult.
     deviations: dict = field(default_factory=dict)
+    #: The record analysed: the input Samples as validated (isolated stamp faults dropped,
+    #: with their warning; :mod:`.stamp_order`), before the warm-up cut; the input object
+    #: itself when nothing was dropped.  Callers use it instead of applying the rule again.
+    samples: object = None
 
 
 _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
@@ -243,7 +247,8 @@ def analyze_samples(samples, options=None):
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
                     t=samples.t, upper_limits=upper,
                     integrity=getattr(samples, 'integrity', ''), warmup_s=warmup_s,
-                    allow_motion=options.allow_motion, deviations=deviations)
+                    allow_motion=options.allow_motion, deviations=deviations,
+                    samples=samples)
 
 
 def _kalibr_upper_limits(fit):

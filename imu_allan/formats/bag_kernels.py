@@ -137,6 +137,58 @@ def row_digest(stamp, rowid):  # pragma: no cover - compiled
     return (np.uint64(stamp) * DIGEST_TS) ^ (np.uint64(rowid) * DIGEST_ROWID)
 
 
+@jit(nogil=True, inline='always')
+def _get2(u8, pos):  # pragma: no cover - compiled
+    return np.int64(u8[pos]) * 256 + np.int64(u8[pos + 1])
+
+
+@jit(nogil=True, inline='always')
+def cell_size(p, n1, n2, usable):  # pragma: no cover - compiled
+    """
+    Bytes a table-leaf cell takes on its page, or -1 for a payload size out of range.
+
+    As SQLite's ``cellSizePtr`` (and ``SqlitePages.cell_sizes``): the two varints, the local
+    part of the payload (all of it up to ``usable - 35`` bytes, else the share the file
+    format's overflow rule keeps on the page) and a 4-byte overflow page number; at least 4.
+    """
+    if p < 0 or p >= np.int64(1) << 31:
+        return np.int64(-1)
+    x = usable - 35
+    if p <= x:
+        size = n1 + n2 + p
+    else:
+        m = ((usable - 12) * 32 // 255) - 23
+        k = m + (p - m) % (usable - 4)
+        size = n1 + n2 + (k if k <= x else m) + 4
+    return max(size, np.int64(4))
+
+
+@jit(nogil=True, inline='always')
+def space_adds_up(u8, base, hdr, usable, used):  # pragma: no cover - compiled
+    """
+    Return True if a table-leaf page's free space adds up (``SqlitePages.space_failures``).
+
+    The cell content area, from the header's content start to the usable end, is exactly
+    the cells (``used`` bytes), the freeblocks (a chain of increasing offsets inside the
+    area) and the fragmented bytes the header counts: SQLite's integrity_check
+    ("Fragmentation of ... reported as ...").
+    """
+    content = _get2(u8, hdr + 5)
+    if content == 0:
+        content = 65536
+    free = np.int64(0)
+    fb = _get2(u8, hdr + 1)
+    while fb != 0:
+        if fb < content or fb + 4 > usable:
+            return False
+        nxt = _get2(u8, base + fb)
+        free += _get2(u8, base + fb + 2)
+        if nxt != 0 and nxt <= fb:
+            return False
+        fb = nxt
+    return usable - content == used + free + np.int64(u8[hdr + 7])
+
+
 @jit(nogil=True)
 def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off, length, ok,
                 t, data, slow, digest):  # pragma: no cover - compiled; tested against _batch
@@ -148,16 +200,19 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
     ``order`` (rowid), ``stamp`` (receive time, ns), ``off`` / ``length`` (blob bytes in
     ``u8``) and, where ``ok``, to ``t`` (s) and ``data`` (rad/s, m/s^2); the cells that are
     not plain message rows on their page go to ``slow`` as (cell offset, page offset).
-    Returns (rows kept, slow cells, pages that are not table leaves), or (-1, 0, 0) when an
-    output array is too short or a page would make the numpy walk fail (the caller then runs
-    that walk on the batch).  ``digest[0]`` / ``digest[1]`` (uint64) add the plain rows of
-    every topic: the sum of :func:`row_digest` and their count (once the batch is accepted:
-    ``digest`` is changed only when the walk returns rows).
+    Returns (rows kept, slow cells, pages that are not table leaves, table leaves whose
+    free-space accounting fails (:func:`space_adds_up`, a cell before the content start or
+    past the usable end included)), or (-1, 0, 0, 0) when an output array is too short or a
+    page would make the numpy walk fail (the caller then runs that walk on the batch).
+    ``digest[0]`` / ``digest[1]`` (uint64) add the plain rows of every topic: the sum of
+    :func:`row_digest` and their count (once the batch is accepted: ``digest`` is changed
+    only when the walk returns rows).
     """
     last = u8.shape[0] - 1
     kept = 0
     nslow = 0
     lost = 0
+    space = 0
     total = np.uint64(0)
     rows = 0
     for i in range(pages.shape[0]):
@@ -168,7 +223,10 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
             lost += 1
             continue
         if hdr + 8 + 2 * ncell > base + page_size:
-            return -1, 0, 0   # page 1's pointers past its end: left to the numpy walk
+            return -1, 0, 0, 0   # page 1's pointers past its end: left to the numpy walk
+        content = _get2(u8, hdr + 5)
+        used = np.int64(0)
+        fits = True
         for j in range(ncell):
             pp = hdr + 8 + 2 * j
             ptr = np.int64(u8[pp]) * 256 + np.int64(u8[pp + 1])
@@ -176,6 +234,10 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
             # payload size, rowid, record header (size, four serial types), values
             p, n1 = _varint(u8, cell, last)
             rowid, n2 = _varint(u8, cell + n1, last)
+            size = cell_size(p, n1, n2, usable)
+            if size < 0 or ptr < (content if content else 65536) or ptr + size > usable:
+                fits = False
+            used += size
             rec = cell + n1 + n2
             hs, n3 = _varint(u8, rec, last)
             s0, a = _varint(u8, rec + n3, last)
@@ -191,7 +253,7 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
                     and p >= 0 and p <= usable - 35 and v3 + blob <= base + page_size
                     and p == v3 + blob - rec):
                 if nslow >= slow.shape[0]:
-                    return -1, 0, 0
+                    return -1, 0, 0, 0
                 slow[nslow, 0] = cell
                 slow[nslow, 1] = base
                 nslow += 1
@@ -207,20 +269,23 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
             if not hit:
                 continue
             if kept >= order.shape[0]:
-                return -1, 0, 0
+                return -1, 0, 0, 0
             order[kept] = rowid
             stamp[kept] = received
             off[kept] = v3
             length[kept] = blob
             ok[kept] = decode_imu(u8, u4, f8, v3, blob, t, data, kept)
             kept += 1
+        if not (fits and space_adds_up(u8, base, hdr, usable, used)):
+            space += 1
     digest[0] += total
     digest[1] += np.uint64(rows)
-    return kept, nslow, lost
+    return kept, nslow, lost, space
 
 
 @jit(nogil=True)
-def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no cover - compiled
+def sqlite_index_level(u8, pages, page_size, usable, digest,
+                       children):  # pragma: no cover - compiled
     """
     Digest the entries of one level of a ``(timestamp)`` index B-tree; list the next level.
 
@@ -228,12 +293,14 @@ def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no co
     (timestamp, rowid) adds :func:`row_digest` to ``digest[0]`` and 1 to ``digest[1]``; the
     child pages of interior pages go to ``children``.  Returns the number of children, -1 for
     damage (a page that is no index page, a cell outside its page, a record that is not two
-    integers) or -2 when ``children`` is too short.
+    integers, cells and free space that do not fill the page's content area as
+    :func:`space_adds_up` checks) or -2 when ``children`` is too short.
     """
     last = u8.shape[0] - 1
     nchild = 0
     total = np.uint64(0)
     count = 0
+    max_local = ((usable - 12) * 64 // 255) - 23   # larger payloads would overflow
     for i in range(pages.shape[0]):
         base = (pages[i] - 1) * page_size
         hdr = base + 100 if pages[i] == 1 else base
@@ -245,6 +312,8 @@ def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no co
         ncell = np.int64(u8[hdr + 3]) * 256 + np.int64(u8[hdr + 4])
         if hdr + head + 2 * ncell > base + page_size:
             return -1
+        content = _get2(u8, hdr + 5)
+        used = np.int64(0)
         for j in range(ncell):
             pp = hdr + head + 2 * j
             ptr = np.int64(u8[pp]) * 256 + np.int64(u8[pp + 1])
@@ -262,6 +331,10 @@ def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no co
             if (hs != n2 + a + b or z0 < 0 or z1 < 0 or p < hs
                     or rec + p > base + page_size):
                 return -1
+            size = max(rec + p - cell, np.int64(4))  # (left child,) payload size, payload
+            if p > max_local or ptr < (content if content else 65536) or ptr + size > usable:
+                return -1
+            used += size
             total += row_digest(_be_int(u8, rec + hs, s0), _be_int(u8, rec + hs + z0, s1))
             count += 1
             if interior:
@@ -276,6 +349,8 @@ def sqlite_index_level(u8, pages, page_size, digest, children):  # pragma: no co
             children[nchild] = ((np.int64(u8[hdr + 8]) << 24) | (np.int64(u8[hdr + 9]) << 16)
                                 | (np.int64(u8[hdr + 10]) << 8) | np.int64(u8[hdr + 11]))
             nchild += 1
+        if not space_adds_up(u8, base, hdr, usable, used):
+            return -1
     digest[0] += total
     digest[1] += np.uint64(count)
     return nchild

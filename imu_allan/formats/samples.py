@@ -37,6 +37,9 @@ class Samples:
     temperature : tuple or None
         Bags with a ``sensor_msgs/Temperature`` topic: ``(t, deg C)`` arrays (set by
         ``analyze``, :mod:`imu_allan.report.temperature_report`); None otherwise.
+    topic_types : dict or None
+        Bags read by the direct MCAP and sqlite3 readers: ``{topic: message type}`` of every
+        topic in the bag; None where the reader did not list them.
 
     """
 
@@ -51,6 +54,7 @@ class Samples:
     topic: str = ''
     frame_id: str = ''
     temperature: tuple = None
+    topic_types: dict = None
 
     @property
     def n(self):

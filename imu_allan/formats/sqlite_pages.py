@@ -16,6 +16,7 @@ once numba is loaded (:func:`compiled_walk`); numba is optional, without it the 
 reads.
 """
 
+import os
 import struct
 import threading
 
@@ -25,12 +26,18 @@ from .imu_cdr import compiled_walks, decode_at, map_file, release
 from ..errors import InputError
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
+#: The columns of rosbag2's messages table, in the order the walks decode its rows.
+MESSAGE_COLUMNS = ('id', 'topic_id', 'timestamp', 'data')
 
 _SERIAL_SIZE = np.array([0, 1, 2, 3, 4, 6, 8, 8, 0, 0, -1, -1], dtype=np.int64)
 #: Serial types that hold an integer (1-6 sized, 8 and 9 the constants 0 and 1), as a lookup
 #: table (np.isin hashes its arguments on every call: a table lookup is several times faster).
 _INTEGER_SERIAL = np.isin(np.arange(256), [1, 2, 3, 4, 5, 6, 8, 9])
+#: Leaf pages of a table other than ``messages`` beyond which its rows are not checked
+#: against its columns (a rosbag2 bag's small tables take a page or a few).
+SMALL_TABLE_PAGES = 256
 _PAGE_BATCH = 512  # leaf pages decoded per numpy batch (bounds the index arrays' memory)
+_INDEX_CHUNK = 1024  # index pages copied (:meth:`SqlitePages._pages_copy`) and walked at a time
 
 
 #: Multipliers of the row digest (:func:`row_digests`): odd 64-bit constants (the golden
@@ -174,7 +181,14 @@ class SqlitePages:
         self.lost_pages = 0  # referenced pages beyond the end of the file or not B-tree pages
         # (digest, count) of the message rows walked, every topic (:func:`row_digests`)
         self.digest = np.zeros(2, dtype=np.uint64)
+        #: table-leaf pages walked whose free space does not add up (:meth:`space_failures`)
+        #: or, in the small tables, with a record that does not fill its payload
+        self.space_pages = 0
         self.indexes = {}  # index name -> (table name, root page), from sqlite_schema
+        self.sql = []  # (kind, name, table, CREATE statement): sqlite_schema's tables, indexes
+        self.schema_kinds = []  # the type column of every sqlite_schema row
+        self.schema_roots = []  # (kind, root page) of its tables and indexes
+        self.schema_roots_by_name = []  # (name, root page) of the same
         self._index = None  # the thread digesting the index, then its result
 
     def close(self):
@@ -323,14 +337,32 @@ class SqlitePages:
         return vals
 
     def table_rows(self, root):
-        """All rows of a small table as (rowid, values) (Python, not for ``messages``)."""
+        """
+        All rows of a small table as (rowid, values) (Python, not for ``messages``).
+
+        Its pages' free space and records are checked as the message table's
+        (:meth:`space_failures`; a record that does not fill its payload): a failure counts
+        in :attr:`space_pages`.
+        """
         rows = []
         for no in self.leaf_pages(root):
             base, hdr = self._page(no)
             ncell = int(self.u8[hdr + 3]) * 256 + int(self.u8[hdr + 4])
-            for ptr in self._ptrs(hdr, ncell, 0).tolist():
+            ptrs = self._ptrs(hdr, ncell, 0)
+            p, n1 = _varints(self.u8, base + ptrs)
+            n2 = _varints(self.u8, base + ptrs + n1)[1]
+            bad = self.space_failures(self.u8, np.array([base]), np.array([hdr]),
+                                      np.array([ncell]), ptrs, self.cell_sizes(p, n1, n2))
+            for ptr in ptrs.tolist():
                 rowid, payload = self._payload(base + ptr, base)
-                rows.append((rowid, self._record(payload)))
+                try:
+                    vals = self._record(payload, exact=True)
+                except Unsupported:
+                    bad, vals = 1, self._record(payload)
+                if rows and rowid <= rows[-1][0]:
+                    bad = 1  # rowids increase along a table (SQLite: "out of order")
+                rows.append((rowid, vals))
+            self.space_pages += bad
         return rows
 
     def schema(self):
@@ -341,7 +373,95 @@ class SqlitePages:
                 out[vals[1]] = vals[3]
             elif len(vals) >= 4 and vals[0] == 'index' and isinstance(vals[3], int):
                 self.indexes[vals[1]] = (vals[2], vals[3])
+            self.schema_kinds.append(vals[0] if vals else None)
+            if len(vals) >= 4 and vals[0] in ('table', 'index'):
+                self.schema_roots.append((vals[0], vals[3]))
+                self.schema_roots_by_name.append((str(vals[1]), vals[3]))
+            if len(vals) >= 4 and vals[0] in ('table', 'index'):
+                self.sql.append((*vals[:3], vals[4] if len(vals) > 4 else None))
         return out
+
+    def schema_problem(self):
+        """
+        Words when the schema's SQL is damaged or not the layout the walk assumes, else ''.
+
+        SQLite parses the CREATE statements of sqlite_schema before any query and calls a
+        file whose text it cannot parse malformed; here they are replayed into an empty
+        in-memory database (SQLite's own parser, about a millisecond), then the messages
+        table's columns are compared with the rosbag2 row the walk decodes.
+        """
+        import sqlite3
+        odd = set(map(str, self.schema_kinds)) - {'table', 'index', 'view', 'trigger'}
+        if odd:
+            return f'a schema row of unknown type {sorted(odd)[0]:.20}'
+        roots = [(typ, root) for typ, root in self.schema_roots if root]  # (views have 0)
+        kinds = {'table': (0x0D, 0x05), 'index': (0x0A, 0x02)}
+        for typ, root in roots:
+            loc = self._page(root) if isinstance(root, int) and root > 1 else None  # 1: schema
+            if loc is None or self.u8[loc[1]] not in kinds[typ]:
+                return f'a {typ} of the schema has root page {root!s:.12}, no {typ} page'
+        if len({root for _, root in roots}) != len(roots):
+            return 'two tables or indexes of the schema share a root page'
+        con = sqlite3.connect(':memory:')
+        try:
+            # Every object of the file's schema, its automatic indexes (a PRIMARY KEY or
+            # UNIQUE that is no rowid alias) included, must come out of its statements.
+            want = {(typ, str(name).lower(), str(table).lower())
+                    for typ, name, table, _ in self.sql
+                    if not str(name).startswith('sqlite_stat')}
+            for kind in ('table', 'index'):  # (the tables first: an index names one)
+                for typ, name, _, sql in self.sql:
+                    if typ != kind or str(name).startswith('sqlite_'):
+                        continue  # SQLite's own tables and automatic indexes
+                    try:
+                        con.execute(sql if isinstance(sql, str) else '')
+                    except (sqlite3.Error, ValueError):
+                        return f'the schema SQL of {name!s:.40} is damaged'
+            made = {(typ, name.lower(), table.lower()) for typ, name, table in con.execute(
+                "SELECT type, name, tbl_name FROM sqlite_master WHERE type IN ('table', "
+                "'index')")}
+            info = con.execute('PRAGMA table_info(messages)').fetchall()
+            for typ, name, _, _ in self.sql:  # the small tables' rows fit their columns
+                name = str(name)
+                if typ == 'table' and name != 'messages' and not name.startswith('sqlite_'):
+                    quoted = name.replace('"', '""')
+                    ncol = len(con.execute(f'PRAGMA table_info("{quoted}")').fetchall())
+                    if not self._rows_fit(dict(self.schema_roots_by_name).get(name), ncol):
+                        return f'the rows of table {name:.40} do not fit its columns'
+        finally:
+            con.close()
+        if made != want:  # the statements name other objects than their schema rows
+            return 'the schema SQL names other tables or indexes than the schema rows'
+        cols = [str(row[1]).lower() for row in info]
+        if cols != list(MESSAGE_COLUMNS):
+            return (f'the messages table\'s columns are ({", ".join(cols)[:80]}), not '
+                    f'rosbag2\'s ({", ".join(MESSAGE_COLUMNS)})')
+        if str(info[0][2]).upper() != 'INTEGER' or info[0][5] != 1:
+            # only "id INTEGER PRIMARY KEY" makes id the rowid, stored as NULL in the rows
+            return "the messages table's id is no INTEGER PRIMARY KEY in its schema SQL"
+        return ''
+
+    def _rows_fit(self, root, ncol):
+        """Return True if the rows of a small table have ``ncol`` values (or it is too large)."""
+        try:
+            if len(self.leaf_pages(root)) > SMALL_TABLE_PAGES:
+                return True
+            return all(len(vals) == ncol for _, vals in self.table_rows(root))
+        except (Unsupported, IndexError, struct.error, ValueError, TypeError):
+            return False
+
+    def structure_problem(self):
+        """
+        Words on damage that SQLite would see beside the rows' own checks, or ''.
+
+        Call after :meth:`read_messages`: the free-space accounting of the pages walked
+        (:meth:`space_failures`), then the schema's SQL (:meth:`schema_problem`).
+        """
+        schema = self.schema_problem()  # (reads the small tables: their pages count too)
+        if self.space_pages:
+            return (f'the cells and free space of {self.space_pages} table page(s) do not '
+                    'add up')
+        return schema
 
     def topics(self, root):
         """Return [(topic id, name, type)] from rosbag2's topics table."""
@@ -358,8 +478,9 @@ class SqlitePages:
         Every page of the tree is visited level by level (interior index pages hold entries
         too); each entry is a record (timestamp, rowid), digested as the table's rows are
         (:func:`row_digests`).  Any page that is not an index page, a cell pointer outside its
-        page, a record that is not two integers, or more pages than the file holds (a loop)
-        is damage: None.
+        page, a record that is not two integers, cells and free space that do not fill the
+        page's content area (:meth:`space_failures`: SQLite's "Multiple uses for byte" and
+        "Fragmentation" lines), or more pages than the file holds (a loop) is damage: None.
         """
         u8, ps = self.u8, self.page_size
         level = np.array([root], dtype=np.int64)
@@ -370,18 +491,23 @@ class SqlitePages:
             if seen > self.npages or ((level < 1) | (level > self.npages)).any():
                 return None
             if kernel is not None:  # the compiled walk of the level (same digest, ~10x faster)
-                hdr = (level - 1) * ps + np.where(level == 1, 100, 0)
-                inner = u8[hdr] == 0x02
-                room = int((u8[hdr + 3][inner].astype(np.int64) * 256 + u8[hdr + 4][inner]
-                            + 1).sum())
-                digest = np.zeros(2, dtype=np.uint64)
-                children = np.empty(room, dtype=np.int64)
-                n = kernel.sqlite_index_level(u8, level, ps, digest, children)
-                if n < 0:
-                    return None
-                total += digest[:1]
-                count += int(digest[1])
-                level = children[:n]
+                nxt = []
+                for c0 in range(0, level.size, _INDEX_CHUNK):
+                    buf, local = self._pages_copy(level[c0:c0 + _INDEX_CHUNK])
+                    hdr = (local - 1) * ps
+                    inner = buf[hdr] == 0x02
+                    room = int((buf[hdr + 3][inner].astype(np.int64) * 256 + buf[hdr + 4][inner]
+                                + 1).sum())
+                    digest = np.zeros(2, dtype=np.uint64)
+                    children = np.empty(room, dtype=np.int64)
+                    n = kernel.sqlite_index_level(buf, local, ps, self.usable, digest,
+                                                  children)
+                    if n < 0:
+                        return None
+                    total += digest[:1]
+                    count += int(digest[1])
+                    nxt.append(children[:n])
+                level = np.concatenate(nxt)
                 continue
             nxt = []
             for b0 in range(0, level.size, _PAGE_BATCH):
@@ -395,6 +521,28 @@ class SqlitePages:
                 nxt.append(children)
             level = np.concatenate(nxt)
         return total[0], count
+
+    def _pages_copy(self, pages):
+        """
+        Read ``pages`` (numbers) into a private buffer; return it and their numbers in it.
+
+        The index walk reads its pages with ``pread``, not through the map: its pages lie
+        scattered between the table's, and each fault on the map brings the neighbouring
+        pages (already cached by the table walk) into this process as well (the kernel's
+        fault-around), which took the 10 h bag's peak resident memory from 0.4 GB to 1.25 GB.
+        Page k of ``pages`` sits at page k + 2 of the buffer (page 1, whose B-tree header
+        starts at byte 100, is left empty: a copy of it is no index page either way).
+        """
+        ps = self.page_size
+        fd = os.open(self.path, os.O_RDONLY)
+        try:
+            parts = [bytes(ps)] + [os.pread(fd, ps, (no - 1) * ps) for no in pages.tolist()]
+        finally:
+            os.close(fd)
+        if any(len(part) != ps for part in parts):
+            raise ValueError('index page beyond the end of the file')  # (cut meanwhile)
+        return (np.frombuffer(b''.join(parts), dtype=np.uint8),
+                np.arange(2, pages.size + 2, dtype=np.int64))
 
     def _index_batch(self, u8, ps, pages):
         """Digest, entry count and child pages of a batch of index pages (None if damaged)."""
@@ -428,6 +576,11 @@ class SqlitePages:
               & _INTEGER_SERIAL[np.clip(s1, 0, 255)] & (s1 < 10) & (p >= hs)
               & (rec + p <= cbase + ps))
         if not ok.all():
+            return None
+        # (left child,) payload size and payload: the cells must fill the content area
+        usable = self.usable
+        size = np.where(p > ((usable - 12) * 64 // 255) - 23, -1, np.maximum(rec + p - cell, 4))
+        if self.space_failures(u8, base, hdr, ncell, ptr, size):
             return None
         ts = _be_ints(u8, rec + hs, s0)
         rowid = _be_ints(u8, rec + hs + _SERIAL_SIZE[s0], s1)
@@ -528,12 +681,13 @@ class SqlitePages:
         slow = np.empty((cells, 2), dtype=np.int64)
         if self._views is None:
             self._views = kernel.byte_views(u8)
-        kept, nslow, lost = kernel.sqlite_walk(
+        kept, nslow, lost, space = kernel.sqlite_walk(
             u8, *self._views, pages, ps, self.usable, wanted, order, stamp, off, length, ok, t,
             data, slow, self.digest)
         if kept < 0:
             return False
         self.lost_pages += lost
+        self.space_pages += space
         t, data = t[:kept], data[:kept]
         if nslow:  # the slow cells' parts go first (as in _batch) into the reserved places
             t, data = t.copy(), data.copy()
@@ -567,9 +721,7 @@ class SqlitePages:
         if not good_page.all():
             self.lost_pages += int((~good_page).sum())
             base, hdr, ncell = base[good_page], hdr[good_page], ncell[good_page]
-        if ncell.sum() == 0:
-            return
-        maxc = int(ncell.max())
+        maxc = int(ncell.max()) if ncell.size else 0
         j = np.arange(maxc)
         mask = j[None, :] < ncell[:, None]
         pp = (hdr[:, None] + 8 + 2 * j[None, :])[mask]
@@ -580,6 +732,10 @@ class SqlitePages:
         # Cell layout: payload size, rowid, record header (size, 4 serial types), values.
         p, n1 = _varints(u8, cell)
         rowid, n2 = _varints(u8, cell + n1)
+        self.space_pages += self.space_failures(u8, base, hdr, ncell, ptr,
+                                                self.cell_sizes(p, n1, n2))
+        if ncell.sum() == 0:
+            return
         rec = cell + n1 + n2
         hs, s0, s1, s2, s3, fits = _record_headers(u8, rec)
         fast = (inside & fits & (s0 == 0) & _INTEGER_SERIAL[np.clip(s1, 0, 255)]
@@ -615,6 +771,64 @@ class SqlitePages:
             for i in np.nonzero(~ok)[0].tolist():
                 t[i], data[i] = coll.generic(blob_of(i))
             coll.add_part(order[sel], stamp[sel], t, data, blob_of)
+
+    def cell_sizes(self, p, n1, n2):
+        """
+        Bytes each table-leaf cell takes on its page (-1: payload size out of range).
+
+        SQLite's ``cellSizePtr``: the varints of payload size (``n1`` bytes) and rowid
+        (``n2``), the payload's local part (all ``p`` bytes up to ``usable - 35``, else the
+        share kept on the page by the file format's overflow rule) and a 4-byte overflow page
+        number; at least 4 bytes.  (:func:`.bag_kernels.cell_size` for one cell.)
+        """
+        usable = self.usable
+        x = usable - 35
+        m = ((usable - 12) * 32 // 255) - 23
+        ok = (p >= 0) & (p < 1 << 31)
+        q = np.where(ok, p, 0)
+        k = m + (q - m) % (usable - 4)
+        local = np.where(q <= x, q, np.where(k <= x, k, m) + 4)
+        return np.where(ok, np.maximum(n1 + n2 + local, 4), -1)
+
+    def space_failures(self, u8, base, hdr, ncell, ptr, size):
+        """
+        Count the table-leaf pages whose free-space accounting fails.
+
+        The cell content area (from the header's content start to the usable end) must be
+        exactly the cells, the freeblocks (a chain of increasing offsets inside the area) and
+        the fragmented bytes the header counts: SQLite's integrity_check ("Fragmentation of
+        ... reported as ...").  A cell before the content start or past the usable end, or of
+        a payload size out of range (``size`` -1), fails its page.  ``base`` / ``hdr``: the
+        pages' offsets in ``u8``; ``ptr`` / ``size``: their cells, page by page.
+        (:func:`.bag_kernels.space_adds_up` in the compiled walk.)
+        """
+        if not ncell.size:
+            return 0
+        usable = self.usable
+        content = u8[hdr + 5].astype(np.int64) * 256 + u8[hdr + 6]
+        content = np.where(content == 0, 65536, content)
+        page = np.repeat(np.arange(ncell.size), ncell)
+        stray = (size < 0) | (ptr < content[page]) | (ptr + size > usable)
+        used = np.zeros(ncell.size, dtype=np.int64)
+        np.add.at(used, page, size)
+        bad = np.zeros(ncell.size, dtype=bool)
+        bad[page[stray]] = True
+        first = u8[hdr + 1].astype(np.int64) * 256 + u8[hdr + 2]
+        free = np.zeros(ncell.size, dtype=np.int64)
+        for i in np.flatnonzero(first).tolist():  # freeblocks: rare in a bag (no deletes)
+            fb, b0 = int(first[i]), int(base[i])
+            while fb:
+                if fb < content[i] or fb + 4 > usable:
+                    bad[i] = True
+                    break
+                nxt = int(u8[b0 + fb]) * 256 + int(u8[b0 + fb + 1])
+                free[i] += int(u8[b0 + fb + 2]) * 256 + int(u8[b0 + fb + 3])
+                if nxt and nxt <= fb:
+                    bad[i] = True
+                    break
+                fb = nxt
+        bad |= usable - content != used + free + u8[hdr + 7]
+        return int(bad.sum())
 
     def _slow_cell(self, cell, page_base, wanted, coll):
         if not page_base <= cell < page_base + self.page_size - 4:

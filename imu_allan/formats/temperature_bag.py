@@ -35,7 +35,7 @@ def choose_temperature_topic(topics, imu_topic=''):
     return topics[0]
 
 
-def read_temperature(path, imu_topic='', topic=None):
+def read_temperature(path, imu_topic='', topic=None, topic_types=None):
     """
     Read the temperatures of a bag.
 
@@ -44,8 +44,12 @@ def read_temperature(path, imu_topic='', topic=None):
     no ``sensor_msgs/Temperature`` topic (or only an empty one).  A bag rosbags cannot open
     also gives None: the Imu readers report the damage, the temperature is only extra.
     ``topic`` picks one; ``imu_topic`` guides the default choice
-    (:func:`choose_temperature_topic`).
+    (:func:`choose_temperature_topic`).  ``topic_types``: ``{topic: type}`` of the bag when
+    the Imu reader listed them (``Samples.topic_types``); without a Temperature type among
+    them the bag is not opened again (rosbags counts every row of a sqlite3 bag on opening).
     """
+    if topic_types is not None and not TEMPERATURE_TYPES & set(topic_types.values()):
+        return None
     _, p = bag_kind(path)
     try:
         reader = any_reader([p], str(path))

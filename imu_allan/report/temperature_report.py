@@ -46,7 +46,8 @@ def add_temperature(report, path, fmt, samples, analysis):
         kind = detect_format(path) if fmt == 'auto' else fmt
         if kind not in ('rosbag2', 'ros1'):
             return
-        reading = read_temperature(path, imu_topic=samples.topic or '')
+        reading = read_temperature(path, imu_topic=samples.topic or '',
+                                   topic_types=samples.topic_types)
     except InputError:
         return
     if reading is None:

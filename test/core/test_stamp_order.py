@@ -82,6 +82,17 @@ def test_isolated_faults_dropped_named_and_the_rest_unchanged():
     assert len(text) == 1 and text[0].startswith('5 isolated out-of-order or repeated')
     for i in idx[:3].tolist():
         assert f'{i} (t={t[i]:.9f} s)' in text[0]
+    # The record analysed is handed back (the command reports on it, not rule-applied again)
+    assert np.array_equal(got.samples.t, rec.t[keep])
+    assert np.array_equal(got.samples.data, rec.data[keep])
+    assert got.samples.warnings == text and damaged.warnings == []
+    assert ref.samples.warnings == []
+
+
+def test_an_intact_record_is_handed_back_as_it_was():
+    """No stamp dropped: Analysis.samples is the input itself (no copy of the record)."""
+    rec = _record(3)
+    assert analyze_samples(rec).samples is rec
 
 
 @pytest.mark.parametrize('case', ['two_in_a_row', 'too_many', 'run_backwards', 'far_ahead'])

@@ -99,6 +99,37 @@ def test_no_temperature_topic_no_section(tmp_path):
     assert 'temperature' not in report
 
 
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_reader_lists_the_topics_and_the_bag_is_opened_again_only_for_a_temperature(
+        tmp_path, storage):
+    """
+    The direct readers list every topic's type; read_temperature opens the bag only then.
+
+    A 2-min bag with a Temperature topic: the listed types name it and the temperatures read
+    with the list are those read without.  Without a Temperature type in the list the bag is
+    not opened (a path that does not exist gives None, not the reader's InputError).
+    """
+    from imu_allan.errors import InputError
+    from imu_allan.formats.readers import read_samples
+    samples, temp_t, temp_c = recording(seconds=120.0)
+    path = tmp_path / 'rec'
+    write_imu_bag(path, samples, topic='/imu/data_raw', storage=storage, extra_topics={
+        '/imu/temperature': ('sensor_msgs/msg/Temperature',
+                             temperature_messages(temp_t, temp_c))})
+    types = read_samples(path).topic_types
+    assert types == {'/imu/data_raw': 'sensor_msgs/msg/Imu',
+                     '/imu/temperature': 'sensor_msgs/msg/Temperature'}
+    with_list = read_temperature(path, '/imu/data_raw', topic_types=types)
+    without = read_temperature(path, '/imu/data_raw')
+    assert with_list[0] == without[0] == '/imu/temperature'
+    assert np.array_equal(with_list[1], temp_t) and np.array_equal(with_list[2], temp_c)
+    imu_only = {'/imu/data_raw': 'sensor_msgs/msg/Imu'}
+    missing = tmp_path / 'no_such_bag'
+    assert read_temperature(missing, topic_types=imu_only) is None
+    with pytest.raises(InputError):
+        read_temperature(missing, topic_types=types)
+
+
 def test_topic_choice_and_coincidences():
     """Several Temperature topics: the Imu's namespace wins; events related to moves."""
     assert choose_temperature_topic({'/a/temp', '/imu/temperature'}, '/imu/data_raw') == \
