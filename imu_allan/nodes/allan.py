@@ -151,6 +151,8 @@ PARAMETERS = [
 _DEFAULTS = {p.name: p.default for p in PARAMETERS}
 #: Fewest samples in a change-test window (its longest tau is a tenth of it).
 CHANGE_MIN_SAMPLES = 100
+#: imu/temperature queue depth, messages (taken every drain; the driver sends 1 a second).
+TEMPERATURE_DEPTH = 100
 #: Longest stretch of publish-cycle work done in one drain callback, s (a step may overrun it).
 STEP_BUDGET_S = 0.02
 # Parameters whose change restarts the estimate.
@@ -241,11 +243,12 @@ class AllanNode(Node):
         self._pub_kinds = {}  # imu/allan_deviation/<kind> of the other estimators
         self._deviation_publishers()
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        # The temperature range the current estimate spans (the driver's imu/temperature).
+        # The temperature range the current estimate spans (the driver's imu/temperature),
+        # taken with the IMU messages: a subscription the executor waits on would cost every
+        # drain's wake-up more (its wait set is built anew each time).
         self._temperature = TemperatureRange(self.params['window_s'])
-        self.create_subscription(Temperature, 'imu/temperature',
-                                 lambda msg: self._temperature.add_message(msg),
-                                 qos_profile_sensor_data)
+        self._temperature_sub = polled_subscription(self, Temperature, 'imu/temperature',
+                                                    TEMPERATURE_DEPTH, overrides=False)
         self._pub_cov = self.create_publisher(
             Imu, self.params['covariance_topic'], qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
@@ -317,6 +320,8 @@ class AllanNode(Node):
 
     def drain(self):
         """Take every queued message, feed them in one batch, advance a publish cycle."""
+        for msg in take_batch(self._temperature_sub, TEMPERATURE_DEPTH):
+            self._temperature.add_message(msg)
         msgs = take_batch(self._sub, self._max_batch)
         if msgs:
             self._last_arrival = time.monotonic()
