@@ -32,7 +32,8 @@ The numerics are :class:`imu_allan.core.online.OnlineAllan` (stamp checks, stati
 gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
 code, so the numbers agree for the same samples.  Messages are not handled one by one: the
 subscription sits in a callback group the executor never waits on, and a timer takes the queued
-messages in batches (the executor costs about 200 us per message at 1 kHz otherwise).
+messages in batches (the executor costs about 200 us per message at 1 kHz otherwise), decoded
+and fed every ``FEED_PERIOD_S`` (0.25 s) and before each publish cycle.
 """
 
 import math
@@ -151,6 +152,11 @@ PARAMETERS = [
 _DEFAULTS = {p.name: p.default for p in PARAMETERS}
 #: Fewest samples in a change-test window (its longest tau is a tenth of it).
 CHANGE_MIN_SAMPLES = 100
+#: Seconds between feeds of the messages taken (decoded and fed in one batch): each numpy
+#: call costs 5-15 us on the cache-cold data of a 50-ms drain, so five drains fed as one cost
+#: about 40 % as much (docs/benchmarks.md).  Everything taken is fed before a publish cycle
+#: starts, before its diagnostics and before a parameter change: what is published is the same.
+FEED_PERIOD_S = 0.25
 #: imu/temperature queue depth, messages (taken every drain; the driver sends 1 a second).
 TEMPERATURE_DEPTH = 100
 #: Longest stretch of publish-cycle work done in one drain callback, s (a step may overrun it).
@@ -228,6 +234,7 @@ class AllanNode(Node):
         super().__init__('allan')
         self.params = declare_parameter_table(self, PARAMETERS)
         check_parameters(self.params)  # InputError: main() prints it, exit status 2
+        self._pending, self._fed_at = [], 0.0  # messages taken, not yet fed (FEED_PERIOD_S)
         self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
         self._load_model()
         self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
@@ -280,6 +287,7 @@ class AllanNode(Node):
     # -- parameters ------------------------------------------------------------------
 
     def _post_set(self, params):
+        self._feed_pending()  # the samples taken before the change go where they went before
         changed = apply_changes(self.params, PARAMETERS, params)
         if changed & _RESTART or 'terms' in changed:
             if changed & _RESTART:
@@ -319,26 +327,36 @@ class AllanNode(Node):
     # -- work ------------------------------------------------------------------------
 
     def drain(self):
-        """Take every queued message, feed them in one batch, advance a publish cycle."""
+        """Take every queued message, feed them every FEED_PERIOD_S, advance a publish cycle."""
         for msg in take_batch(self._temperature_sub, TEMPERATURE_DEPTH):
             self._temperature.add_message(msg)
         msgs = take_batch(self._sub, self._max_batch)
         if msgs:
             self._last_arrival = time.monotonic()
-            t, data = cdr_to_arrays(msgs)
-            started = self.pipeline.estimator is not None
-            self.pipeline.feed(t, data)  # InputError (measured rate misfits): exit 2
-            if not started and self.pipeline.estimator is not None:
-                self.get_logger().info(
-                    f'sample rate {self.pipeline.rate_hz:.6g} Hz ({self.pipeline.rate_source});'
-                    f' estimator memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
-            self._feed_change(t, data)
+            self._pending += msgs
             if self._pub_cov is not None:
                 self._republish(msgs)
+            if self._last_arrival - self._fed_at >= FEED_PERIOD_S:
+                self._feed_pending()
         if self._cycle is not None:
             self._advance_cycle()
         elif self._advice is not None:
             self._advance_advice()
+
+    def _feed_pending(self):
+        """Decode the gathered messages and feed them in one batch (estimate, change test)."""
+        self._fed_at = time.monotonic()
+        if not self._pending:
+            return
+        msgs, self._pending = self._pending, []
+        t, data = cdr_to_arrays(msgs)
+        started = self.pipeline.estimator is not None
+        self.pipeline.feed(t, data)  # InputError (measured rate misfits): exit 2
+        if not started and self.pipeline.estimator is not None:
+            self.get_logger().info(
+                f'sample rate {self.pipeline.rate_hz:.6g} Hz ({self.pipeline.rate_source});'
+                f' estimator memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
+        self._feed_change(t, data)
 
     def _start_change(self):
         """Start the change test once the sample rate is known (off at change_window_s 0)."""
@@ -359,6 +377,7 @@ class AllanNode(Node):
         """Start a publish cycle: freeze the sums; the steps run between drains."""
         if self._cycle is not None:
             return  # the previous cycle is still running (publish_period very short)
+        self._feed_pending()  # the estimate of every sample taken so far
         self._cycle = StagedEstimate(self.pipeline, window=self.params['window_s'] > 0)
         self._cycle_cpu = 0.0
         self._cycle_max_step = 0.0
@@ -398,6 +417,7 @@ class AllanNode(Node):
                                'cycle_max_step_s': self._cycle_max_step,
                                'cycle_wall_s': time.monotonic() - self._cycle_wall}
             self._start_advice(result, fitted)
+            self._feed_pending()  # the stream's counts of every sample taken so far
             self._pub_diag.publish(self._diagnostics(result, table))
         else:
             self._cycle_cpu += time.perf_counter() - start
