@@ -136,8 +136,9 @@ PARAMETERS = [
     Param('advice_period', 60.0, 'seconds between recording-advice updates (each costs about '
                                  'a second of CPU, run in steps between drains)',
           (0.1, 86400.0)),
-    Param('drain_period', 0.05, 'seconds between taking the queued messages (read-only)',
-          (0.001, 1.0), read_only=True),
+    Param('drain_period', 0.0, 'seconds between taking the queued messages (read-only); 0 = '
+                               '0.1, or 0.05 with covariance_topic set (its republish delay)',
+          (0.0, 1.0), read_only=True),
     Param('change_window_s', 600.0, 'change test window, s: dynamic Allan variance over windows '
                                     'of this length, step a quarter, each against the pooled '
                                     'baseline before it (docs/online.md); 0 = off',
@@ -152,15 +153,20 @@ PARAMETERS = [
 _DEFAULTS = {p.name: p.default for p in PARAMETERS}
 #: Fewest samples in a change-test window (its longest tau is a tenth of it).
 CHANGE_MIN_SAMPLES = 100
+#: Default seconds between drains (:func:`drain_period`), without / with covariance_topic.
+DRAIN_S, DRAIN_COVARIANCE_S = 0.1, 0.05
 #: Seconds between feeds of the messages taken (decoded and fed in one batch): each numpy
-#: call costs 5-15 us on the cache-cold data of a 50-ms drain, so five drains fed as one cost
-#: about 40 % as much (docs/benchmarks.md).  Everything taken is fed before a publish cycle
-#: starts, before its diagnostics and before a parameter change: what is published is the same.
+#: call costs 5-15 us on the cache-cold data of a drain, so a quarter second of 50-ms drains
+#: fed as one costs about 40 % as much (docs/benchmarks.md).  Everything taken is fed before
+#: a publish cycle starts, before its diagnostics and before a parameter change: what is
+#: published is the same.
 FEED_PERIOD_S = 0.25
 #: imu/temperature queue depth, messages (taken every drain; the driver sends 1 a second).
 TEMPERATURE_DEPTH = 100
-#: Longest stretch of publish-cycle work done in one drain callback, s (a step may overrun it).
-STEP_BUDGET_S = 0.02
+#: Longest stretch of publish-cycle work done in one drain callback, as a share of the drain
+#: period (a step may overrun it): 20 ms of 50, 40 ms of 100, so a cycle and the advice take
+#: the same wall time whatever the period.
+STEP_SHARE = 0.4
 # Parameters whose change restarts the estimate.
 _RESTART = {'rate_hz', 'window_s', 'max_tau', 'points_per_decade', 'stride_base',
             'min_clusters', 'gate', 'gate_window_s', 'gate_std_factor', 'gate_step_factor',
@@ -210,6 +216,20 @@ def check_parameters(p):
             NoiseModel.from_yaml(p['model_file'])
         except ModelError as exc:
             raise InputError('model_file', str(exc)) from None
+
+
+def drain_period(p):
+    """
+    Seconds between drains: ``drain_period``, or with 0 the default for ``covariance_topic``.
+
+    Each drain wakes the executor, whose wait set is built anew in Python every time (about
+    1 ms of CPU on this machine's cache-cold data, docs/benchmarks.md): at 1 kHz 0.1 s costs
+    a point and a half of a core less than 0.05 s.  A republished stream (``covariance_topic``)
+    keeps 0.05 s, the delay a filter downstream sees.
+    """
+    if p['drain_period'] > 0:
+        return p['drain_period']
+    return DRAIN_COVARIANCE_S if p['covariance_topic'] else DRAIN_S
 
 
 def multiarray(table, labels):
@@ -269,7 +289,8 @@ class AllanNode(Node):
         self._advice_status = advice_health(None, f'{self.get_name()}: recording advice')
         self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
                            'cycle_wall_s': math.nan}
-        self._drain_timer = self.create_timer(self.params['drain_period'], self.drain)
+        self._step_budget = STEP_SHARE * drain_period(self.params)
+        self._drain_timer = self.create_timer(drain_period(self.params), self.drain)
         self._publish_timer = self.create_timer(self.params['publish_period'],
                                                 self.publish)
         rate = self.params['rate_hz']
@@ -385,10 +406,10 @@ class AllanNode(Node):
         self._advance_cycle()
 
     def _advance_cycle(self):
-        """Run cycle steps for up to STEP_BUDGET_S, then publish once the cycle is done."""
+        """Run cycle steps for up to a step budget, then publish once the cycle is done."""
         start = time.perf_counter()
         cycle = self._cycle
-        while not cycle.done and time.perf_counter() - start < STEP_BUDGET_S:
+        while not cycle.done and time.perf_counter() - start < self._step_budget:
             t0 = time.perf_counter()
             cycle.step()
             self._cycle_max_step = max(self._cycle_max_step, time.perf_counter() - t0)
@@ -444,9 +465,9 @@ class AllanNode(Node):
                                     factor_grid_of(est.ms, est.min_clusters), undetected=False)
 
     def _advance_advice(self):
-        """Advice steps for up to STEP_BUDGET_S; its status is ready when they are done."""
+        """Advice steps for up to a step budget; its status is ready when they are done."""
         start = time.perf_counter()
-        while not self._advice.step() and time.perf_counter() - start < STEP_BUDGET_S:
+        while not self._advice.step() and time.perf_counter() - start < self._step_budget:
             pass
         if self._advice.done:
             self._advice_status = advice_health(self._advice.advice, self._advice_status.name)
