@@ -308,6 +308,11 @@ def bench_node(seconds=35.0, rate=1000.0, cases=None):
                 if p is not None:
                     p.terminate()
                     p.wait(timeout=10)
+            # DDS still lists the ended node's subscription for a while: wait until it is gone,
+            # or the next case's timing starts while that node is still starting (imports)
+            deadline = time.monotonic() + 30
+            while pub.get_subscription_count() > 0 and time.monotonic() < deadline:
+                rclpy.spin_once(node, timeout_sec=0.1)
     node.destroy_node()
     rclpy.try_shutdown()
 

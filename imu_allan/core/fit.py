@@ -133,6 +133,7 @@ class Problem:
                                   self.correlation_tails) + 1e-9 * np.eye(ok.sum())
         self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(corr)))
         self._rel_sd = np.sqrt(2.0 / self.edf)
+        self._floor = 1e-3 * self.avar  # the smallest noise AVAR a weight uses (whiten)
         self._columns = {}
 
     def column(self, name, position=None):
@@ -151,7 +152,9 @@ class Problem:
         it adds to the expected AVAR but not to the scatter of its estimate, whose chi-square
         variance 2 AVAR^2 / EDF belongs to the noise part alone.
         """
-        noise = np.maximum(model - deterministic, 1e-3 * self.avar)
+        # (x - 0.0 is x: the subtraction is skipped without a ramp; whiten runs in every step)
+        noise = np.maximum(model if isinstance(deterministic, float) and deterministic == 0.0
+                           else model - deterministic, self._floor)
         return self._l_inv @ (columns / (self._rel_sd * noise)[:, None])
 
     def solve(self, shapes, iterations=_IRLS_ITERATIONS, offset=0.0, deterministic=None,

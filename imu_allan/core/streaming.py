@@ -518,17 +518,9 @@ class StreamingAllan:
                 d = d2[q:] - d2[:d2.shape[0] - q]
                 np.einsum('ij,ij->j', d, d, out=ss3[i])
                 kk3[i] = d.shape[0]
-        for sums, sq, counts, n in ((sums2, ss, kk, nv), (sums3, ss3, kk3, nv3)):
-            if not n:
-                continue
-            fs = slice(f0, f0 + n)
-            sq = sq[:, cols]
-            acc, cnt, wacc, wcnt = sums
-            acc[fs, cols] += sq
-            cnt[fs, cols] += counts
-            if windowed:
-                wacc[slot][fs, cols] += sq
-                wcnt[slot][fs, cols] += counts
+        _add_terms(sums2, f0, cols, ss, kk, slot, windowed)
+        if nv3:
+            _add_terms(sums3, f0, cols, ss3, kk3, slot, windowed)
 
     @staticmethod
     def _book(x, h, qs, f0, order, sums, cols, slot, windowed):
@@ -556,14 +548,7 @@ class StreamingAllan:
                      - 3.0 * (x[k0 + 2 * q:k1 + 2 * q] - x[k0 + q:k1 + q]))
             np.einsum('ij,ij->j', d, d, out=ss[i])
             kk[i] = k1 - k0
-        fs = slice(f0, f0 + nv)
-        ss = ss[:, cols]
-        acc, cnt, wacc, wcnt = sums
-        acc[fs, cols] += ss
-        cnt[fs, cols] += kk
-        if windowed:
-            wacc[slot][fs, cols] += ss
-            wcnt[slot][fs, cols] += kk
+        _add_terms(sums, f0, cols, ss, kk, slot, windowed)
 
     # -- output ------------------------------------------------------------------------------
 
@@ -690,6 +675,24 @@ class StreamingDeviation:
     def axis_index(self, axis):
         """Column of ``axis`` in ``dev``."""
         return self.axes.index(axis)
+
+
+def _add_terms(sums, f0, cols, sq, counts, slot, windowed):
+    """
+    Add one level's new terms into a kind's running sums ``[acc, cnt, wacc, wcnt]``.
+
+    ``sq`` (F', A): the sums of squared differences of the factors f0 .. f0 + F' - 1 on every
+    column (only ``cols`` are stored), ``counts`` (F', 1) their numbers of terms; with
+    ``windowed`` also into the window bucket ``slot``.
+    """
+    fs = slice(f0, f0 + sq.shape[0])
+    sq = sq[:, cols]
+    acc, cnt, wacc, wcnt = sums
+    acc[fs, cols] += sq
+    cnt[fs, cols] += counts
+    if windowed:
+        wacc[slot][fs, cols] += sq
+        wcnt[slot][fs, cols] += counts
 
 
 def _as_mask(mask, n, n_axes, name):

@@ -138,7 +138,13 @@ def cdr_to_arrays(blobs):
     cover (big-endian CDR, odd lengths) is deserialized one by one and goes through
     :func:`.imu_adapter.imu_to_row`, so the numbers are the same either way.  (Here, not in
     :mod:`.imu_adapter`: this module imports the adapter, the adapter imports nothing of it.)
+    A live batch is almost always one stream of one frame_id: :func:`_uniform_cdr` decodes
+    it with one structured view and a dozen numpy calls (the node calls this 20 times a
+    second on cache-cold data, where each numpy call costs 5-15 us).
     """
+    fast = _uniform_cdr(blobs)
+    if fast is not None:
+        return fast
     n = len(blobs)
     t = np.empty(n, dtype=np.float64)
     data = np.empty((n, len(AXES)), dtype=np.float64)
@@ -151,6 +157,49 @@ def cdr_to_arrays(blobs):
         for i in idx[~ok]:
             t[i], data[i] = imu_to_row(deserialize(bytes(blobs[i])))
     return t, data
+
+
+#: Structured dtypes of little-endian CDR Imu messages, by (length, frame_id length).
+_UNIFORM_DTYPES = {}
+
+
+def _uniform_dtype(length, slen):
+    """Return the fields of a little-endian CDR Imu of ``length`` bytes (decode_rows' bytes)."""
+    key = (length, slen)
+    if key not in _UNIFORM_DTYPES:
+        start, _ = _cdr_layout(slen)
+        _UNIFORM_DTYPES[key] = np.dtype({
+            'names': ['enc', 'sec', 'nsec', 'slen', 'gyro', 'accel'],
+            'formats': ['<u2', '<i4', '<u4', '<u4', ('<f8', 3), ('<f8', 3)],
+            'offsets': [0, 4, 8, 12, start + 8 * _GYRO_OFF, start + 8 * _ACCEL_OFF],
+            'itemsize': length})
+    return _UNIFORM_DTYPES[key]
+
+
+def _uniform_cdr(blobs):
+    """
+    Decode a batch whose messages share one length and one frame_id length, else None.
+
+    The same byte fields and float operations as :func:`decode_rows` (bit for bit); None also
+    when any message is not little-endian plain CDR (``00 01``), so :func:`cdr_to_arrays`
+    takes its general path.
+    """
+    if not blobs or len(set(map(len, blobs))) != 1:
+        return None
+    length = len(blobs[0])
+    if length < 16 + _TAIL:
+        return None
+    slen = int.from_bytes(blobs[0][12:16], 'little')
+    if _cdr_layout(slen)[1] != length:
+        return None
+    rec = np.frombuffer(b''.join(blobs), dtype=_uniform_dtype(length, slen))
+    # encapsulation 00 01 is 0x0100 as a little-endian uint16
+    if not ((rec['enc'] == 0x0100).all() and (rec['slen'] == slen).all()):
+        return None
+    data = np.empty((len(blobs), len(AXES)), dtype=np.float64)
+    data[:, :3] = rec['gyro']
+    data[:, 3:] = rec['accel']
+    return _stamp(rec['sec'].astype(np.float64), rec['nsec'].astype(np.float64)), data
 
 
 def set_covariance_diagonals(blobs, variances):

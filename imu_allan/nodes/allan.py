@@ -32,7 +32,8 @@ The numerics are :class:`imu_allan.core.online.OnlineAllan` (stamp checks, stati
 gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
 code, so the numbers agree for the same samples.  Messages are not handled one by one: the
 subscription sits in a callback group the executor never waits on, and a timer takes the queued
-messages in batches (the executor costs about 200 us per message at 1 kHz otherwise).
+messages in batches (the executor costs about 200 us per message at 1 kHz otherwise), decoded
+and fed every ``FEED_PERIOD_S`` (0.25 s) and before each publish cycle.
 """
 
 import math
@@ -135,8 +136,9 @@ PARAMETERS = [
     Param('advice_period', 60.0, 'seconds between recording-advice updates (each costs about '
                                  'a second of CPU, run in steps between drains)',
           (0.1, 86400.0)),
-    Param('drain_period', 0.05, 'seconds between taking the queued messages (read-only)',
-          (0.001, 1.0), read_only=True),
+    Param('drain_period', 0.0, 'seconds between taking the queued messages (read-only); 0 = '
+                               '0.1, or 0.05 with covariance_topic set (its republish delay)',
+          (0.0, 1.0), read_only=True),
     Param('change_window_s', 600.0, 'change test window, s: dynamic Allan variance over windows '
                                     'of this length, step a quarter, each against the pooled '
                                     'baseline before it (docs/online.md); 0 = off',
@@ -151,8 +153,20 @@ PARAMETERS = [
 _DEFAULTS = {p.name: p.default for p in PARAMETERS}
 #: Fewest samples in a change-test window (its longest tau is a tenth of it).
 CHANGE_MIN_SAMPLES = 100
-#: Longest stretch of publish-cycle work done in one drain callback, s (a step may overrun it).
-STEP_BUDGET_S = 0.02
+#: Default seconds between drains (:func:`drain_period`), without / with covariance_topic.
+DRAIN_S, DRAIN_COVARIANCE_S = 0.1, 0.05
+#: Seconds between feeds of the messages taken (decoded and fed in one batch): each numpy
+#: call costs 5-15 us on the cache-cold data of a drain, so a quarter second of 50-ms drains
+#: fed as one costs about 40 % as much (docs/benchmarks.md).  Everything taken is fed before
+#: a publish cycle starts, before its diagnostics and before a parameter change: what is
+#: published is the same.
+FEED_PERIOD_S = 0.25
+#: imu/temperature queue depth, messages (taken every drain; the driver sends 1 a second).
+TEMPERATURE_DEPTH = 100
+#: Longest stretch of publish-cycle work done in one drain callback, as a share of the drain
+#: period (a step may overrun it): 20 ms of 50, 40 ms of 100, so a cycle and the advice take
+#: the same wall time whatever the period.
+STEP_SHARE = 0.4
 # Parameters whose change restarts the estimate.
 _RESTART = {'rate_hz', 'window_s', 'max_tau', 'points_per_decade', 'stride_base',
             'min_clusters', 'gate', 'gate_window_s', 'gate_std_factor', 'gate_step_factor',
@@ -204,6 +218,20 @@ def check_parameters(p):
             raise InputError('model_file', str(exc)) from None
 
 
+def drain_period(p):
+    """
+    Seconds between drains: ``drain_period``, or with 0 the default for ``covariance_topic``.
+
+    Each drain wakes the executor, whose wait set is built anew in Python every time (about
+    1 ms of CPU on this machine's cache-cold data, docs/benchmarks.md): at 1 kHz 0.1 s costs
+    a point and a half of a core less than 0.05 s.  A republished stream (``covariance_topic``)
+    keeps 0.05 s, the delay a filter downstream sees.
+    """
+    if p['drain_period'] > 0:
+        return p['drain_period']
+    return DRAIN_COVARIANCE_S if p['covariance_topic'] else DRAIN_S
+
+
 def multiarray(table, labels):
     """Return a row-major ``std_msgs/Float64MultiArray`` of a numpy array with dimension labels."""
     msg = Float64MultiArray()
@@ -226,6 +254,7 @@ class AllanNode(Node):
         super().__init__('allan')
         self.params = declare_parameter_table(self, PARAMETERS)
         check_parameters(self.params)  # InputError: main() prints it, exit status 2
+        self._pending, self._fed_at = [], 0.0  # messages taken, not yet fed (FEED_PERIOD_S)
         self.budget = hm.NoiseBudget.from_yaml(self.params['budget_file'] or None)
         self._load_model()
         self.pipeline = OnlineAllan(axes=AXES, **pipeline_options(self.params))
@@ -241,11 +270,12 @@ class AllanNode(Node):
         self._pub_kinds = {}  # imu/allan_deviation/<kind> of the other estimators
         self._deviation_publishers()
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        # The temperature range the current estimate spans (the driver's imu/temperature).
+        # The temperature range the current estimate spans (the driver's imu/temperature),
+        # taken with the IMU messages: a subscription the executor waits on would cost every
+        # drain's wake-up more (its wait set is built anew each time).
         self._temperature = TemperatureRange(self.params['window_s'])
-        self.create_subscription(Temperature, 'imu/temperature',
-                                 lambda msg: self._temperature.add_message(msg),
-                                 qos_profile_sensor_data)
+        self._temperature_sub = polled_subscription(self, Temperature, 'imu/temperature',
+                                                    TEMPERATURE_DEPTH, overrides=False)
         self._pub_cov = self.create_publisher(
             Imu, self.params['covariance_topic'], qos_profile_sensor_data,
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
@@ -259,7 +289,8 @@ class AllanNode(Node):
         self._advice_status = advice_health(None, f'{self.get_name()}: recording advice')
         self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
                            'cycle_wall_s': math.nan}
-        self._drain_timer = self.create_timer(self.params['drain_period'], self.drain)
+        self._step_budget = STEP_SHARE * drain_period(self.params)
+        self._drain_timer = self.create_timer(drain_period(self.params), self.drain)
         self._publish_timer = self.create_timer(self.params['publish_period'],
                                                 self.publish)
         rate = self.params['rate_hz']
@@ -277,6 +308,7 @@ class AllanNode(Node):
     # -- parameters ------------------------------------------------------------------
 
     def _post_set(self, params):
+        self._feed_pending()  # the samples taken before the change go where they went before
         changed = apply_changes(self.params, PARAMETERS, params)
         if changed & _RESTART or 'terms' in changed:
             if changed & _RESTART:
@@ -316,24 +348,36 @@ class AllanNode(Node):
     # -- work ------------------------------------------------------------------------
 
     def drain(self):
-        """Take every queued message, feed them in one batch, advance a publish cycle."""
+        """Take every queued message, feed them every FEED_PERIOD_S, advance a publish cycle."""
+        for msg in take_batch(self._temperature_sub, TEMPERATURE_DEPTH):
+            self._temperature.add_message(msg)
         msgs = take_batch(self._sub, self._max_batch)
         if msgs:
             self._last_arrival = time.monotonic()
-            t, data = cdr_to_arrays(msgs)
-            started = self.pipeline.estimator is not None
-            self.pipeline.feed(t, data)  # InputError (measured rate misfits): exit 2
-            if not started and self.pipeline.estimator is not None:
-                self.get_logger().info(
-                    f'sample rate {self.pipeline.rate_hz:.6g} Hz ({self.pipeline.rate_source});'
-                    f' estimator memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
-            self._feed_change(t, data)
+            self._pending += msgs
             if self._pub_cov is not None:
                 self._republish(msgs)
+            if self._last_arrival - self._fed_at >= FEED_PERIOD_S:
+                self._feed_pending()
         if self._cycle is not None:
             self._advance_cycle()
         elif self._advice is not None:
             self._advance_advice()
+
+    def _feed_pending(self):
+        """Decode the gathered messages and feed them in one batch (estimate, change test)."""
+        self._fed_at = time.monotonic()
+        if not self._pending:
+            return
+        msgs, self._pending = self._pending, []
+        t, data = cdr_to_arrays(msgs)
+        started = self.pipeline.estimator is not None
+        self.pipeline.feed(t, data)  # InputError (measured rate misfits): exit 2
+        if not started and self.pipeline.estimator is not None:
+            self.get_logger().info(
+                f'sample rate {self.pipeline.rate_hz:.6g} Hz ({self.pipeline.rate_source});'
+                f' estimator memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)')
+        self._feed_change(t, data)
 
     def _start_change(self):
         """Start the change test once the sample rate is known (off at change_window_s 0)."""
@@ -354,6 +398,7 @@ class AllanNode(Node):
         """Start a publish cycle: freeze the sums; the steps run between drains."""
         if self._cycle is not None:
             return  # the previous cycle is still running (publish_period very short)
+        self._feed_pending()  # the estimate of every sample taken so far
         self._cycle = StagedEstimate(self.pipeline, window=self.params['window_s'] > 0)
         self._cycle_cpu = 0.0
         self._cycle_max_step = 0.0
@@ -361,10 +406,10 @@ class AllanNode(Node):
         self._advance_cycle()
 
     def _advance_cycle(self):
-        """Run cycle steps for up to STEP_BUDGET_S, then publish once the cycle is done."""
+        """Run cycle steps for up to a step budget, then publish once the cycle is done."""
         start = time.perf_counter()
         cycle = self._cycle
-        while not cycle.done and time.perf_counter() - start < STEP_BUDGET_S:
+        while not cycle.done and time.perf_counter() - start < self._step_budget:
             t0 = time.perf_counter()
             cycle.step()
             self._cycle_max_step = max(self._cycle_max_step, time.perf_counter() - t0)
@@ -393,6 +438,7 @@ class AllanNode(Node):
                                'cycle_max_step_s': self._cycle_max_step,
                                'cycle_wall_s': time.monotonic() - self._cycle_wall}
             self._start_advice(result, fitted)
+            self._feed_pending()  # the stream's counts of every sample taken so far
             self._pub_diag.publish(self._diagnostics(result, table))
         else:
             self._cycle_cpu += time.perf_counter() - start
@@ -419,9 +465,9 @@ class AllanNode(Node):
                                     factor_grid_of(est.ms, est.min_clusters), undetected=False)
 
     def _advance_advice(self):
-        """Advice steps for up to STEP_BUDGET_S; its status is ready when they are done."""
+        """Advice steps for up to a step budget; its status is ready when they are done."""
         start = time.perf_counter()
-        while not self._advice.step() and time.perf_counter() - start < STEP_BUDGET_S:
+        while not self._advice.step() and time.perf_counter() - start < self._step_budget:
             pass
         if self._advice.done:
             self._advice_status = advice_health(self._advice.advice, self._advice_status.name)

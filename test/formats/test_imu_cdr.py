@@ -107,6 +107,54 @@ def test_cdr_to_arrays_equals_the_message_adapter_on_rclpy_bytes():
     np.testing.assert_array_equal(d, d_ref)
 
 
+@pytest.mark.parametrize('frame', ['imu_link', '', 'base_imu_frame_0'])
+def test_cdr_to_arrays_one_frame_batch_equals_the_adapter(frame):
+    """
+    A batch of one frame_id (the node's usual one, one structured view) equals the adapter.
+
+    Also with a damaged nanosecond field (NaN stamp, as decode_rows gives) and with one
+    big-endian message in the batch (then every message takes the general path).
+    """
+    from imu_allan.formats.imu_cdr import _uniform_cdr, cdr_to_arrays
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import Imu
+    rng = np.random.default_rng(13)
+    msgs = []
+    for i in range(50):
+        m = Imu()
+        m.header.frame_id = frame
+        m.header.stamp.sec = -2 if i == 3 else 1_700_000_000 + i  # int32: negative too
+        m.header.stamp.nanosec = i * 19_999_999
+        (m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z,
+         m.linear_acceleration.x, m.linear_acceleration.y,
+         m.linear_acceleration.z) = rng.normal(size=6).tolist()
+        msgs.append(m)
+    blobs = [serialize_message(m) for m in msgs]
+    t_ref, d_ref = imus_to_arrays(msgs)
+    assert _uniform_cdr(blobs) is not None  # the one-view path is the one tested
+    t, d = cdr_to_arrays(blobs)
+    np.testing.assert_array_equal(t, t_ref)
+    np.testing.assert_array_equal(d, d_ref)
+    # nanosec 1e9 in the bytes (rclpy refuses to build it): NaN, as the row decoder gives
+    damaged = bytearray(blobs[7])
+    damaged[8:12] = (1_000_000_000).to_bytes(4, 'little')
+    blobs[7] = bytes(damaged)
+    rows = np.frombuffer(b''.join(blobs), np.uint8).reshape(len(blobs), -1)
+    ok, t_rows, d_rows = _decode_rows(rows, ros1=False)
+    t, d = cdr_to_arrays(blobs)
+    assert ok.all() and np.isnan(t[7])
+    np.testing.assert_array_equal(t, t_rows)
+    np.testing.assert_array_equal(d, d_rows)
+    # one big-endian message: the general path, the same numbers for every message
+    big = _rosbags_imu(int(msgs[9].header.stamp.sec), int(msgs[9].header.stamp.nanosec),
+                       d_ref[9, :3], d_ref[9, 3:], frame_id=frame)
+    blobs[9] = bytes(JAZZY.serialize_cdr(big, IMU, little_endian=False))
+    assert len(blobs[9]) == len(blobs[0]) and _uniform_cdr(blobs) is None
+    t, d = cdr_to_arrays(blobs)
+    np.testing.assert_array_equal(t[9], t_ref[9])
+    np.testing.assert_array_equal(d, d_rows)
+
+
 def test_covariance_diagonals_patched_in_bytes_as_rclpy_reads_them():
     """
     set_covariance_diagonals: rclpy deserializes exactly the intended messages.
