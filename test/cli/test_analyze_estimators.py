@@ -56,7 +56,7 @@ def test_unknown_estimator_is_one_line_exit_2(short_csv):
 
 def test_ohdev_decides_a_walk_against_a_ramp(tmp_path):
     """
-    ``--estimators ohdev``: the Hadamard curve rejects the rate random walk the Allan fit left open.
+    ``--estimators ohdev``: the Hadamard curve rejects a rate random walk the Allan fit left open.
 
     gyro_x: 1 h at 100 Hz of N 2e-3, B 2e-4 and a rate ramp of 3e-6 rad/s^2 (seed 6 of
     test/core/test_hadamard_check.py: the Allan fit leaves N K R and N B R open; the walk
