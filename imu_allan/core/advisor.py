@@ -462,7 +462,7 @@ class _AxisAdvisor:
 
     def _pair_time(self, directions, crit_gap, start, n_max):
         """
-        Samples until the criterion gap separates in every direction (None: not within n_max).
+        Return the samples until the gap separates in every direction (None: not by n_max).
 
         ``directions``: ``(truth, names, key)``, each alternative taken as the truth and fitted
         with the other (module docstring).  The time is the latest of the directions' times,
