@@ -480,8 +480,10 @@ class _AxisAdvisor:
             def evaluate(n, truth=truth, names=names, key=key, scale=scale):
                 gap = scale * self.forecast.criterion_gap(n, truth, key, names, start)
                 return _separated(gap), log_ratio(gap, _SEPARATED_GAP)
-            if at is not None and evaluate(_samples(at))[0]:
-                continue
+            if at is not None:
+                yield  # (one forecast evaluation per step: gap0 was one)
+                if evaluate(_samples(at))[0]:
+                    continue
             # the noise-free gap grows as n
             n_sep, x = yield from _crossing_point(evaluate, self.n, n_max, 1.0)
             if n_sep is None:
