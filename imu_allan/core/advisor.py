@@ -319,14 +319,24 @@ def _crossing(evaluate, n0, n_max, slope):
     per unit of log n, for the first guess.  n_max is evaluated only when the crossing is not
     found below it (a forecast of n_max samples is the most costly one).
     """
+    return (yield from _crossing_point(evaluate, n0, n_max, slope))[0]
+
+
+def _crossing_point(evaluate, n0, n_max, slope):
+    """
+    :func:`_crossing`'s search; return ``(n, x)``: that n, and the log n where ok holds.
+
+    ``x`` is the upper end of bisection's last cell (a point of its grid on
+    [log n0, log n_max]; log n0 when ok holds at n0), ``(None, None)`` when n_max fails too.
+    """
     first = evaluate(n0)
     if first[0]:
-        return n0
+        return n0, math.log(n0)
     lo, hi = math.log(n0), math.log(n_max)
     cell = yield from guided(lambda x: evaluate(_samples(x)), lo, hi, _BISECTIONS,
                              (first[1], first[1] + slope * (hi - lo)), key=_samples,
                              hi_known=False)
-    return None if cell is None else int(math.ceil(math.exp(cell[1])))
+    return (None, None) if cell is None else (int(math.ceil(math.exp(cell[1]))), cell[1])
 
 
 def _separated(gap):
@@ -435,26 +445,52 @@ class _AxisAdvisor:
                     or abs(alt_crit - crit) >= SEPARATION_MARGIN):
                 continue
             other = tuple(alt_names)
-            times = []
             start = _nonlinear(alt_fit.terms)
-            for truth, names, key in ((axis_terms, alt_names, 'fit'),
-                                      (alt_fit.terms, chosen, '+'.join(other))):
-                # If the noise-free gap says "separated" already, the data were unlucky: grow
-                # the measured gap as the forecast grows instead (never 0 for an open pair).
-                gap0 = self.forecast.criterion_gap(self.n, truth, key, names, start)
-                scale = max(abs(alt_crit - crit), 1.0) / gap0 if _separated(gap0) else 1.0
-
-                def evaluate(n, truth=truth, names=names, key=key, scale=scale, start=start):
-                    gap = scale * self.forecast.criterion_gap(n, truth, key, names, start)
-                    return _separated(gap), log_ratio(gap, _SEPARATED_GAP)
-                # the noise-free gap grows as n
-                times.append((yield from _crossing(evaluate, self.n, n_max, 1.0)))
-            if any(t is None for t in times):
+            # The pair separates when both directions do: at the later time.  The direction
+            # whose fit is linear (no tau_c profiled at every n) is searched first; the other
+            # only matters if it separates later (see _pair_time).
+            directions = sorted(((axis_terms, alt_names, 'fit'),
+                                 (alt_fit.terms, chosen, '+'.join(other))),
+                                key=lambda d: any(len(TERM_PARAMETERS[t]) > 1 for t in d[1]))
+            n_sep = yield from self._pair_time(directions, alt_crit - crit, start, n_max)
+            if n_sep is None:
                 self.unresolved.append(Unresolved(self.axis, pair, None, 'not separated '
                                                   f'within {HORIZON:g} x the record', other))
             else:
-                self.unresolved.append(Unresolved(self.axis, pair, self._more_s(max(times)),
+                self.unresolved.append(Unresolved(self.axis, pair, self._more_s(n_sep),
                                                   None, other))
+
+    def _pair_time(self, directions, crit_gap, start, n_max):
+        """
+        Return the samples until the gap separates in every direction (None: not by n_max).
+
+        ``directions``: ``(truth, names, key)``, each alternative taken as the truth and fitted
+        with the other (module docstring).  The time is the latest of the directions' times,
+        so a direction that is separated already at the latest time so far (a point of the
+        same bisection grid; ok is monotone in n, as the search assumes) cannot change it and
+        is not searched, and none is after one that never separates.
+        """
+        latest, at = None, None
+        for truth, names, key in directions:
+            # If the noise-free gap says "separated" already, the data were unlucky: grow the
+            # measured gap as the forecast grows instead (never 0 for an open pair).
+            gap0 = self.forecast.criterion_gap(self.n, truth, key, names, start)
+            scale = max(abs(crit_gap), 1.0) / gap0 if _separated(gap0) else 1.0
+
+            def evaluate(n, truth=truth, names=names, key=key, scale=scale):
+                gap = scale * self.forecast.criterion_gap(n, truth, key, names, start)
+                return _separated(gap), log_ratio(gap, _SEPARATED_GAP)
+            if at is not None:
+                yield  # (one forecast evaluation per step: gap0 was one)
+                if evaluate(_samples(at))[0]:
+                    continue
+            # the noise-free gap grows as n
+            n_sep, x = yield from _crossing_point(evaluate, self.n, n_max, 1.0)
+            if n_sep is None:
+                return None
+            if latest is None or n_sep > latest:  # (always, if ok is monotone)
+                latest, at = n_sep, x
+        return latest
 
     def _undetected(self, axis_terms, n_max):
         chosen = list(axis_terms)

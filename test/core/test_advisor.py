@@ -10,15 +10,20 @@ import math
 from core.advisor_cases import cases, RATE_HZ, rel_halfwidth, SEEDS
 from imu_allan.core import health
 from imu_allan.core.advisor import (
+    _AxisAdvisor,
+    _nonlinear,
     Advice,
     advice_health,
     advise,
+    analysis_grid,
     DEFAULT_TARGETS,
+    HORIZON,
     parse_targets,
     TermAdvice,
     Unresolved,
 )
 from imu_allan.core.allan import allan_deviation
+from imu_allan.core.bisection import run
 from imu_allan.core.fit import fit_noise_model
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
@@ -124,6 +129,35 @@ def test_ten_minutes_of_white_and_b_report_the_unresolved_pair():
     sentence = advice_sentence(advice)
     # (the sentence now gives each alternative in words with its own time, issue 22)
     assert f'{swapped[0]}: bias instability or rate random walk: cannot tell yet' in sentence
+
+
+def test_a_pair_separates_when_the_later_of_its_two_directions_does():
+    """
+    The pair's time is the later direction's, searched on its own (_pair_time skips work).
+
+    Each direction (one alternative as the truth, fitted with the other) is searched alone
+    here, all the way; the pair's time must be the later of the two (None if either has
+    none), as it was before the second direction's search was cut short.
+    """
+    thesis = {'gyro_x': {'white_noise': 5.759587e-04, 'bias_instability': 1.502922e-04},
+              'gyro_y': {'white_noise': 5.730498e-04, 'bias_instability': 1.534920e-04}}
+    result, fitted = _record(thesis, 600.0, seed=0, rate_hz=100.0, axes=tuple(thesis))
+    checked = 0
+    for axis in fitted.axes:
+        adv = _AxisAdvisor(result, fitted, axis, DEFAULT_TARGETS, analysis_grid())
+        n_max = int(adv.n * HORIZON)
+        chosen = list(adv.fit.terms)
+        run(adv._pairs(adv.fit.terms, n_max))
+        _, crit = adv._data_criterion(chosen)
+        for u in adv.unresolved:
+            alt_fit, alt_crit = adv._data_criterion(list(u.alternative))
+            start = _nonlinear(alt_fit.terms)
+            times = [run(adv._pair_time([d], alt_crit - crit, start, n_max)) for d in (
+                (adv.fit.terms, list(u.alternative), 'fit'),
+                (alt_fit.terms, chosen, '+'.join(u.alternative)))]
+            assert u.more_s == (None if None in times else adv._more_s(max(times))), (u, times)
+            checked += 1
+    assert checked >= 2
 
 
 def _advice(more_b, pair_more=None):
