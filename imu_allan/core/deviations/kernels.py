@@ -13,6 +13,7 @@ against.
 
 import numpy as np
 
+from .noise_id_kernel import gather_block
 from ..jit import jit, map_threads
 
 
@@ -118,13 +119,7 @@ def _stride_blocks(xa, ms, d, acc, ks, offs, points):  # pragma: no cover - comp
             if q0 < b1:
                 acc[t] += _stride_one(xa, m, d, q0, b1)
             if ks[t] > 0:
-                stop = min(b1, ks[t] * m + 1)
-                q = j * m
-                at = offs[t] + j
-                while q < stop:
-                    points[at] = xa[q]
-                    at += 1
-                    q += m
+                gather_block(xa, m, ks[t], b0, b1, points, offs[t])
 
 
 @jit(nogil=True)

@@ -25,21 +25,26 @@ BLOCK = 4096
 
 
 @jit(nogil=True)
+def gather_block(xa, m, k, b0, b1, out, off):  # pragma: no cover - compiled
+    # out[off + j] = xa[j m] for the j <= k whose point j m lies in the block [b0, b1).
+    stop = min(b1, k * m + 1)
+    j = (b0 + m - 1) // m  # the first point of this block (no division per point)
+    q = j * m
+    at = off + j
+    while q < stop:
+        out[at] = xa[q]
+        at += 1
+        q += m
+
+
+@jit(nogil=True)
 def _gather(xa, ms, ks, offs, out):  # pragma: no cover - compiled; tested vs numpy
     # out[offs[t] + j] = xa[j ms[t]] for j = 0 .. ks[t], block by block over the phase.
     n = xa.shape[0]
     for b0 in range(0, n, BLOCK):
         b1 = min(b0 + BLOCK, n)
         for t in range(ms.shape[0]):
-            m = ms[t]
-            stop = min(b1, ks[t] * m + 1)
-            j = (b0 + m - 1) // m  # the first point of this block (no division per point)
-            q = j * m
-            at = offs[t] + j
-            while q < stop:
-                out[at] = xa[q]
-                at += 1
-                q += m
+            gather_block(xa, ms[t], ks[t], b0, b1, out, offs[t])
 
 
 @jit(nogil=True, fastmath=True)
