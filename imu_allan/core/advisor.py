@@ -31,6 +31,7 @@ the noisy difference below its mean) exceeds the margin for both.  An undetected
 noise-free forecast grows, exceeds the penalty of one term.
 """
 
+import dataclasses
 from dataclasses import dataclass, field
 import math
 
@@ -209,9 +210,11 @@ def _rel_halfwidth(coef, sd, deterministic=False):
 class _Forecast:
     """Noise-free problems of records of n samples from a model curve (cached by n)."""
 
-    def __init__(self, rate_hz, grid):
+    def __init__(self, rate_hz, grid, span=None):
         self.rate_hz = rate_hz
         self.grid = grid
+        # the fit's own span (fit.tau_range: lower end, line, filter), open at the long end
+        self.span = None if span is None else dataclasses.replace(span, hi=math.inf)
         self._cache = {}
         self._gaps = {}  # a crossing search starts where its scale was taken: asked twice
 
@@ -227,7 +230,7 @@ class _Forecast:
         avar = _terms.model_avar(axis_terms, tau, self.rate_hz)
         alpha = identify_noise(tau, avar[:, None])[:, 0]
         edf = np.array([edf_oadev(int(a), int(m), int(n) + 1) for a, m in zip(alpha, ms)])
-        problem = Problem(tau, avar, edf, alpha, self.rate_hz, n / self.rate_hz)
+        problem = Problem(tau, avar, edf, alpha, self.rate_hz, n / self.rate_hz, self.span)
         self._cache[(n, key)] = problem
         return problem
 
@@ -356,15 +359,15 @@ class _AxisAdvisor:
         self.undetected = undetected
         self.targets = targets
         j = result.axis_index(axis)
-        # the measured curve, set up once
-        self.problem = Problem(result.tau, result.avar[:, j], result.edf[:, j],
-                               result.alpha[:, j], result.rate_hz,
-                               result.n_samples / result.rate_hz)
-        self.rate_hz = result.rate_hz
-        self.n = int(result.n_samples)
         self.fitted = fitted
         self.fit = fitted.fits[axis]
-        self.forecast = _Forecast(result.rate_hz, grid)
+        # the measured curve as the fit saw it (span, fixed lines), else set up here
+        self.problem = getattr(self.fit, 'problem', None) or Problem(
+            result.tau, result.avar[:, j], result.edf[:, j], result.alpha[:, j],
+            result.rate_hz, result.n_samples / result.rate_hz)
+        self.rate_hz = result.rate_hz
+        self.n = int(result.n_samples)
+        self.forecast = _Forecast(result.rate_hz, grid, getattr(self.fit, 'tau_range', None))
         self.terms = {}
         self.unresolved = []
 

@@ -33,7 +33,7 @@ import time
 from imu_allan.core.allan import AllanResult, avar_fast, tau_grid
 from imu_allan.core.deviations import deviation
 from imu_allan.core.edf import CI_LEVEL
-from imu_allan.core.fit import fit_noise_model
+from imu_allan.core.fit import fit_noise_model, Processing
 from imu_allan.core.simulate import simulate_axis
 from imu_allan.core.units import AXES
 import numpy as np
@@ -58,6 +58,8 @@ CROSSINGS = {
     'QN': (3.0, 20.0),          # Q = N at 3 .. 20 tau0
 }
 FLOOR = 2.0 * math.log(2.0) / math.pi  # AVAR / B^2 of flicker at long tau
+#: Terms the fit adds for the sensor, not the noise (a line seen in the spectrum): not scored.
+NUISANCE = {'sinusoid'}
 
 
 def _log_uniform(rng, lo, hi):
@@ -117,16 +119,112 @@ def package_axis(truth, n, rate_hz, rng):
     return simulate_axis({t: {'value': v} for t, v in truth.items()}, n, rate_hz, rng)
 
 
+#: The sensor's processing drawn for a realistic record: internal rate (Hz), filter window
+#: taps at that rate, LSB in output noise sigmas (log-uniform), chance of an aliased line and
+#: its output amplitude in output noise sigmas (log-uniform), the line's input frequency (Hz).
+INTERNAL_RATE = 1000.0
+WINDOW_TAPS = (1, 32)
+LSB_SIGMAS = (0.2, 3.0)
+LINE_CHANCE = 0.5
+LINE_SIGMAS = (0.1, 0.5)
+LINE_INPUT_HZ = (20.0, 450.0)
+
+
+def draw_processing(rng, rate_hz):
+    """A realistic sensor's processing for one axis (see the constants above)."""
+    line = None
+    if rng.uniform() < LINE_CHANCE:
+        line = (rng.uniform(*LINE_INPUT_HZ), _log_uniform(rng, *LINE_SIGMAS))
+    return {'taps': int(rng.integers(WINDOW_TAPS[0], WINDOW_TAPS[1] + 1)),
+            'lsb_sigmas': _log_uniform(rng, *LSB_SIGMAS), 'line': line,
+            'decimation': int(round(INTERNAL_RATE / rate_hz))}
+
+
+def realistic_truth(truth, processing, rate_hz, slow, rng, samples=2_000_000):
+    """
+    The white-noise density a realistic record carries at low frequency (continuous time).
+
+    Decimation folds the filtered noise (output means of M taps, D input samples apart:
+    N^2 D (M + 2 sum_k max(0, M - k D)) / M^2, N^2 exactly when D divides M) and rounding adds
+    its own noise: d^2 / 12 per sample where the noise spans many LSB (Sheppard), but where it
+    spans few the error depends on where the drift puts the signal within an LSB and, for
+    correlated samples, correlates from sample to sample.  So the density is measured here,
+    independently of the package: fresh white noise through the same processing, on the
+    record's own slow part ``slow`` (what sets the offsets), rounded, the slow part taken off
+    again; density^2 = the sum of its autocovariances over the lags the filter correlates
+    (and two more), over ``samples`` output samples (error ~ 0.1 %).
+    """
+    n = slow.size
+    lags = processing['taps'] // processing['decimation'] + 3
+    total, count = np.zeros(lags), 0
+    while count < samples:
+        e = _processed(truth['white_noise'], processing, n, rng, slow) - slow
+        e -= e.mean()
+        total += [np.dot(e[:n - k], e[k:]) for k in range(lags)]
+        count += n
+    acov = total / count
+    return {**truth, 'white_noise': math.sqrt((acov[0] + 2.0 * acov[1:].sum()) / rate_hz)}
+
+
+def _output_sigma(truth, processing):
+    """Output-sample std of the filtered white noise (what the LSB is measured against)."""
+    return truth['white_noise'] * math.sqrt(INTERNAL_RATE / processing['taps'])
+
+
+def _processed(n_density, processing, n, rng, slow, line=None):
+    """
+    White noise of density ``n_density`` (and a line) at the internal rate, through the window,
+    decimated, plus ``slow``, rounded to the LSB: ``n`` output samples.
+    """
+    d, m = processing['decimation'], processing['taps']
+    n_in = n * d + m
+    fast = n_density * math.sqrt(INTERNAL_RATE) * rng.standard_normal(n_in)
+    if line is not None:
+        f_in, amplitude = line
+        w = 2.0 * math.pi * f_in / INTERNAL_RATE
+        fast += amplitude * np.sin(w * np.arange(n_in) + rng.uniform(0.0, 2.0 * math.pi))
+    csum = np.concatenate([[0.0], np.cumsum(fast)])
+    y = ((csum[m:] - csum[:-m]) / m)[::d][:n] + slow
+    lsb = processing['lsb_sigmas'] * n_density * math.sqrt(INTERNAL_RATE / m)
+    return np.round(y / lsb) * lsb
+
+
+def realistic_axis(truth, n, rate_hz, rng, processing):
+    """
+    Rate samples of a realistic sensor from textbook parts (no package code): ``(y, slow)``.
+
+    White noise at the internal rate (density N: per-sample std N sqrt(fs_in)), plus a line at
+    an input frequency (it aliases after decimation), through a ``taps``-sample moving average,
+    every ``decimation``-th sample kept; the slow terms (``slow``: the independent generator at
+    the output rate; the filter does not touch them); rounded to an LSB.
+    """
+    slow = independent_axis({k: v for k, v in truth.items() if k != 'white_noise'}, n,
+                            rate_hz, rng)
+    line = None
+    if processing['line'] is not None:
+        f_in, sigmas = processing['line']
+        w = 2.0 * math.pi * f_in / INTERNAL_RATE
+        m = processing['taps']
+        gain = abs(math.sin(w * m / 2.0) / (m * math.sin(w / 2.0)))  # the window's response
+        line = (f_in, sigmas * _output_sigma(truth, processing) / max(gain, 1e-3))
+    return _processed(truth['white_noise'], processing, n, rng, slow, line), slow
+
+
 GENERATORS = {'independent': independent_axis, 'package': package_axis}
 
 
-def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6, hadamard=False):
+def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6, hadamard=False,
+          processing='measured'):
     """
     Simulate and fit ``n_axes`` axes; return ``[(truth, fitted, axis), ...]``.
 
     Axes are generated ``chunk`` (at most 6: the package's axis names) at a time into one
     (n, chunk) array, their Allan variances computed in one call and fitted together; with
-    ``hadamard`` the fit also sees the OHDEV curve (:mod:`imu_allan.core.hadamard_check`).
+    ``hadamard`` the fit also sees the OHDEV curve (:mod:`imu_allan.core.fit.hadamard_check`).
+    The fit is given the sensor's processing as :func:`imu_allan.core.sensor.measure_sensor`
+    measures it from the samples (``processing='measured'``, what ``analyze`` does), as the
+    realistic generator made it (``'known'``: the device's window, the line), or not at all
+    (None).  For realistic records the truth is :func:`realistic_truth`.
     """
     rng = np.random.default_rng(seed)
     n = int(round(hours * 3600.0 * rate_hz))
@@ -135,27 +233,60 @@ def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6, hadamard=F
     for start in range(0, n_axes, chunk):
         count = min(chunk, n_axes - start)
         data = np.empty((n, count))
-        truths = []
+        truths, known = [], {}
         for j in range(count):
-            truths.append(draw_truth(scenario, rng, n, rate_hz))
-            data[:, j] = GENERATORS[generator](truths[-1], n, rate_hz, rng)
+            truth = draw_truth(scenario, rng, n, rate_hz)
+            if generator == 'realistic':
+                proc = draw_processing(rng, rate_hz)
+                data[:, j], slow = realistic_axis(truth, n, rate_hz, rng, proc)
+                known[AXES[j]] = _known_processing(truth, proc, rate_hz)
+                truth = realistic_truth(truth, proc, rate_hz, slow, rng)
+            else:
+                data[:, j] = GENERATORS[generator](truth, n, rate_hz, rng)
+            truths.append(truth)
         result = AllanResult.from_avar(ms, avar_fast(data, ms), n, rate_hz, axes=AXES[:count])
         curves = ({'ohdev': deviation(data, rate_hz, 'ohdev', axes=AXES[:count])}
                   if hadamard else None)
+        proc = None
+        if processing == 'measured':
+            from imu_allan.core.sensor import measure_sensor
+            proc = measure_sensor(data, rate_hz, AXES[:count]).processing()
+        elif processing == 'known' and known:
+            proc = known
         del data
-        fitted = fit_noise_model(result, deviations=curves)
+        fitted = fit_noise_model(result, deviations=curves, processing=proc)
         out += [(truth, fitted, axis) for truth, axis in zip(truths, AXES)]
     return out
+
+
+def _known_processing(truth, proc, rate_hz):
+    """
+    The realistic generator's processing as the fit takes it: filter moment, aliased line.
+
+    The output's autocovariance (in units of sigma_in^2 / M^2): M + d^2 / 12 at lag 0 (the
+    rounding, d in those units), M - k D at lag k while positive.
+    """
+    m, d = proc['taps'], proc['decimation']
+    cov = [m - k * d for k in range(1, m // d + 1) if m - k * d > 0]
+    lsb = proc['lsb_sigmas'] * math.sqrt(m)  # sigma_out = sqrt(M) in these units
+    s = m + lsb * lsb / 12.0 + 2.0 * sum(cov)
+    moment = 2.0 * sum(k * c for k, c in enumerate(cov, 1)) / s
+    lines = ()
+    if proc['line'] is not None:
+        f_in, sigmas = proc['line']
+        alias = abs(f_in - rate_hz * round(f_in / rate_hz))
+        lines = ((alias, sigmas * _output_sigma(truth, proc)),)
+    return Processing(len(cov), moment, lines, source='device')
 
 
 def score(cases, levels=(CI_LEVEL, 0.95)):
     """Per-axis outcomes: selection, alternatives, and per true term the coverage flags."""
     rows = []
     for truth, fitted, axis in cases:
-        chosen = set(fitted.model.terms.get(axis, {}))
-        alternatives = [set(a) for a in fitted.alternatives(axis)]
+        chosen = set(fitted.model.terms.get(axis, {})) - NUISANCE
+        alternatives = [set(a) - NUISANCE for a in fitted.alternatives(axis)]
         fit = fitted.fits[axis]
-        crits = {frozenset(names): crit for crit, names in fit.candidates}
+        crits = {frozenset(names) - NUISANCE: crit for crit, names in fit.candidates}
         best = fit.candidates[0][0] if fit.candidates else math.nan
         row = {'exact': chosen == set(truth),
                'gap': crits.get(frozenset(truth), math.inf) - best,

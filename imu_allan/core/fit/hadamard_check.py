@@ -27,16 +27,17 @@ A contradicted set leaves the alternatives; a contradicted selection is replaced
 every open set, the two curves disagree and nothing is decided.
 
 Measured (docs/method.md, section 4): on the calibration records the check runs on about one
-axis in five and changes little, in both directions; it is therefore not part of the
-analysis (``analyze``), only of :func:`~imu_allan.core.fit.fit_noise_model` given the curve.
+axis in five and changes little, in both directions; it therefore runs only when the OHDEV
+curve is at hand: :func:`~imu_allan.core.fit.fit_noise_model` given it, ``analyze`` with
+``--estimators`` including ``ohdev``.
 """
 
 import math
 
 import numpy as np
 
-from .deviations.greenhall import edf_greenhall
-from .fit import (
+from ..deviations.greenhall import edf_greenhall
+from .axis import (
     ALTERNATIVE_MARGIN,
     coefficient_interval,
     fit_terms,
@@ -45,7 +46,8 @@ from .fit import (
     shape_columns,
     two_sided_z,
 )
-from .terms import hadamard_shape, ID_ALPHA
+from .tau_range import TauRange
+from ..terms import hadamard_shape, ID_ALPHA
 
 #: Criterion gain of K on the Hadamard curve that contradicts a term set without K.
 MARGIN = 10.0
@@ -81,9 +83,11 @@ class HadamardProblem(Problem):
         return self._columns[name]
 
 
-def hadamard_problem(ohdev, axis, coef=None):
+def hadamard_problem(ohdev, axis, coef=None, tau_min=None):
     """
     Build the OHVAR problem of ``axis`` from an ``ohdev`` DeviationResult (None: too short).
+
+    ``tau_min`` (s): the shortest averaging time used, the Allan fit's (:mod:`.tau_range`).
 
     With ``coef`` (the selected Allan fit's squared coefficients) the noise at each averaging
     time is the term that dominates the predicted Hadamard curve, as the Allan side
@@ -105,7 +109,8 @@ def hadamard_problem(ohdev, axis, coef=None):
         edf = np.array([edf_greenhall(int(a), 3, int(m), ohdev.n_samples + 1, True, False)
                         for a, m in zip(alpha, ohdev.m)])
     edf = np.where(ohdev.m * MIN_CLUSTERS <= ohdev.n_samples, edf, np.nan)
-    problem = HadamardProblem(tau, ohdev.dev[:, j] ** 2, edf, alpha, ohdev.rate_hz)
+    problem = HadamardProblem(tau, ohdev.dev[:, j] ** 2, edf, alpha, ohdev.rate_hz,
+                              span=None if tau_min is None else TauRange(tau_min, math.inf))
     return problem if problem.tau.size >= 4 else None
 
 

@@ -32,14 +32,13 @@ import math
 
 import numpy as np
 
-from . import terms as _terms
-from .bisection import guided, log_ratio, run
-from .bounded_min import bounded_minimum
-from .edf import _gammainccinv, CI_LEVEL
-from .model import NoiseModel
-from .nnls import nnls_scaled
-from .terms import TERMS
-from .units import ALL_TERMS, conventional, IEEE_TERMS, si_unit
+from .. import terms as _terms
+from ..bisection import guided, log_ratio, run
+from ..bounded_min import bounded_minimum
+from ..edf import _gammainccinv, CI_LEVEL
+from ..nnls import nnls_scaled
+from ..terms import filtered_white_shape, TERMS
+from ..units import ALL_TERMS, conventional, IEEE_TERMS, si_unit
 
 #: Correlation width (decades) of AVAR estimates vs noise exponent alpha (measured, see doc).
 CORRELATION_WIDTH = {2: 0.41, 1: 0.41, 0: 0.41, -1: 0.58, -2: 1.08}
@@ -76,6 +75,12 @@ class AxisFit:
     candidates: list = field(default_factory=list)
     #: what another curve said about the open term sets (:func:`.hadamard_check.check`)
     evidence: list = field(default_factory=list)
+    #: the averaging times fitted, and why (:class:`.tau_range.TauRange`; None: all usable)
+    tau_range: object = None
+    #: does the model describe the curve (:class:`.adequacy.Adequacy`; set by fit_noise_model)
+    adequacy: object = None
+    #: the measured curve as fitted (:class:`Problem`: span, weights, fixed line frequencies)
+    problem: object = None
 
 
 class FitError(ValueError):
@@ -116,22 +121,34 @@ class Problem:
     correlation_widths = CORRELATION_WIDTH
     correlation_tails = CORRELATION_TAIL
 
-    def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None):
+    def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None, span=None):
         """
         Keep the usable averaging times of one axis (s, AVAR in SI units squared, EDF).
 
         ``duration_s`` (the record length) gives a rate ramp's drift variance
         (:func:`ramp_drift_variance`); without it a ramp's interval lacks that part.
+        ``span`` (a :class:`.tau_range.TauRange`): keep only its averaging times (those the
+        sensor's own processing does not shape), give white noise the shape its filter makes
+        (``filter_moment``: :func:`~imu_allan.core.terms.filtered_white_shape`) and fix the
+        frequency of its line (a ``sinusoid`` fitted on this problem keeps it, unprofiled).
         """
         self.duration_s = duration_s
+        tau = np.asarray(tau, dtype=float)
         ok = np.isfinite(avar) & (avar > 0) & np.isfinite(edf) & (edf >= _MIN_EDF)
+        if span is not None:
+            ok &= (tau >= span.lo * (1.0 - 1e-9)) & (tau <= span.hi * (1.0 + 1e-9))
         self.tau = tau[ok]
         self.avar = avar[ok]
         self.edf = edf[ok]
+        self.alpha = np.asarray(alpha)[ok]
         self.rate_hz = rate_hz
-        corr = correlation_matrix(self.tau, alpha[ok], self.correlation_widths,
-                                  self.correlation_tails) + 1e-9 * np.eye(ok.sum())
-        self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(corr)))
+        self.span = span
+        self.fixed = ({'sinusoid': span.line[0]} if span is not None and span.line is not None
+                      else {})
+        self.filter_moment = span.filter_moment if span is not None else 0.0
+        self.corr = correlation_matrix(self.tau, self.alpha, self.correlation_widths,
+                                       self.correlation_tails) + 1e-9 * np.eye(ok.sum())
+        self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(self.corr)))
         self._rel_sd = np.sqrt(2.0 / self.edf)
         self._floor = 1e-3 * self.avar  # the smallest noise AVAR a weight uses (whiten)
         self._columns = {}
@@ -141,7 +158,10 @@ class Problem:
         if position is not None:
             return TERMS[name].shape(self.tau, self.rate_hz, position)
         if name not in self._columns:  # profiles and forecasts ask again for every trial
-            self._columns[name] = TERMS[name].shape(self.tau, self.rate_hz, None)
+            self._columns[name] = (
+                filtered_white_shape(self.tau, self.rate_hz, self.filter_moment)
+                if name == 'white_noise' and self.filter_moment
+                else TERMS[name].shape(self.tau, self.rate_hz, None))
         return self._columns[name]
 
     def whiten(self, model, columns, deterministic=0.0):
@@ -213,46 +233,60 @@ def ramp_drift_variance(problem, coef):
         return 0.0
     w = float(problem.tau[-1])
     span = max(t_rec - 2.0 * w, w)
-    var_d = (2.0 * coef.get('white_noise', 0.0) / w
-             + 2.0 / math.pi * coef.get('bias_instability', 0.0)
-             * (math.log(max(t_rec / w, 1.0)) + 1.5)
-             + coef.get('rate_random_walk', 0.0) * t_rec
-             + 4.0 * coef.get('quantization', 0.0) / w ** 2)
-    return 4.0 * coef['rate_ramp'] * var_d / span ** 2
+    return 4.0 * coef['rate_ramp'] * drift_structure(coef, t_rec, w) / span ** 2
 
 
-def _nonlinear_range(problem, name):
-    """Log-position range of a hump term whose peak lies inside the measured span."""
-    lo, hi = TERMS[name].position_range(problem.tau[0], problem.tau[-1])
+def drift_structure(coef, t_rec, w):
+    """
+    Var(D): the difference of the noise's averages over windows ``w`` (s) ``t_rec`` apart.
+
+    The noise terms' structure function (``coef``: squared coefficients): 2 N^2 / w (white),
+    (2 B^2 / pi) (ln(T / w) + 1.5) (flicker), K^2 T (random walk), 4 Q^2 / w^2
+    (quantization); :func:`ramp_drift_variance` tells where it comes from.  ``w`` may be an
+    array.
+    """
+    w = np.asarray(w, dtype=float)
+    return (2.0 * coef.get('white_noise', 0.0) / w
+            + 2.0 / math.pi * coef.get('bias_instability', 0.0)
+            * (np.log(np.maximum(t_rec / w, 1.0)) + 1.5)
+            + coef.get('rate_random_walk', 0.0) * t_rec
+            + 4.0 * coef.get('quantization', 0.0) / w ** 2)
+
+
+def _nonlinear_range(problem, name, peaks=None):
+    """Log-position range of a hump term whose peak lies in ``peaks`` (s; default the span)."""
+    lo, hi = TERMS[name].position_range(*(peaks or (problem.tau[0], problem.tau[-1])))
     return math.log(lo), math.log(hi)
 
 
-def fit_terms(problem, names, profile_intervals=True):
+def fit_terms(problem, names, profile_intervals=True, peaks=None):
     """
     Fit the named terms; return an :class:`AxisFit` (profiling tau_c / f0 when present).
 
     ``profile_intervals=False`` leaves the intervals of tau_c / f0 NaN: their profile
     bisection is most of the cost of such a fit, and a caller comparing criteria (the
-    recording advisor) does not need them.
+    recording advisor) does not need them.  ``peaks`` ``(lo, hi)`` (s): where the hump of a
+    profiled term may peak (default: anywhere in the span).
     """
     names = list(names)
-    nl_names = [n for n in names if TERMS[n].position]
+    nonlinear = {n: problem.fixed[n] for n in names if n in problem.fixed}
+    nl_names = [n for n in names if TERMS[n].position and n not in nonlinear]
 
     ramp = deterministic_index(names)
 
     def evaluate(nonlinear):
         return problem.solve(shape_columns(problem, names, nonlinear), deterministic=ramp)
 
-    nonlinear = {}
     profiles = {}
     for name in nl_names:  # profile each nonlinear parameter with the others held
-        lo, hi = _nonlinear_range(problem, name)
+        lo, hi = _nonlinear_range(problem, name, peaks)
         grid = np.linspace(lo, hi, 25)
 
         def chi2_at(logp, name=name):
             trial = {**nonlinear, name: math.exp(logp)}
             for other in nl_names:
-                trial.setdefault(other, math.exp(np.mean(_nonlinear_range(problem, other))))
+                trial.setdefault(other, math.exp(np.mean(_nonlinear_range(problem, other,
+                                                                          peaks))))
             return evaluate(trial)[1]
         values = np.array([chi2_at(v) for v in grid])
         k = int(np.argmin(values))
@@ -285,7 +319,9 @@ def fit_terms(problem, names, profile_intervals=True):
         spec = TERMS[name]
         fit.terms[name] = spec.pack(value, nonlinear.get(name))
         position = None
-        if spec.position:
+        if name in problem.fixed:  # known from elsewhere (a line's frequency): no interval
+            position = (nonlinear[name],) * 2
+        elif spec.position:
             position = (_profile_interval(profiles[name], chi2) if profile_intervals
                         else (math.nan, math.nan))
         fit.intervals[name] = spec.pack(interval, position)
@@ -313,34 +349,68 @@ def _profile_interval(profile, chi2_min):
     return math.exp(crossing(grid[0])), math.exp(crossing(grid[-1]))
 
 
-def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None):
-    """Fit one axis; ``terms=None`` selects the IEEE terms by BIC (``duration_s``: Problem)."""
+def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=None):
+    """
+    Fit one axis; ``terms=None`` selects the IEEE terms (chi^2 + 2 k ln T, module docstring).
+
+    ``duration_s`` and ``span``: see :class:`Problem`.  In a selection every candidate set
+    also holds the span's line (known from the spectrum: a nuisance term, the same in every
+    set).  The returned fit keeps its problem (``fit.problem``).
+    """
     problem = Problem(np.asarray(tau, float), np.asarray(avar, float),
-                      np.asarray(edf, float), np.asarray(alpha), rate_hz, duration_s)
+                      np.asarray(edf, float), np.asarray(alpha), rate_hz, duration_s, span)
     if problem.tau.size == 0:
         raise FitError('no averaging time with a usable Allan variance')
     if terms is not None:
         unknown = [t for t in terms if t not in ALL_TERMS]
         if unknown:
             raise ValueError(f'unknown noise term(s): {", ".join(unknown)}')
-        return fit_terms(problem, terms)
+        fit = fit_terms(problem, terms)
+        fit.problem = problem
+        return fit
+    base = tuple(problem.fixed)
     candidates = list(IEEE_TERMS) if problem.tau.size >= 4 else ['white_noise']
     best, best_bic = None, math.inf
     penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
     scored = []
     for k in range(1, len(candidates) + 1):
         for subset in combinations(candidates, k):
-            fit = fit_terms(problem, subset)
-            if len(fit.terms) < k:  # a pinned-at-zero term: the smaller subset covers it
+            fit = fit_terms(problem, base + subset)
+            if not set(subset) <= set(fit.terms):  # a term pinned at zero: a smaller set has it
                 continue
             bic = fit.chi2 + len(fit.terms) * penalty
-            scored.append((bic, subset))
+            scored.append((bic, base + subset))
             if bic < best_bic:
                 best, best_bic = fit, bic
     if best is None:
-        return AxisFit(n_points=problem.tau.size)
+        return AxisFit(n_points=problem.tau.size, problem=problem)
     best.candidates = sorted(scored, key=lambda item: item[0])
+    best.problem = problem
     return best
+
+
+def widen(fit, scale):
+    """
+    Widen every interval of ``fit`` by ``scale`` (in place): its covariance by scale^2.
+
+    For a fit the adequacy test rejects (:attr:`.adequacy.Adequacy.scale`): main parameters
+    from the scaled covariance (:func:`coefficient_interval`), positions (tau_c, f0) by their
+    log half-widths times ``scale``; a fixed position stays a point.
+    """
+    if not scale > 1.0 or fit.cov is None:
+        return
+    fit.cov = fit.cov * scale * scale
+    for j, name in enumerate(fit.coef):
+        spec = TERMS[name]
+        interval = coefficient_interval(fit.coef[name], max(fit.cov[j, j], 0.0), CI_LEVEL,
+                                        name == 'rate_ramp')
+        position = None
+        if spec.position:
+            value = fit.terms[name][spec.position]
+            lo, hi = fit.intervals[name][spec.position]
+            position = ((lo, hi) if not (lo > 0 and hi > 0) else
+                        (value * (lo / value) ** scale, value * (hi / value) ** scale))
+        fit.intervals[name] = spec.pack(interval, position)
 
 
 def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LIMIT_DELTA_CHI2):
@@ -353,10 +423,15 @@ def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LI
     """
     problem = Problem(np.asarray(tau, float), np.asarray(avar, float), np.asarray(edf, float),
                       np.asarray(alpha), rate_hz)
-    others = [t for t in terms if t != term and t in IEEE_TERMS]
+    return problem_upper_limit(problem, terms, term, delta_chi2)
+
+
+def problem_upper_limit(problem, terms, term, delta_chi2=UPPER_LIMIT_DELTA_CHI2):
+    """:func:`upper_limit` on a :class:`Problem` (its span and fixed lines: a fit's own)."""
+    others = [t for t in terms if t != term and (t in IEEE_TERMS or t in problem.fixed)]
     if problem.tau.size < 2 or not others:
         return math.nan
-    base = shape_columns(problem, others, {})
+    base = shape_columns(problem, others, problem.fixed)
     extra = problem.column(term)
 
     ramp = deterministic_index(others)
@@ -426,190 +501,3 @@ def two_sided_z(level):
     z^2 is the chi-square(1) quantile with upper tail 1 - level (no scipy.special import).
     """
     return math.sqrt(2.0 * float(_gammainccinv(0.5, 1.0 - level)))
-
-
-class FittedModel:
-    """Result of :func:`fit_noise_model`: a :class:`NoiseModel` plus intervals per term."""
-
-    def __init__(self, fits, rate_hz, result=None):
-        """Wrap per-axis :class:`AxisFit` objects."""
-        self.fits = fits
-        self.rate_hz = rate_hz
-        self.result = result
-        self.model = NoiseModel({a: f.terms for a, f in fits.items()}, rate_hz)
-        self.intervals = {a: f.intervals for a, f in fits.items()}
-        self.chi2 = {a: f.chi2 for a, f in fits.items()}
-        self.dof = {a: f.dof for a, f in fits.items()}
-        self._upper_limits = {}
-
-    @property
-    def axes(self):
-        """Fitted axes."""
-        return list(self.fits)
-
-    def value(self, axis, term, param='value'):
-        """Return a fitted parameter (SI, continuous time), NaN if the term was not detected."""
-        return self.model.value(axis, term, param)
-
-    def interval(self, axis, term, param='value', level=CI_LEVEL):
-        """
-        Return the two-sided ``level`` interval of a parameter, ``(nan, nan)`` if not detected.
-
-        ``level`` defaults to 68.27 % (one standard deviation), the interval stored with the
-        fit.  Main parameters: :func:`coefficient_interval` from the squared coefficient and
-        its GLS variance (chi-square with Satterthwaite's degrees of freedom; normal for the
-        deterministic ramp); tau_c / f0: the stored profile interval's log half-widths scaled
-        by z = Phi^-1((1 + level) / 2).
-        """
-        stored = self.intervals.get(axis, {}).get(term, {}).get(param)
-        if stored is None:
-            return (math.nan, math.nan)
-        if not 0.0 < level < 1.0:
-            raise ValueError(f'confidence level {level!r} must be between 0 and 1')
-        if abs(level - CI_LEVEL) < 1e-12:
-            return stored
-        fit = self.fits[axis]
-        value = self.model.value(axis, term, param)
-        if param == TERMS[term].params[0] and term in fit.coef:
-            j = list(fit.coef).index(term)
-            return coefficient_interval(fit.coef[term], max(fit.cov[j, j], 0.0), level,
-                                        term == 'rate_ramp')
-        z = two_sided_z(level)
-        lo, hi = stored
-        return (value * (lo / value) ** z, value * (hi / value) ** z)
-
-    def alternatives(self, axis):
-        """
-        Term sets the data of ``axis`` cannot reject, the selected one first.
-
-        Every candidate set whose selection criterion is within :data:`ALTERNATIVE_MARGIN`
-        of the best (see there); ``[selected]`` when the terms were named, not selected.
-        """
-        fit = self.fits.get(axis)
-        if fit is None or not fit.terms:
-            return []
-        selected = list(fit.terms)
-        if not fit.candidates:
-            return [selected]
-        best = fit.candidates[0][0]
-        out = [selected]
-        rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
-        for crit, names in fit.candidates:
-            if (crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected)
-                    and frozenset(names) not in rejected):
-                out.append(list(names))
-        return out
-
-    def rejected(self, axis):
-        """
-        Term sets the Allan fit left open but another curve contradicts (JSON-ready).
-
-        ``[{'terms': [...], 'by': curve, ...}]``; so far only the Hadamard check of a rate
-        random walk against a rate ramp (:mod:`.hadamard_check`, curve ``'ohdev'``, with its
-        ``gain``, ``walk_min`` and ``walk_max``), run when :func:`fit_noise_model` is given
-        the OHDEV curve.
-        """
-        fit = self.fits.get(axis)
-        return [{'terms': e['terms'], 'by': e['curve'],
-                 **{k: v for k, v in e.items() if k not in ('terms', 'curve', 'rejected')}}
-                for e in (fit.evidence if fit is not None else []) if e['rejected']]
-
-    def decided_by(self, axis):
-        """
-        Name the curves that decided the term set of ``axis``; None while alternatives remain.
-
-        ``'oadev'`` when the Allan fit alone leaves no alternative, ``'oadev+ohdev'`` when the
-        Hadamard curve rejected the last ones; None when the terms were named or nothing was
-        fitted.
-        """
-        fit = self.fits.get(axis)
-        if (fit is None or not fit.terms or not fit.candidates
-                or len(self.alternatives(axis)) > 1):
-            return None
-        curves = ['oadev'] + sorted({e['curve'] for e in fit.evidence if e['rejected']})
-        return '+'.join(curves)
-
-    def upper_limit(self, axis, term):
-        """
-        95 % upper limit of a term the fit of ``axis`` did not select (SI, cached).
-
-        NaN if the term was selected, nothing was, or the data do not bound it (see
-        :func:`upper_limit`).  Exporters write it where a consumer needs a number.
-        """
-        key = (axis, term)
-        if key not in self._upper_limits:
-            selected = list(self.model.terms.get(axis, {}))
-            value = math.nan
-            if self.result is not None and selected and term not in selected:
-                r, j = self.result, self.result.axis_index(axis)
-                value = float(upper_limit(r.tau, r.avar[:, j], r.edf[:, j], r.alpha[:, j],
-                                          r.rate_hz, selected + [term], term))
-            self._upper_limits[key] = value
-        return self._upper_limits[key]
-
-    def model_avar(self, axis, tau):
-        """AVAR of the fitted model of an axis at ``tau`` (s)."""
-        return _terms.model_avar(self.model.terms.get(axis, {}), tau, self.rate_hz)
-
-    def term_report(self, axis):
-        """JSON-ready ``{term: {value, ci, unit, time, conventional}}`` for one axis."""
-        out = {}
-        for term, params in self.model.terms.get(axis, {}).items():
-            main = TERMS[term].params[0]
-            lo, hi = self.intervals[axis][term][main]
-            conv, conv_unit = conventional(axis, term, params[main])
-            entry = {'value': params[main], 'ci': [lo, hi], 'unit': si_unit(axis, term),
-                     'time': 'continuous',
-                     'conventional': {'value': conv, 'unit': conv_unit,
-                                      'ci': [conventional(axis, term, lo)[0],
-                                             conventional(axis, term, hi)[0]]}}
-            for extra in params:
-                if extra != main:
-                    entry[extra] = {'value': params[extra],
-                                    'ci': list(self.intervals[axis][term][extra]),
-                                    'unit': TERMS[term].param_unit(axis, extra)}
-            out[term] = entry
-        return out
-
-
-def fit_noise_model(result, terms=None, axes=None, deviations=None):
-    """
-    Fit noise terms to every axis of an :class:`~imu_allan.core.allan.AllanResult`.
-
-    Parameters
-    ----------
-    result : AllanResult
-        Measured Allan deviation with EDF.
-    terms : sequence of str, optional
-        Terms to fit on every axis (any of :data:`~imu_allan.core.units.ALL_TERMS`); default:
-        automatic selection among the five IEEE terms by BIC.
-    axes : sequence of str, optional
-        Axes to fit (default all).
-    deviations : dict, optional
-        ``{kind: DeviationResult}`` of the same record (:func:`imu_allan.deviation`).  With
-        ``'ohdev'`` and automatic selection, the Hadamard curve decides between a rate random
-        walk and a rate ramp where the Allan fit cannot (:mod:`.hadamard_check`).
-
-    Returns
-    -------
-    FittedModel
-
-    """
-    if isinstance(terms, str):
-        terms = [t.strip() for t in terms.split(',') if t.strip()]
-    fits = {}
-    for axis in (axes or result.axes):
-        j = result.axis_index(axis)
-        fits[axis] = fit_axis(result.tau, result.avar[:, j], result.edf[:, j],
-                              result.alpha[:, j], result.rate_hz, terms,
-                              result.n_samples / result.rate_hz)
-        ohdev = (deviations or {}).get('ohdev')
-        if terms is None and ohdev is not None and axis in ohdev.axes:
-            from . import hadamard_check  # (it builds on this module)
-            hadamard = hadamard_check.hadamard_problem(ohdev, axis, fits[axis].coef)
-            if hadamard is not None:
-                allan = Problem(result.tau, result.avar[:, j], result.edf[:, j],
-                                result.alpha[:, j], result.rate_hz,
-                                result.n_samples / result.rate_hz)
-                fits[axis] = hadamard_check.decide(fits[axis], allan, hadamard)
-    return FittedModel(fits, result.rate_hz, result)

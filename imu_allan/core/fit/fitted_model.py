@@ -1,0 +1,342 @@
+"""
+A noise model fitted to every axis of an Allan deviation: :func:`fit_noise_model`.
+
+Per axis (:mod:`.axis` holds the machinery): the averaging times the sensor's own processing
+does not shape (:mod:`.tau_range`; all of them without a processing description), a line the
+spectrum shows fitted as the ``sinusoid`` term at its frequency, the IEEE 952 terms selected
+(chi^2 + 2 k ln T), the Hadamard check of a rate random walk against a ramp when the OHDEV
+curve is given (:mod:`.hadamard_check`), and last the adequacy test of the result
+(:mod:`.adequacy`): where the model does not describe the curve the intervals are widened by the
+Birge ratio and the spans it misses are named.
+"""
+
+import math
+
+import numpy as np
+
+from . import hadamard_check
+from .adequacy import assess
+from .axis import (
+    ALTERNATIVE_MARGIN,
+    coefficient_interval,
+    drift_structure,
+    fit_axis,
+    fit_terms,
+    problem_upper_limit,
+    SELECTION_PENALTY,
+    two_sided_z,
+    widen,
+)
+from .tau_range import choose, TauRange
+from .. import terms as _terms
+from ..edf import CI_LEVEL
+from ..model import NoiseModel
+from ..terms import TERMS
+from ..units import conventional, si_unit
+
+
+class FittedModel:
+    """Result of :func:`fit_noise_model`: a :class:`NoiseModel` plus intervals per term."""
+
+    def __init__(self, fits, rate_hz, result=None):
+        """Wrap per-axis :class:`AxisFit` objects."""
+        self.fits = fits
+        self.rate_hz = rate_hz
+        self.result = result
+        self.model = NoiseModel({a: f.terms for a, f in fits.items()}, rate_hz)
+        self.intervals = {a: f.intervals for a, f in fits.items()}
+        self.chi2 = {a: f.chi2 for a, f in fits.items()}
+        self.dof = {a: f.dof for a, f in fits.items()}
+        self._upper_limits = {}
+
+    @property
+    def axes(self):
+        """Fitted axes."""
+        return list(self.fits)
+
+    def value(self, axis, term, param='value'):
+        """Return a fitted parameter (SI, continuous time), NaN if the term was not detected."""
+        return self.model.value(axis, term, param)
+
+    def interval(self, axis, term, param='value', level=CI_LEVEL):
+        """
+        Return the two-sided ``level`` interval of a parameter, ``(nan, nan)`` if not detected.
+
+        ``level`` defaults to 68.27 % (one standard deviation), the interval stored with the
+        fit.  Main parameters: :func:`coefficient_interval` from the squared coefficient and
+        its GLS variance (chi-square with Satterthwaite's degrees of freedom; normal for the
+        deterministic ramp); tau_c / f0: the stored profile interval's log half-widths scaled
+        by z = Phi^-1((1 + level) / 2).
+        """
+        stored = self.intervals.get(axis, {}).get(term, {}).get(param)
+        if stored is None:
+            return (math.nan, math.nan)
+        if not 0.0 < level < 1.0:
+            raise ValueError(f'confidence level {level!r} must be between 0 and 1')
+        if abs(level - CI_LEVEL) < 1e-12:
+            return stored
+        fit = self.fits[axis]
+        value = self.model.value(axis, term, param)
+        if param == TERMS[term].params[0] and term in fit.coef:
+            j = list(fit.coef).index(term)
+            return coefficient_interval(fit.coef[term], max(fit.cov[j, j], 0.0), level,
+                                        term == 'rate_ramp')
+        z = two_sided_z(level)
+        lo, hi = stored
+        return (value * (lo / value) ** z, value * (hi / value) ** z)
+
+    def alternatives(self, axis):
+        """
+        Term sets the data of ``axis`` cannot reject, the selected one first.
+
+        Every candidate set whose selection criterion is within :data:`ALTERNATIVE_MARGIN`
+        of the best (see there); ``[selected]`` when the terms were named, not selected.
+        """
+        fit = self.fits.get(axis)
+        if fit is None or not fit.terms:
+            return []
+        selected = list(fit.terms)
+        if not fit.candidates:
+            return [selected]
+        best = fit.candidates[0][0]
+        out = [selected]
+        rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
+        for crit, names in fit.candidates:
+            if (crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected)
+                    and frozenset(names) not in rejected):
+                out.append(list(names))
+        return out
+
+    def rejected(self, axis):
+        """
+        Term sets the Allan fit left open but another curve contradicts (JSON-ready).
+
+        ``[{'terms': [...], 'by': curve, ...}]``; so far only the Hadamard check of a rate
+        random walk against a rate ramp (:mod:`.hadamard_check`, curve ``'ohdev'``, with its
+        ``gain``, ``walk_min`` and ``walk_max``), run when :func:`fit_noise_model` is given
+        the OHDEV curve.
+        """
+        fit = self.fits.get(axis)
+        return [{'terms': e['terms'], 'by': e['curve'],
+                 **{k: v for k, v in e.items() if k not in ('terms', 'curve', 'rejected')}}
+                for e in (fit.evidence if fit is not None else []) if e['rejected']]
+
+    def decided_by(self, axis):
+        """
+        Name the curves that decided the term set of ``axis``; None while alternatives remain.
+
+        ``'oadev'`` when the Allan fit alone leaves no alternative, ``'oadev+ohdev'`` when the
+        Hadamard curve rejected the last ones; None when the terms were named or nothing was
+        fitted.
+        """
+        fit = self.fits.get(axis)
+        if (fit is None or not fit.terms or not fit.candidates
+                or len(self.alternatives(axis)) > 1):
+            return None
+        curves = ['oadev'] + sorted({e['curve'] for e in fit.evidence if e['rejected']})
+        return '+'.join(curves)
+
+    def upper_limit(self, axis, term):
+        """
+        95 % upper limit of a term the fit of ``axis`` did not select (SI, cached).
+
+        NaN if the term was selected, nothing was, or the data do not bound it (see
+        :func:`upper_limit`).  Exporters write it where a consumer needs a number.
+        """
+        key = (axis, term)
+        if key not in self._upper_limits:
+            selected = list(self.model.terms.get(axis, {}))
+            value = math.nan
+            problem = self.fits[axis].problem if axis in self.fits else None
+            if problem is not None and selected and term not in selected:
+                value = float(problem_upper_limit(problem, selected + [term], term))
+            self._upper_limits[key] = value
+        return self._upper_limits[key]
+
+    def adequacy(self, axis):
+        """The adequacy test of ``axis`` (:class:`.adequacy.Adequacy`), None if not fitted."""
+        fit = self.fits.get(axis)
+        return None if fit is None else fit.adequacy
+
+    def tau_range(self, axis):
+        """The averaging times fitted on ``axis`` (:class:`.tau_range.TauRange`) or None."""
+        fit = self.fits.get(axis)
+        return None if fit is None else fit.tau_range
+
+    def model_avar(self, axis, tau):
+        """AVAR of the fitted model of an axis at ``tau`` (s)."""
+        return _terms.model_avar(self.model.terms.get(axis, {}), tau, self.rate_hz)
+
+    def term_report(self, axis):
+        """JSON-ready ``{term: {value, ci, unit, time, conventional}}`` for one axis."""
+        out = {}
+        for term, params in self.model.terms.get(axis, {}).items():
+            main = TERMS[term].params[0]
+            lo, hi = self.intervals[axis][term][main]
+            conv, conv_unit = conventional(axis, term, params[main])
+            entry = {'value': params[main], 'ci': [lo, hi], 'unit': si_unit(axis, term),
+                     'time': 'continuous',
+                     'conventional': {'value': conv, 'unit': conv_unit,
+                                      'ci': [conventional(axis, term, lo)[0],
+                                             conventional(axis, term, hi)[0]]}}
+            for extra in params:
+                if extra != main:
+                    entry[extra] = {'value': params[extra],
+                                    'ci': list(self.intervals[axis][term][extra]),
+                                    'unit': TERMS[term].param_unit(axis, extra)}
+            out[term] = entry
+        return out
+
+
+def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=None,
+                    tau_range=None):
+    """
+    Fit noise terms to every axis of an :class:`~imu_allan.core.allan.AllanResult`.
+
+    Parameters
+    ----------
+    result : AllanResult
+        Measured Allan deviation with EDF.
+    terms : sequence of str, optional
+        Terms to fit on every axis (any of :data:`~imu_allan.core.units.ALL_TERMS`); default:
+        automatic selection among the five IEEE terms by BIC.
+    axes : sequence of str, optional
+        Axes to fit (default all).
+    deviations : dict, optional
+        ``{kind: DeviationResult}`` of the same record (:func:`imu_allan.deviation`).  With
+        ``'ohdev'`` and automatic selection, the Hadamard curve decides between a rate random
+        walk and a rate ramp where the Allan fit cannot (:mod:`.hadamard_check`).
+    processing : dict, optional
+        ``{axis: Processing}``: what the sensor's own processing does to each axis (filter,
+        lines, resonances; :class:`.tau_range.Processing`, measured by
+        :func:`imu_allan.core.sensor.measure_sensor` or known from the device).  The fit then
+        leaves out the averaging times it shapes and fits a visible line as the ``sinusoid``
+        term (:mod:`.tau_range`).  Without it every usable averaging time is fitted.
+    tau_range : (float, float), optional
+        Fit only these averaging times (s) on every axis, instead of the choice above.
+
+    Returns
+    -------
+    FittedModel
+
+    """
+    if isinstance(terms, str):
+        terms = [t.strip() for t in terms.split(',') if t.strip()]
+    fits = {}
+    duration = result.n_samples / result.rate_hz
+    for axis in (axes or result.axes):
+        j = result.axis_index(axis)
+        tau, avar, edf, alpha = result.tau, result.avar[:, j], result.edf[:, j], result.alpha[:, j]
+        proc = (processing or {}).get(axis)
+        span = _span(tau, avar, edf, result.rate_hz, proc, tau_range)
+        fit = fit_axis(tau, avar, edf, alpha, result.rate_hz, terms, duration, span)
+        ohdev = (deviations or {}).get('ohdev')
+        if terms is None and ohdev is not None and axis in ohdev.axes and fit.terms:
+            hadamard = hadamard_check.hadamard_problem(ohdev, axis, fit.coef, span.lo)
+            if hadamard is not None:
+                problem = fit.problem
+                fit = hadamard_check.decide(fit, problem, hadamard)
+                fit.problem = problem
+        fit.tau_range = span
+        _assess(fit, result.rate_hz, proc)
+        if terms is None:
+            fit = _bounded_drift(fit, result.rate_hz, proc)
+        fits[axis] = fit
+    return FittedModel(fits, result.rate_hz, result)
+
+
+def _span(tau, avar, edf, rate_hz, processing, tau_range):
+    """The :class:`TauRange` of one axis: the usable points, cut as asked or as chosen."""
+    ok = (avar > 0) & (edf >= 1.0)
+    if not ok.any():
+        return TauRange(math.nan, math.nan)
+    span = choose(processing, tau[ok], avar[ok], edf[ok], rate_hz)
+    if tau_range is not None:  # asked for: the span, with the shapes the processing gives
+        span.lo, span.hi = max(tau_range[0], tau[ok][0]), min(tau_range[1], tau[ok][-1])
+        span.limited_by = 'asked' if tau_range[0] > tau[ok][0] else None
+    return span
+
+
+def _assess(fit, rate_hz, processing):
+    """Set ``fit.adequacy`` (and widen the intervals of a model the curve rejects)."""
+    problem = fit.problem
+    if problem is None or not fit.terms:
+        return
+    tau = problem.tau
+    columns = np.column_stack([
+        params[TERMS[name].params[0]] ** 2
+        * problem.column(name, params.get(TERMS[name].position) if TERMS[name].position
+                         else None)
+        for name, params in fit.terms.items()])
+    names = list(fit.terms)
+    model = columns.sum(axis=1)
+    ramp, drift, drift_sd = None, None, None
+    if 'rate_ramp' in names:
+        ramp = columns[:, names.index('rate_ramp')]
+        t_rec = problem.duration_s
+        if t_rec:  # the estimator's cross term R tau^2 D / (T - 2 tau), D the noise's drift
+            drift = tau * tau / np.maximum(t_rec - 2.0 * tau, tau)
+            drift_sd = (math.sqrt(fit.coef['rate_ramp']) * drift
+                        * np.sqrt(drift_structure(fit.coef, t_rec, tau)) / model)
+    fit.adequacy = assess(tau, problem.avar, problem.edf, problem.corr, model, columns,
+                          _namer(processing, tau), ramp, drift, drift_sd)
+    widen(fit, fit.adequacy.scale)
+
+
+def _bounded_drift(fit, rate_hz, processing):
+    """
+    Try a Gauss-Markov hump where the selected IEEE terms leave the curve undescribed.
+
+    Real records drift within bounds (temperature cycles, a mount that settles): the Allan
+    curve rises to a hump and falls again, which no IEEE term does (a random walk or ramp keeps
+    rising).  When the adequacy test rejects the selection, the selected set plus a
+    Gauss-Markov term peaking in the worst misfit span (half a decade either side), and the
+    same with the random walk or ramp replaced by it, are fitted; the best is kept if it beats
+    the selection by the criterion chi^2 + 2 k ln T (k counts tau_c too) and the test then
+    rejects it less (higher p).
+    """
+    worst = fit.adequacy.misfit[0] if fit.adequacy and fit.adequacy.misfit else None
+    if worst is None or 'gauss_markov' in fit.terms or not fit.candidates:
+        return fit
+    problem = fit.problem
+    penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
+    peaks = (max(worst.tau_s[0] / 3.0, problem.tau[0]), min(worst.tau_s[1] * 3.0,
+                                                            problem.tau[-1]))
+    names = list(fit.terms)
+    trials = {tuple(names) + ('gauss_markov',)}
+    trials.add(tuple(n for n in names if n not in ('rate_random_walk', 'rate_ramp'))
+               + ('gauss_markov',))
+    best, best_crit = None, fit.candidates[0][0]
+    for trial in trials:
+        new = fit_terms(problem, trial, peaks=peaks)
+        if 'gauss_markov' not in new.terms:
+            continue
+        crit = new.chi2 + (len(new.terms) + 1) * penalty
+        if crit < best_crit:
+            best, best_crit = new, crit
+    if best is None:
+        return fit
+    best.problem, best.tau_range = problem, fit.tau_range
+    best.candidates = [(best_crit, tuple(best.terms))]
+    _assess(best, rate_hz, processing)
+    return best if best.adequacy.p > fit.adequacy.p else fit
+
+
+def _namer(processing, tau):
+    """Name what bends a misfit span ``(lo, hi, ratio)`` from what is known of the sensor."""
+    def name(lo, hi, ratio):
+        near = (lambda t: lo / 3.0 <= t <= hi * 3.0)
+        if processing is not None:
+            for f, _ in sorted(processing.lines, key=lambda ln: -ln[1]):
+                if near(_terms.TERMS['sinusoid'].peak_ratio / f):
+                    return f'a {f:.3g} Hz line'
+            for f_lo, f_hi, _ in processing.humps:
+                if near(_terms.TERMS['sinusoid'].peak_ratio / f_lo):
+                    return f'a resonance at {f_lo:.3g}-{f_hi:.3g} Hz'
+            if lo <= tau[0] and processing.filter_moment > 0 and ratio < 1.0:
+                return "the sensor's filter"
+        if hi >= tau[-1]:
+            return ('more drift than the model (random walk, ramp or temperature)' if ratio > 1
+                    else 'a bounded drift the model lacks (Gauss-Markov or an oscillation)')
+        return None
+    return name

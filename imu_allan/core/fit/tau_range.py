@@ -1,0 +1,149 @@
+"""
+The averaging times a fit may use, and the shape the sensor's own processing gives white noise.
+
+Real IMUs filter their samples, resonate and carry vibration lines (docs/method.md, "Sensor
+processing").  None of that is an IEEE 952 term, and each bends the short end of the Allan curve,
+where the estimates have the most degrees of freedom and so the most weight: a fit that ignores
+it puts N 15-32 % low and B 2-40x high on real ADIS16405 records, while the conventional reading
+(IEEE 952, allan_variance_ros, MATLAB's allanvar) takes N from the -1/2 region.  What each
+effect does at tau = m tau0:
+
+* a filter (band-limited white noise; sample-and-hold repeats are one): for m at or beyond its
+  correlation length L the white part's AVAR is exactly N^2 / tau - 1.5 (D / S) N^2 / (fs tau^2)
+  (D / S the filter moment; :func:`~imu_allan.core.terms.filtered_white_shape`).  The fit gives
+  white noise that shape and starts at m = L + 1 (one sample beyond the closed form's reach, for
+  a correlation the measurement cut short).  A negative moment is white phase noise's own
+  (quantization Q, a term of the fit): no correction then.
+* a narrow line of amplitude A at f (aliased or not): A^2 sin^4(pi f tau) / (pi f tau)^2.  The
+  line most visible in the curve is fitted as the ``sinusoid`` term at the frequency the
+  spectrum shows (one per axis: the noise model holds one sinusoid); any other adds on average
+  3 A^2 / (8 (pi f tau)^2) once tau spans several periods.
+* a broad resonance of excess variance P from f_lo up: on average 3 P / (4 (pi f_lo tau)^2).
+
+Effects not fitted as a term are cut away: the fit starts at the shortest averaging time from
+which each of them stays below :data:`KAPPA` standard deviations of the AVAR estimate
+(sqrt(2 / EDF)) at that time and every longer one.  Why a fraction of the estimate's own scatter:
+a systematic shift of a third of a standard deviation over strongly correlated points moves a
+coefficient by a small part of its interval; shifts of many deviations are what bias the
+ADIS16405 fits.
+"""
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from ..terms import sinusoid_shape
+
+#: Largest effect of the processing not fitted allowed at a fitted averaging time, in standard
+#: deviations of its AVAR estimate.
+KAPPA = 0.3
+#: Fewest averaging times a fit keeps, however far the processing reaches.
+MIN_POINTS = 8
+
+
+@dataclass(frozen=True)
+class Processing:
+    """
+    What a sensor's own processing does to one axis (measured, :mod:`..sensor`, or known).
+
+    ``filter_length``: output samples over which the white noise is correlated (0: none);
+    ``filter_moment``: D / S of that correlation (samples; positive for a low-pass);
+    ``lines``: ``((frequency_hz, amplitude), ...)`` narrow lines (peak amplitude, SI);
+    ``humps``: ``((f_lo_hz, f_hi_hz, excess_variance), ...)`` broad resonances (SI^2);
+    ``source``: where the filter figures come from (``'measured'`` or ``'device'``).
+    """
+
+    filter_length: int = 0
+    filter_moment: float = 0.0
+    lines: tuple = ()
+    humps: tuple = ()
+    source: str = 'measured'
+
+    @classmethod
+    def moving_average(cls, window_samples, lines=(), humps=()):
+        """
+        The filter of a moving average ``window_samples`` output samples long (a device's).
+
+        A window of M taps at an internal rate, decimated by D to the output, gives white
+        noise the autocorrelation max(0, 1 - k / w) at output lag k, w = M / D (the
+        3DM-GX3-25's 0xDB window: 15 taps at 1 kHz, w = 1.5 at 100 Hz).
+        """
+        w = float(window_samples)
+        k = np.arange(1, max(math.ceil(w), 1))
+        rho = np.maximum(0.0, 1.0 - k / w) if w > 1.0 else np.zeros(0)
+        s = 1.0 + 2.0 * rho.sum()
+        return cls(int(k.size), float(2.0 * np.sum(k * rho) / s), tuple(lines), tuple(humps),
+                   'device')
+
+
+@dataclass
+class TauRange:
+    """The averaging times a fit uses, why its lower end is where it is, and its shapes."""
+
+    lo: float
+    hi: float
+    #: what set the lower end: 'filter', 'line', 'resonance', 'asked' or None (the shortest)
+    limited_by: str = None
+    #: the line fitted as the sinusoid term: (frequency_hz, amplitude) or None
+    line: tuple = None
+    #: D / S given to white noise's shape (0: none), and the correlation length, samples
+    filter_moment: float = 0.0
+    filter_length: int = 0
+    #: each effect not fitted, at the lower end, in standard deviations of the estimate there
+    effects: dict = field(default_factory=dict)
+
+    def to_json(self):
+        """JSON-ready ``[lo, hi]`` (report.json ``axes.<axis>.fit.tau_range_s``)."""
+        return [float(self.lo), float(self.hi)]
+
+
+def _tail(amplitude_sq, f_hz, tau):
+    """Average AVAR of a narrow band of variance-scale ``amplitude_sq`` at f beyond tau ~ 1/f."""
+    return 3.0 * amplitude_sq / (8.0 * (math.pi * f_hz * tau) ** 2)
+
+
+def choose(processing, tau, avar, edf, rate_hz, kappa=KAPPA):
+    """
+    The fit's span of averaging times for one axis (a :class:`TauRange`).
+
+    ``tau``, ``avar``, ``edf``: the measured curve (usable points, increasing tau);
+    ``processing``: a :class:`Processing` or None (then the whole curve, plain shapes).
+    """
+    tau = np.asarray(tau, dtype=float)
+    avar = np.asarray(avar, dtype=float)
+    if tau.size == 0:
+        return TauRange(math.nan, math.nan)
+    if processing is None:
+        return TauRange(float(tau[0]), float(tau[-1]))
+    sd = np.sqrt(2.0 / np.asarray(edf, dtype=float))
+    line = _visible_line(processing, tau, avar, sd, kappa)
+    moment = max(processing.filter_moment, 0.0)
+    start, limited_by = 0, None
+    if moment > 0.0:
+        start = int(np.searchsorted(tau * rate_hz, processing.filter_length + 1 - 1e-9))
+        limited_by = 'filter' if start else None
+    rel = {}
+    others = [ln for ln in processing.lines if ln != line]
+    if others:
+        rel['line'] = sum(_tail(a * a, f, tau) for f, a in others) / avar
+    if processing.humps:
+        rel['resonance'] = sum(_tail(2.0 * p, f_lo, tau) for f_lo, _, p in processing.humps) / avar
+    for name, size in rel.items():
+        over = np.flatnonzero(size > kappa * sd)
+        if over.size and over[-1] + 1 > start:
+            start, limited_by = int(over[-1]) + 1, name
+    start = min(start, max(tau.size - MIN_POINTS, 0))
+    return TauRange(float(tau[start]), float(tau[-1]), limited_by if start else None, line,
+                    moment, processing.filter_length,
+                    {name: float(size[start] / sd[start]) for name, size in rel.items()})
+
+
+def _visible_line(processing, tau, avar, sd, kappa):
+    """The line most visible in the curve (largest AVAR / estimate sd), if visible at all."""
+    best, best_vis = None, kappa
+    for f, a in processing.lines:
+        visibility = float(np.max(a * a * sinusoid_shape(tau, f) / avar / sd))
+        if visibility > best_vis:
+            best, best_vis = (f, a), visibility
+    return best
