@@ -48,6 +48,7 @@ import math
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from .fit.tau_range import Processing
 from .sensor_spectrum import find_lines, fit_white, Hump, Line, Welch  # noqa: F401 - API
 from .units import AXES, sample_unit
 
@@ -164,6 +165,12 @@ class AxisSensor:
         m = np.asarray(tau, dtype=float) * self.rate_hz
         return s / m - 1.5 * d / (m * m)
 
+    def processing(self):
+        """This axis as the fit takes it (:class:`~.fit.tau_range.Processing`)."""
+        return Processing(self.filter_length or 0, self.filter_moment or 0.0,
+                          tuple((ln.frequency_hz, ln.amplitude) for ln in self.lines),
+                          tuple((*h.frequency_range_hz, h.excess_variance) for h in self.humps))
+
     def to_json(self):
         """Return a JSON-ready dict: SI, per sample or continuous time as :data:`JSON_UNITS`."""
         return {
@@ -212,6 +219,16 @@ class SensorReport:
     rate_hz: float
     n_samples: int
     axes: dict
+
+    def processing(self):
+        """
+        ``{axis: Processing}``: what the fit needs of each axis (:mod:`.fit.tau_range`).
+
+        The filter's length and moment (a negative moment, white phase noise's, is left to
+        the quantization term), the lines as (frequency, amplitude), the humps as
+        (f_lo, f_hi, excess variance).
+        """
+        return {name: ax.processing() for name, ax in self.axes.items()}
 
     def to_json(self):
         """Return the ``sensor`` entry of report.json (SI; None for what was not measured)."""

@@ -126,6 +126,18 @@ def sinusoid_shape(tau, frequency_hz):
     return (np.sin(x) ** 2 / x) ** 2
 
 
+def band_shape(tau, f_lo, f_hi, points=64):
+    """
+    AVAR per unit variance of noise spread evenly over the band [f_lo, f_hi] Hz (a resonance).
+
+    Each frequency f in it contributes as a sinusoid of that power does (amplitude^2 = 2 x
+    power): 2 sin^4(pi f tau) / (pi f tau)^2, averaged over the band (``points`` midpoints).
+    """
+    f = f_lo + (np.arange(points) + 0.5) * ((f_hi - f_lo) / points)
+    x = math.pi * np.asarray(tau, dtype=float)[..., None] * f
+    return 2.0 * np.mean((np.sin(x) ** 2 / x) ** 2, axis=-1)
+
+
 def quantization_shape(tau):
     """AVAR of quantization noise per unit Q^2: 3 / tau^2 (IEEE Std 952, Table C.1)."""
     return 3.0 / np.asarray(tau, dtype=float) ** 2

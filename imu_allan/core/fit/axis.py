@@ -37,7 +37,7 @@ from ..bisection import guided, log_ratio, run
 from ..bounded_min import bounded_minimum
 from ..edf import _gammainccinv, CI_LEVEL
 from ..nnls import nnls_scaled
-from ..terms import filtered_white_shape, TERMS
+from ..terms import filtered_white_shape, sinusoid_shape, TERMS
 from ..units import ALL_TERMS, conventional, IEEE_TERMS, si_unit
 
 #: Correlation width (decades) of AVAR estimates vs noise exponent alpha (measured, see doc).
@@ -81,6 +81,8 @@ class AxisFit:
     adequacy: object = None
     #: the measured curve as fitted (:class:`Problem`: span, weights, fixed line frequencies)
     problem: object = None
+    #: the span's nuisance lines, fitted: frequency (Hz) -> amplitude (SI, peak)
+    lines: dict = field(default_factory=dict)
 
 
 class FitError(ValueError):
@@ -146,6 +148,11 @@ class Problem:
         self.fixed = ({'sinusoid': span.line[0]} if span is not None and span.line is not None
                       else {})
         self.filter_moment = span.filter_moment if span is not None else 0.0
+        #: the span's other lines: nuisance columns every fit of this problem carries, their
+        #: amplitudes fitted (the sensor's, not noise terms), per unit amplitude^2
+        self.lines = tuple(f for f, _ in span.lines) if span is not None else ()
+        self.nuisance = (np.column_stack([sinusoid_shape(self.tau, f) for f in self.lines])
+                         if self.lines else None)
         self.corr = correlation_matrix(self.tau, self.alpha, self.correlation_widths,
                                        self.correlation_tails) + 1e-9 * np.eye(ok.sum())
         self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(self.corr)))
@@ -163,6 +170,10 @@ class Problem:
                 if name == 'white_noise' and self.filter_moment
                 else TERMS[name].shape(self.tau, self.rate_hz, None))
         return self._columns[name]
+
+    def with_nuisance(self, columns):
+        """``columns`` (term shapes, one column each) followed by the nuisance lines' shapes."""
+        return columns if self.nuisance is None else np.column_stack([columns, self.nuisance])
 
     def whiten(self, model, columns, deterministic=0.0):
         """
@@ -275,7 +286,8 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
     ramp = deterministic_index(names)
 
     def evaluate(nonlinear):
-        return problem.solve(shape_columns(problem, names, nonlinear), deterministic=ramp)
+        return problem.solve(problem.with_nuisance(shape_columns(problem, names, nonlinear)),
+                             deterministic=ramp)
 
     profiles = {}
     for name in nl_names:  # profile each nonlinear parameter with the others held
@@ -297,9 +309,12 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
         profiles[name] = (grid, values, logp, chi2_at)
     coef, chi2, g = evaluate(nonlinear)
     fit = AxisFit(chi2=chi2, n_points=problem.tau.size)
+    coef, lines = coef[:len(names)], coef[len(names):]
+    fit.lines = {f: math.sqrt(c) for f, c in zip(problem.lines, lines) if c > 0}
     active = coef > 0
-    try:
-        cov = np.linalg.inv(g[:, active].T @ g[:, active])
+    used = np.concatenate([active, lines > 0])  # the nuisance columns count for the covariance
+    try:  # (the terms come first: their block of the inverse is their marginal covariance)
+        cov = np.linalg.inv(g[:, used].T @ g[:, used])[:active.sum(), :active.sum()]
     except np.linalg.LinAlgError:
         cov = np.full((active.sum(), active.sum()), np.nan)
     sd = np.full(coef.size, np.nan)
@@ -325,7 +340,7 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
             position = (_profile_interval(profiles[name], chi2) if profile_intervals
                         else (math.nan, math.nan))
         fit.intervals[name] = spec.pack(interval, position)
-    n_params = int(active.sum()) + sum(1 for n in nl_names if n in fit.terms)
+    n_params = int(used.sum()) + sum(1 for n in nl_names if n in fit.terms)
     fit.dof = max(problem.tau.size - n_params, 0)
     return fit
 
@@ -431,7 +446,7 @@ def problem_upper_limit(problem, terms, term, delta_chi2=UPPER_LIMIT_DELTA_CHI2)
     others = [t for t in terms if t != term and (t in IEEE_TERMS or t in problem.fixed)]
     if problem.tau.size < 2 or not others:
         return math.nan
-    base = shape_columns(problem, others, problem.fixed)
+    base = problem.with_nuisance(shape_columns(problem, others, problem.fixed))
     extra = problem.column(term)
 
     ramp = deterministic_index(others)

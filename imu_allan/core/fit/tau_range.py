@@ -14,13 +14,14 @@ effect does at tau = m tau0:
   white noise that shape and starts at m = L + 1 (one sample beyond the closed form's reach, for
   a correlation the measurement cut short).  A negative moment is white phase noise's own
   (quantization Q, a term of the fit): no correction then.
-* a narrow line of amplitude A at f (aliased or not): A^2 sin^4(pi f tau) / (pi f tau)^2.  The
-  line most visible in the curve is fitted as the ``sinusoid`` term at the frequency the
-  spectrum shows (one per axis: the noise model holds one sinusoid); any other adds on average
-  3 A^2 / (8 (pi f tau)^2) once tau spans several periods.
+* a narrow line of amplitude A at f (aliased or not): A^2 sin^4(pi f tau) / (pi f tau)^2.  Every
+  line visible in the curve is fitted at the frequency the spectrum shows, the most visible one
+  as the ``sinusoid`` term (one per axis: the noise model holds one sinusoid), the others as
+  nuisance columns of the fit (``AxisFit.lines``): a line is the sensor's, not a reason to
+  lose the averaging times it crosses.
 * a broad resonance of excess variance P from f_lo up: on average 3 P / (4 (pi f_lo tau)^2).
 
-Effects not fitted as a term are cut away: the fit starts at the shortest averaging time from
+What is not fitted (a resonance) is cut away: the fit starts at the shortest averaging time from
 which each of them stays below :data:`KAPPA` standard deviations of the AVAR estimate
 (sqrt(2 / EDF)) at that time and every longer one.  Why a fraction of the estimate's own scatter:
 a systematic shift of a third of a standard deviation over strongly correlated points moves a
@@ -33,7 +34,7 @@ import math
 
 import numpy as np
 
-from ..terms import sinusoid_shape
+from ..terms import band_shape, sinusoid_shape
 
 #: Largest effect of the processing not fitted allowed at a fitted averaging time, in standard
 #: deviations of its AVAR estimate.
@@ -87,6 +88,9 @@ class TauRange:
     limited_by: str = None
     #: the line fitted as the sinusoid term: (frequency_hz, amplitude) or None
     line: tuple = None
+    #: the other visible lines, fitted as nuisance (the sensor's): ((frequency_hz, amplitude),)
+    lines: tuple = ()
+
     #: D / S given to white noise's shape (0: none), and the correlation length, samples
     filter_moment: float = 0.0
     filter_length: int = 0
@@ -117,33 +121,28 @@ def choose(processing, tau, avar, edf, rate_hz, kappa=KAPPA):
     if processing is None:
         return TauRange(float(tau[0]), float(tau[-1]))
     sd = np.sqrt(2.0 / np.asarray(edf, dtype=float))
-    line = _visible_line(processing, tau, avar, sd, kappa)
+    visible = _visible_lines(processing, tau, avar, sd, kappa)
+    line, others = (visible[0], tuple(visible[1:])) if visible else (None, ())
     moment = max(processing.filter_moment, 0.0)
     start, limited_by = 0, None
     if moment > 0.0:
         start = int(np.searchsorted(tau * rate_hz, processing.filter_length + 1 - 1e-9))
         limited_by = 'filter' if start else None
-    rel = {}
-    others = [ln for ln in processing.lines if ln != line]
-    if others:
-        rel['line'] = sum(_tail(a * a, f, tau) for f, a in others) / avar
-    if processing.humps:
-        rel['resonance'] = sum(_tail(2.0 * p, f_lo, tau) for f_lo, _, p in processing.humps) / avar
-    for name, size in rel.items():
+    if processing.humps:  # cut where a resonance shifts the estimate by more than kappa sd
+        size = sum(p * band_shape(tau, lo, hi) for lo, hi, p in processing.humps) / avar
         over = np.flatnonzero(size > kappa * sd)
         if over.size and over[-1] + 1 > start:
-            start, limited_by = int(over[-1]) + 1, name
+            start, limited_by = int(over[-1]) + 1, 'resonance'
     start = min(start, max(tau.size - MIN_POINTS, 0))
     return TauRange(float(tau[start]), float(tau[-1]), limited_by if start else None, line,
-                    moment, processing.filter_length,
-                    {name: float(size[start] / sd[start]) for name, size in rel.items()})
+                    others, moment, processing.filter_length)
 
 
-def _visible_line(processing, tau, avar, sd, kappa):
-    """The line most visible in the curve (largest AVAR / estimate sd), if visible at all."""
-    best, best_vis = None, kappa
+def _visible_lines(processing, tau, avar, sd, kappa):
+    """The lines visible in the curve (AVAR over the estimate's sd above kappa), most first."""
+    seen = []
     for f, a in processing.lines:
         visibility = float(np.max(a * a * sinusoid_shape(tau, f) / avar / sd))
-        if visibility > best_vis:
-            best, best_vis = (f, a), visibility
-    return best
+        if visibility > kappa:
+            seen.append((visibility, (f, a)))
+    return [line for _, line in sorted(seen, reverse=True)]
