@@ -27,16 +27,17 @@ from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
 import numpy as np
 
-# Runs in a fresh interpreter: the steps of ``analyze INPUT --json``, each timed.  The two
-# functions analyze_samples calls for the estimate and the fit are wrapped to time them.
+# Runs in a fresh interpreter: the steps of ``analyze INPUT --json``, each timed (the stages
+# core.record.analyze_record runs, called one by one).  The two functions analyze_samples
+# calls for the estimate and the fit are wrapped to time them.
 _STEPS = r"""
 import sys, time
 clock = time.process_time if sys.argv[2] == 'cpu' else time.perf_counter
 t0 = clock()
 from imu_allan.cli import analyze
-from imu_allan.core import analysis
+from imu_allan.core import analysis, record
 from imu_allan.formats.readers import read_samples
-from imu_allan.report.advice import advice_to_json, compute_advice
+from imu_allan.report.advice import advice_to_json
 from imu_allan.report.json_report import analysis_to_json
 import json
 t1 = clock()
@@ -55,9 +56,9 @@ analysis._kalibr_upper_limits = timed(analysis._kalibr_upper_limits, 'fit')
 samples = read_samples(sys.argv[1])
 t2 = clock()
 options = analyze._options(analyze.build_parser().parse_args([sys.argv[1]]))
-result = analysis.analyze_samples(samples, options)
+result = analysis.analyze_samples(samples, options.analysis)
 t3 = clock()
-advice = compute_advice(result, options)
+advice = record.record_advice(result, options)
 t4 = clock()
 text = json.dumps({**analysis_to_json(result), 'advice': advice_to_json(advice)})
 t5 = clock()

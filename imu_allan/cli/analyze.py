@@ -18,12 +18,13 @@ from .common import (
     emit,
     guarded,
 )
+from .export_args import add_arguments as add_export_arguments
+from .export_args import check_overbound_args
 from .one_input import run_one
 from .progress import Progress
 from ..core.units import ALL_TERMS, IEEE_TERMS
 from ..errors import InputError
 from ..formats import FORMATS
-from ..report.exporters import add_arguments as add_export_arguments
 
 
 def build_parser():
@@ -97,25 +98,31 @@ def build_parser():
 
 
 def _options(args):
+    """Return the :class:`~imu_allan.core.record.RecordOptions` of parsed arguments."""
     terms = None
     if args.terms:
         terms = [t.strip() for t in args.terms.split(',') if t.strip()]
     if args.export and not args.out:
         raise InputError('--export', 'needs --out DIR (the files go into DIR/export/)')
-    from ..report.exporters import check_overbound_args
     check_overbound_args(args)
     from ..core.analysis import AnalysisOptions
     for term in terms or []:
         if term not in ALL_TERMS:
             raise InputError('--terms', f'unknown term {term!r} (known: {", ".join(ALL_TERMS)})')
     from ..core.advisor import parse_targets
-    args.targets = parse_targets(args.target, '--target')
+    targets = parse_targets(args.target, '--target')
+    from .export_args import export_options
     from ..core.deviations import parse_kinds
-    return AnalysisOptions(terms=terms, points_per_decade=args.points_per_decade,
-                           min_clusters=args.min_clusters, replace_outliers=args.replace_outliers,
-                           tau_max=args.tau_max, rate_hz=args.rate, allow_jumps=args.allow_jumps,
-                           online=args.online, allow_motion=args.allow_motion,
-                           estimators=parse_kinds(args.estimators, '--estimators'))
+    from ..core.record import RecordOptions
+    analysis = AnalysisOptions(terms=terms, points_per_decade=args.points_per_decade,
+                               min_clusters=args.min_clusters,
+                               replace_outliers=args.replace_outliers, tau_max=args.tau_max,
+                               rate_hz=args.rate, allow_jumps=args.allow_jumps,
+                               online=args.online, allow_motion=args.allow_motion,
+                               estimators=parse_kinds(args.estimators, '--estimators'))
+    return RecordOptions(analysis=analysis, targets=targets, dynamic_window_s=args.dynamic,
+                         denoise=args.denoise,
+                         overbound=export_options(args).overbound_request())
 
 
 @guarded

@@ -54,7 +54,12 @@ class AnalysisOptions:
 
 @dataclass
 class Analysis:
-    """Everything the reports show about one record."""
+    """
+    The estimate of one record: Allan deviation, fit, and the verdicts on the data.
+
+    Made by :func:`analyze_samples`; :class:`~.record.RecordAnalysis` holds it beside the
+    other parts of a record's analysis (advice, dynamic, temperature, ...).
+    """
 
     source: str
     axes: tuple
@@ -68,7 +73,11 @@ class Analysis:
     static: bool
     motion: dict
     warnings: list = field(default_factory=list)
+    #: The samples the estimate used, (n_samples, A), SI: the validated record after the
+    #: warm-up cut (``warmup_s``), outliers replaced when asked.
     data: np.ndarray = None
+    #: Their time stamps, (n_samples,), s: the rows of ``data``, the warm-up cut alike.  The
+    #: whole record (warm-up included) is ``samples``.
     t: np.ndarray = None
     upper_limits: dict = field(default_factory=dict)
     integrity: str = ''
@@ -245,7 +254,7 @@ def analyze_samples(samples, options=None):
     return Analysis(source=where, axes=tuple(samples.axes), n_samples=n, rate_hz=rate,
                     duration_s=n / rate, timing=timing, outliers=outliers, result=result,
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
-                    t=samples.t, upper_limits=upper,
+                    t=t, upper_limits=upper,
                     integrity=getattr(samples, 'integrity', ''), warmup_s=warmup_s,
                     allow_motion=options.allow_motion, deviations=deviations,
                     samples=samples)

@@ -62,7 +62,7 @@ def detect_format(path):
                            'rosbag2|ros1|csv|thesis|gx3raw)')
 
 
-def read_samples(path, fmt='auto', topic=None, fast=True):
+def read_samples(path, fmt='auto', topic=None, fast=True, temperature=False):
     """
     Read IMU samples from any supported input.
 
@@ -76,6 +76,9 @@ def read_samples(path, fmt='auto', topic=None, fast=True):
         Imu topic for bags (ignored for other formats).
     fast : bool
         Bags only: bulk decoder (True) or the generic deserializer (same numbers).
+    temperature : bool
+        Bags only: also read a ``sensor_msgs/Temperature`` topic into ``Samples.temperature``
+        (:func:`~.temperature_bag.read_temperature`; None when there is none).
 
     Returns
     -------
@@ -92,16 +95,16 @@ def read_samples(path, fmt='auto', topic=None, fast=True):
         raise InputError('--format', f'unknown format {fmt!r} (one of {", ".join(FORMATS)})')
     real = regular_input(path)  # a FIFO is copied once a writer appears; devices are refused
     if real == Path(path):
-        return _read(path, fmt, topic, fast)
+        return _read(path, fmt, topic, fast, temperature)
     try:
-        samples = _read(real, fmt, topic, fast)
+        samples = _read(real, fmt, topic, fast, temperature)
     except InputError as err:  # name the user's path, not the temporary copy
         raise InputError(path, err.problem.replace(str(real), str(path))) from None
     samples.source = samples.source.replace(str(real), str(path))
     return samples
 
 
-def _read(path, fmt, topic, fast):
+def _read(path, fmt, topic, fast, temperature=False):
     if fmt == 'auto':
         fmt = detect_format(path)
     elif not Path(path).exists():
@@ -112,7 +115,10 @@ def _read(path, fmt, topic, fast):
             raise InputError(path, 'not a ROS 1 bag')
         if fmt == 'rosbag2' and kind == 'ros1':
             raise InputError(path, 'a ROS 1 bag, not rosbag2 (use --format ros1)')
-        return read_bag(path, topic=topic, fast=fast)
+        samples = read_bag(path, topic=topic, fast=fast)
+        if temperature:
+            samples.temperature = _temperature(path, samples)
+        return samples
     if fmt == 'csv':
         return read_csv(path)
     if fmt == 'thesis':
@@ -120,3 +126,13 @@ def _read(path, fmt, topic, fast):
     # Imported here: the raw-capture reader belongs to the driver's protocol layer.
     from .gx3raw import read_gx3raw
     return read_gx3raw(path)
+
+
+def _temperature(path, samples):
+    """Return the bag's Temperature readings beside ``samples``; None: none, or unreadable."""
+    from .temperature_bag import read_temperature
+    try:
+        return read_temperature(path, imu_topic=samples.topic or '',
+                                topic_types=samples.topic_types)
+    except InputError:  # the temperature is only extra: the Imu readers report damage
+        return None

@@ -1,10 +1,21 @@
 """The in-memory form of an IMU recording that every reader returns."""
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 from ..core.units import AXES
+
+
+class Temperatures(NamedTuple):
+    """The ``sensor_msgs/Temperature`` readings of a bag, beside its Imu samples."""
+
+    topic: str
+    #: header stamps, s, on the clock of the Imu stamps, sorted
+    t: np.ndarray
+    #: deg C, one per stamp
+    celsius: np.ndarray
 
 
 @dataclass
@@ -34,9 +45,10 @@ class Samples:
         Bags: the Imu topic read ('' for other inputs).
     frame_id : str
         Bags: the ``header.frame_id`` of the first message ('' for other inputs).
-    temperature : tuple or None
-        Bags with a ``sensor_msgs/Temperature`` topic: ``(t, deg C)`` arrays (set by
-        ``analyze``, :mod:`imu_allan.report.temperature_report`); None otherwise.
+    temperature : Temperatures or None
+        Bags with a ``sensor_msgs/Temperature`` topic, read with the Imu when asked
+        (``read_samples(..., temperature=True)``, as ``analyze`` does): the topic and its
+        readings; None otherwise.
     topic_types : dict or None
         Bags read by the direct MCAP and sqlite3 readers: ``{topic: message type}`` of every
         topic in the bag; None where the reader did not list them.
@@ -53,7 +65,7 @@ class Samples:
     integrity: str = ''
     topic: str = ''
     frame_id: str = ''
-    temperature: tuple = None
+    temperature: 'Temperatures' = None
     topic_types: dict = None
 
     @property

@@ -11,6 +11,7 @@ import math
 import numpy as np
 
 from .bag_reader import any_reader, bag_kind
+from .samples import Temperatures
 from ..errors import InputError
 
 #: Message type names of sensor_msgs/Temperature (ROS 2 and ROS 1 spelling).
@@ -39,8 +40,9 @@ def read_temperature(path, imu_topic='', topic=None, topic_types=None):
     """
     Read the temperatures of a bag.
 
-    Returns ``(topic, t, celsius)`` (header stamps in s on the clock of the Imu stamps, deg C,
-    sorted by time, non-finite values and invalid stamps left out) or None when the bag has
+    Returns :class:`~.samples.Temperatures` ``(topic, t, celsius)`` (header stamps in s on
+    the clock of the Imu stamps, deg C, sorted by time, non-finite values and invalid stamps
+    left out) or None when the bag has
     no ``sensor_msgs/Temperature`` topic (or only an empty one).  A bag rosbags cannot open
     also gives None: the Imu readers report the damage, the temperature is only extra.
     ``topic`` picks one; ``imu_topic`` guides the default choice
@@ -81,4 +83,4 @@ def read_temperature(path, imu_topic='', topic=None, topic_types=None):
         return None
     t = np.asarray(stamps, dtype=np.float64)
     order = np.argsort(t, kind='stable')
-    return chosen, t[order], np.asarray(values, dtype=np.float64)[order]
+    return Temperatures(chosen, t[order], np.asarray(values, dtype=np.float64)[order])

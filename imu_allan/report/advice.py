@@ -1,6 +1,9 @@
 """
 The recording advice of ``analyze``: the ``advice`` JSON block and the closing sentence.
 
+The advice itself is computed with the rest of the record
+(:func:`imu_allan.core.record.record_advice`); this module renders it.
+
 JSON (design.md section 6, key ``advice``)::
 
     {"targets": {"white_noise": 0.02, ...},
@@ -18,23 +21,7 @@ time after which a term that large would be detected.
 
 import math
 
-from ..core.advisor import advise, analysis_grid
 from ..core.units import si_unit
-
-
-def compute_advice(analysis, options, targets=None):
-    """
-    Return the :class:`~imu_allan.core.advisor.Advice` of an analysis, on ``analyze``'s grid.
-
-    A record the motion verdict calls moving gets its moving axes in ``advice.moving``: its
-    curve measures the motion, so the advice is to record at rest (:func:`advice_sentence`).
-    """
-    m_max = None if options.tau_max is None else int(options.tau_max * analysis.rate_hz)
-    advice = advise(analysis.result, analysis.fit, targets,
-                    analysis_grid(options.points_per_decade, options.min_clusters, m_max))
-    if not getattr(analysis, 'static', True):
-        advice.moving = [a for a, d in (analysis.motion or {}).items() if d.get('moving')]
-    return advice
 
 
 def _num(value):

@@ -1,9 +1,10 @@
 """
-``analyze --dynamic``: the dynamic Allan deviation, its change test, report.json and the plots.
+``analyze --dynamic``: the plots of the dynamic Allan deviation and its change test.
 
-* ``dynamic`` in report.json: ``window_s``, ``step_s``, ``false_alarm_rate_per_day`` (the
-  figure measured on simulated static data, per axis), ``target_false_alarms_per_day`` and
-  ``changes`` (``axis``, ``t_s`` from the first analysed sample, ``what``, ``ratio``, ...).
+Renders a :class:`~imu_allan.core.record.DynamicAnalysis` (computed with the record,
+:func:`imu_allan.core.record.dynamic_analysis`); its report.json block and console lines are
+in :mod:`.dynamic_report`.
+
 * ``dynamic_gyro.png`` / ``dynamic_accel.png``: per axis, the deviation over window time x
   averaging time as a colour map, each value over the whole record's (median) deviation at
   that tau, so 1 (white) is "as usual"; detected changes marked (matplotlib, Agg).
@@ -18,64 +19,8 @@ from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..core.change_test import (  # noqa: E402
-    ChangeTest,
-    detect_changes,
-    MEASURED_AXIS_DAYS,
-    MEASURED_FALSE_ALARMS_PER_DAY,
-)
-from ..core.dynamic import dynamic_allan, normalized_adev  # noqa: E402
+from ..core.dynamic import normalized_adev  # noqa: E402
 from ..core.units import is_gyro, sample_unit  # noqa: E402
-from ..errors import InputError  # noqa: E402
-
-
-def analyze_dynamic(analysis, window_s=None):
-    """
-    Return ``(DynamicResult, changes)`` of an analysis's samples; InputError if too short.
-
-    Times (window centres, change times) count from the record's first sample, warm-up
-    included (the warm-up itself is not analysed).
-    """
-    try:
-        dyn = dynamic_allan(analysis.data, analysis.rate_hz, window_s or None,
-                            axes=analysis.axes)
-    except ValueError as exc:
-        raise InputError(analysis.source, f'--dynamic: {exc}') from None
-    changes = detect_changes(dyn)
-    start = getattr(analysis, 'warmup_s', 0.0)  # times from the record's first sample
-    dyn.t = dyn.t + start
-    for c in changes:
-        c.t_s += start
-        c.detected_s += start
-        c.extra['reported_s'] += start
-    return dyn, changes
-
-
-def dynamic_json(dyn, changes, warmup_s=0.0):
-    """Return the report.json ``dynamic`` block (SI; times from the first sample)."""
-    test = ChangeTest(dyn.rate_hz, int(round(dyn.step_s * dyn.rate_hz)), dyn.ms, dyn.k,
-                      dyn.axes)
-    return {'window_s': float(dyn.window_s), 'step_s': float(dyn.step_s),
-            'false_alarm_rate_per_day': MEASURED_FALSE_ALARMS_PER_DAY,
-            'false_alarm_note': 'measured per axis per day on simulated static data (thesis '
-                                '3DM-GX3-25 model + rate random walk, 100 Hz, default window): '
-                                f'0 alarms in {MEASURED_AXIS_DAYS:g} axis-days, 95 % upper '
-                                f'bound {3.0 / MEASURED_AXIS_DAYS:.2g}; the threshold targets '
-                                f'{test.target:g} per axis per day',
-            'target_false_alarms_per_day': float(test.target),
-            'tau_s': [float(t) for t in dyn.tau],
-            'analysed_from_s': float(warmup_s),
-            'changes': [c.to_json() for c in changes]}
-
-
-def dynamic_sentence(dyn, changes):
-    """Return the console line(s) of the change test."""
-    head = (f'dynamic Allan deviation: window {dyn.window_s:.4g} s, step {dyn.step_s:.4g} s; '
-            f'{len(changes)} change(s)')
-    lines = [head]
-    for c in changes:
-        lines.append(f'  {c.axis:8} {c.what:17} at {c.t_s:.1f} s, ratio {c.ratio:.3g}')
-    return '\n'.join(lines)
 
 
 def plot_dynamic(path, dyn, changes, sensor):
@@ -128,7 +73,7 @@ def _edges(centres):
     return np.concatenate(([2 * centres[0] - mid[0]], mid, [2 * centres[-1] - mid[-1]]))
 
 
-def write_dynamic_plots(folder, dyn, changes):
-    """Write dynamic_gyro.png and dynamic_accel.png into ``folder``."""
+def write_dynamic_plots(folder, part):
+    """Write dynamic_gyro.png and dynamic_accel.png of a DynamicAnalysis into ``folder``."""
     for sensor in ('gyro', 'accel'):
-        plot_dynamic(f'{folder}/dynamic_{sensor}.png', dyn, changes, sensor)
+        plot_dynamic(f'{folder}/dynamic_{sensor}.png', part.result, part.changes, sensor)

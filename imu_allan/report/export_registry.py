@@ -28,6 +28,9 @@ class Exporter:
     per_axis: bool = False    # True: one number per axis; False: the worst axis per sensor
     #: the consumer's own noise model (terms of core/terms.py), what ``--overbound`` fits
     model: tuple = WHITE_WALK
+    #: what one overbound of ``model`` covers: ``'axis'`` (each axis) or ``'sensor'`` (the
+    #: envelope of a sensor's axes, for one set of values per sensor)
+    overbound_over: str = 'axis'
 
 
 EXPORTERS = {}

@@ -57,12 +57,14 @@ class ExportValues:
     """
 
     def __init__(self, fitted, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw',
-                 overbound=None, model=WHITE_WALK):
+                 overbound=None, model=WHITE_WALK, fits=None):
         """
         Collect from ``fitted``; ``rate_hz`` defaults to the rate the model was fitted at.
 
         ``overbound``: None (raw values) or ``{'horizon_s': seconds or None}``; ``model``: the
-        consumer's terms (what is overbounded).
+        consumer's terms (what is overbounded); ``fits``: the overbounds computed with the
+        record (:class:`~imu_allan.core.record.OverboundValues`, same horizon), else each is
+        fitted when first asked for.
         """
         analysis = fitted if hasattr(fitted, 'fit') else None
         #: the Analysis when one was given (its band and upper limits), else None
@@ -82,6 +84,7 @@ class ExportValues:
         #: key -> {'factor': {axis: x}, 'tight_tau_s': {axis: [s, ...]}} (overbound only)
         self.overbound_used = {}
         self._overbound_fits = {}
+        self._computed_fits = fits
         self._last_overbound = {}
         #: the record moved and motion was not allowed: nothing is exported
         self.motion_withheld = motion_withheld(analysis)
@@ -101,12 +104,17 @@ class ExportValues:
         """
         :class:`~imu_allan.core.overbound.OverboundFit` of ``shapes`` (default: the model).
 
-        ``axes``: one axis, or several whose envelope one model must bound (cached).
+        ``axes``: one axis, or several whose envelope one model must bound (cached).  Taken
+        from the record's computed fits when given; ValueError if it cannot be made.
         """
-        from ..core.overbound import overbound_axes
         shapes = tuple(shapes or self.model)
         key = (axes if isinstance(axes, str) else tuple(axes), shapes)
-        if key not in self._overbound_fits:
+        if key not in self._overbound_fits and self._computed_fits is not None:
+            found = self._computed_fits.get(*key)
+            if found is not None:
+                self._overbound_fits[key] = found
+        if key not in self._overbound_fits:  # the Python API: fitted where first asked for
+            from ..core.overbound import overbound_axes
             self._overbound_fits[key] = overbound_axes(
                 self.fit.result, axes, shapes, self.overbound.get('horizon_s'))
         return self._overbound_fits[key]

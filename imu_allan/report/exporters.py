@@ -40,12 +40,13 @@ builder asks ``values.worst(sensor, term, key)`` or ``values.per_axis(sensor, te
 and upper-limit marks follow from those calls.
 """
 
+from dataclasses import dataclass
 import json
 import math
 from pathlib import Path
 
 from .export_registry import Exporter, EXPORTERS, register
-from .export_values import check_inflate, ExportValues
+from .export_values import ExportValues
 from .sim_exporters import SIM_EXPORTERS
 from ..errors import InputError
 
@@ -59,81 +60,29 @@ def exporter_names():
     return list(EXPORTERS)
 
 
-def parse_names(text, option='--export'):
-    """``'kalibr,vins'`` or ``'all'`` -> list of names; InputError on an unknown name."""
-    known = exporter_names()
-    names = [n.strip() for n in str(text).split(',') if n.strip()]
-    if not names:
-        raise InputError(option, 'needs a comma-separated list of exporter names or "all"')
-    if 'all' in names:
-        return known
-    unknown = [n for n in names if n not in EXPORTERS]
-    if unknown:
-        raise InputError(option, f'unknown exporter {", ".join(map(repr, unknown))} '
-                                 f'(known: {", ".join(known)}, all)')
-    return list(dict.fromkeys(names))
+@dataclass(frozen=True)
+class ExportOptions:
+    """
+    What ``--export`` writes (the command's export options, as one object).
 
+    Exporter ``names`` (registry order as given), ``inflate = (white, walk)`` on the standard
+    deviations and, with ``overbound``, each consumer model's overbounding values up to
+    ``horizon_s`` (s; None: the longest measured averaging time).
+    """
 
-def parse_inflate(text, option='--inflate'):
-    """``'2'`` or ``'2,10'`` -> ``(white, walk)``; InputError unless 0 < factor <= 1000."""
-    parts = [p.strip() for p in str(text).split(',')]
-    try:
-        if len(parts) not in (1, 2):
-            raise ValueError
-        factors = [float(p) for p in parts]
-    except ValueError:
-        raise InputError(option, f'expected WHITE or WHITE,WALK (numbers), got {text!r}') from None
-    try:
-        return check_inflate(factors * 2 if len(factors) == 1 else factors)
-    except ValueError as exc:
-        raise InputError(option, str(exc)) from None
+    names: tuple = ()
+    inflate: tuple = (1.0, 1.0)
+    overbound: bool = False
+    horizon_s: float = None
 
-
-def parse_horizon(text, option='--overbound-horizon'):
-    """``'20'`` -> 20.0 (s); InputError unless a finite number > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise InputError(option, f'expected a positive number of seconds, got {text!r}')
-    return value
-
-
-def check_overbound_args(args):
-    """Refuse ``--overbound`` without ``--export`` and a horizon without ``--overbound``."""
-    if getattr(args, 'overbound_horizon', None) is not None and not args.overbound:
-        raise InputError('--overbound-horizon', 'needs --overbound')
-    if getattr(args, 'overbound', False) and not args.export:
-        raise InputError('--overbound', 'needs --export NAMES (it changes the exported values)')
-
-
-def add_arguments(parser):
-    """Add the ``--export`` and ``--inflate`` options of ``analyze`` (one-line errors, exit 2)."""
-    import argparse
-
-    def checked(parse):
-        def convert(text):
-            try:
-                return parse(text)
-            except InputError as exc:
-                raise argparse.ArgumentTypeError(exc.problem) from None
-        return convert
-    parser.add_argument('--export', metavar='NAMES', type=checked(parse_names),
-                        help='with --out: write consumer files into DIR/export/ (comma list '
-                             f'of {", ".join(exporter_names())}, or all; docs/exports.md)')
-    parser.add_argument('--inflate', metavar='WHITE[,WALK]', type=checked(parse_inflate),
-                        default=(1.0, 1.0),
-                        help='multiply the exported white-noise and bias standard deviations '
-                             '(default 1: no inflation; 0 < factor <= 1000; with --overbound, '
-                             'on top of it)')
-    parser.add_argument('--overbound', action='store_true',
-                        help="with --export: write the values of each consumer's own model "
-                             'whose Allan variance is at or above the measured upper 95 %% bound '
-                             'from tau0 to the horizon (docs/exports.md)')
-    parser.add_argument('--overbound-horizon', metavar='S', type=checked(parse_horizon),
-                        help='longest averaging time the overbound holds for, s (default: the '
-                             'longest measured)')
+    def overbound_request(self):
+        """Return the models the record must overbound for these exports (None: none)."""
+        if not (self.overbound and self.names):
+            return None
+        from ..core.record import OverboundRequest
+        models = dict.fromkeys((tuple(EXPORTERS[n].model), EXPORTERS[n].overbound_over)
+                               for n in self.names)
+        return OverboundRequest(tuple(models), self.horizon_s)
 
 
 # ----------------------------------------------------------------------------- header
@@ -545,14 +494,15 @@ register(Exporter(
 # ----------------------------------------------------------------------------- API
 
 
-def _prepare(fitted, name, rate_hz, inflate, source, topic, overbound=False, horizon_s=None):
+def _prepare(fitted, name, rate_hz, inflate, source, topic, overbound=False, horizon_s=None,
+             fits=None):
     if name not in EXPORTERS:
         raise ValueError(f'unknown exporter {name!r} (known: {", ".join(EXPORTERS)})')
     exporter = EXPORTERS[name]
     spec = {'horizon_s': horizon_s} if overbound else None
     if horizon_s is not None and not overbound:
         raise ValueError('horizon_s is only used with overbound=True')
-    values = ExportValues(fitted, rate_hz, inflate, source, topic, spec, exporter.model)
+    values = ExportValues(fitted, rate_hz, inflate, source, topic, spec, exporter.model, fits)
     data = exporter.build(values)
     return exporter, values, data
 
@@ -583,7 +533,8 @@ def overbound_summary(values):
 
 
 def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
-                  topic='/imu/data_raw', overbound=False, horizon_s=None, summary=None):
+                  topic='/imu/data_raw', overbound=False, horizon_s=None, summary=None,
+                  fits=None):
     """
     Write the named exporters' files into ``folder/export/``; return their relative paths.
 
@@ -591,7 +542,9 @@ def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
     ``report.json``: horizon, level, inflation and, per exporter and key, the factor against the
     raw fit per axis and the averaging times where the bound is tight.  A horizon outside the
     measured averaging times is an InputError naming ``--overbound-horizon``, any other reason
-    the overbound cannot be made one naming ``--overbound``.
+    the overbound cannot be made one naming ``--overbound``.  ``fits``: the overbounding
+    values computed with the record (:class:`~imu_allan.core.record.OverboundValues`), used
+    instead of fitting here.
     """
     target = Path(folder) / EXPORT_DIR
     target.mkdir(parents=True, exist_ok=True)
@@ -599,7 +552,7 @@ def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
     for name in names:
         try:
             exporter, values, data = _prepare(fitted, name, rate_hz, inflate, source, topic,
-                                              overbound, horizon_s)
+                                              overbound, horizon_s, fits)
         except ValueError as exc:
             if overbound:  # the horizon, or a record without a usable bound: one line, exit 2
                 raise InputError('--overbound-horizon' if 'horizon ' in str(exc) else

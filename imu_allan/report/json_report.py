@@ -1,16 +1,24 @@
 """
-Reports of an :class:`~imu_allan.core.analysis.Analysis`: JSON, console text, Kalibr.
+report.json and the console text of a record's analysis, each assembled here in one place.
 
-JSON follows the contract in docs/interfaces.md (SI units, continuous-time coefficients) and
-adds ``verdict``, ``timing``, ``outliers`` and ``kalibr`` blocks.
+:func:`record_to_json` and :func:`record_text` render a
+:class:`~imu_allan.core.record.RecordAnalysis`: the estimate (:func:`analysis_to_json`,
+:func:`console_summary`), then one block per part computed, in the order of :data:`BLOCKS`
+and :data:`LINES`.  JSON follows the contract in docs/interfaces.md (SI units,
+continuous-time coefficients) and adds ``verdict``, ``timing``, ``outliers`` and ``kalibr``
+blocks.
 """
 
+from dataclasses import dataclass
 import math
 
 import numpy as np
 
+from .advice import advice_sentence, advice_to_json
+from .dynamic_report import dynamic_json, dynamic_sentence
 from .export_values import motion_withheld
 from .kalibr import kalibr_values
+from .temperature_report import temperature_json, temperature_sentence
 from ..core.units import sample_unit
 from ..core.warmup import warmup_sentence
 
@@ -130,4 +138,70 @@ def console_summary(analysis):
         lines.append(f'warning: {warning}')
     if analysis.integrity:
         lines.append(f'integrity: {analysis.integrity}')
+    return '\n'.join(lines)
+
+
+def denoised_json(part):
+    """Return the ``denoised`` block: per axis the denoised record's terms and its ADEV."""
+    den = part.analysis
+    return {a: {'terms': den.fit.term_report(a),
+                'adev': {'tau': den.result.tau.tolist(), 'adev': den.result.adev[:, j].tolist()}}
+            for j, a in enumerate(den.axes)}
+
+
+#: report.json blocks of a record's parts, in report order: (key, RecordAnalysis field,
+#: renderer); a part that is None (not asked, or absent) has no block.
+BLOCKS = (('advice', 'advice', advice_to_json),
+          ('denoised', 'denoised', denoised_json),
+          ('dynamic', 'dynamic', dynamic_json),
+          ('temperature', 'temperature', temperature_json))
+
+#: Console lines of a record's parts after the summary, in order: (field, renderer).
+LINES = (('advice', advice_sentence),
+         ('temperature', temperature_sentence),
+         ('dynamic', dynamic_sentence))
+
+
+@dataclass
+class OutFiles:
+    """What ``--out DIR`` holds, for report.json (``outputs.write_out_dir`` returns it)."""
+
+    #: the denoised bag folder (``DIR/denoised_bag``), None without one
+    denoised_bag: str = None
+    #: the ``overbound`` block of the exports (:func:`~.exporters.write_exports`), None: none
+    overbound: dict = None
+    #: the names written into DIR; None while report.json itself is being written
+    files: list = None
+
+
+def record_to_json(record, out=None):
+    """
+    Return the report dictionary of a record's analysis (JSON-ready), the one place it is made.
+
+    The estimate's blocks (:func:`analysis_to_json`, with ``recording``), the parts'
+    (:data:`BLOCKS`) and, with ``out`` (:class:`OutFiles`), ``denoised_bag``, ``overbound``
+    and ``out_files``.
+    """
+    report = analysis_to_json(record.analysis, record.samples)
+    for key, name, render in BLOCKS:
+        part = getattr(record, name)
+        if part is not None:
+            report[key] = render(part)
+    if out is not None:
+        if out.denoised_bag is not None:
+            report['denoised_bag'] = out.denoised_bag
+        if out.overbound:
+            report['overbound'] = out.overbound
+        if out.files is not None:
+            report['out_files'] = list(out.files)
+    return report
+
+
+def record_text(record):
+    """Return the console text of a record's analysis: the summary, then each part's lines."""
+    lines = [console_summary(record.analysis)]
+    for name, render in LINES:
+        part = getattr(record, name)
+        if part is not None:
+            lines.append(render(part))
     return '\n'.join(lines)

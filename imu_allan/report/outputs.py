@@ -1,7 +1,10 @@
 """
 The ``--out DIR`` files: report.json, Kalibr imu.yaml, allan_results.csv, plots, report.html.
 
-report.html (:mod:`imu_allan.report.html`) shows the others; it is written last.
+All of them render one :class:`~imu_allan.core.record.RecordAnalysis`, computed before;
+nothing here computes.  As asked with the record: the denoised bag, the dynamic plots and the
+``export/`` files.  report.html (:mod:`imu_allan.report.html`) shows the others; it is
+written last.
 
 Files are first written into a staging folder next to DIR and moved in only when all of them
 succeeded, so a failed run never leaves a half-written report behind.
@@ -16,7 +19,7 @@ import shutil
 import tempfile
 
 from . import plots
-from .json_report import analysis_to_json
+from .json_report import OutFiles, record_to_json
 from .kalibr import write_kalibr_yaml
 from ..core.units import AXES, IEEE_TERMS, si_unit
 from ..errors import InputError
@@ -47,43 +50,52 @@ def _cell(value):
     return f'{value:.6e}' if math.isfinite(value) else ''
 
 
-def write_out_dir(out_dir, analysis, raw, denoised=None, report=None, topic='/imu/data_raw',
-                  extra=None, exports=None):
+def write_out_dir(out_dir, record, exports=None, input_path=None, input_format='auto',
+                  topic='/imu/data_raw'):
     """
-    Write every report file into ``out_dir`` atomically; returns the list of file names.
+    Write every report file of a record's analysis into ``out_dir`` atomically.
 
-    ``extra(staging_dir)`` may write more files (e.g. a bag) into the staging folder first;
-    ``exports = (names, inflate[, overbound, horizon_s])`` writes those exporters' files into
-    ``export/`` (with ``overbound``, ``report.json`` gets their ``overbound`` block).
+    ``record``: a :class:`~imu_allan.core.record.RecordAnalysis`; ``exports``: an
+    :class:`~.exporters.ExportOptions` (its files go into ``export/``, and with ``overbound``
+    report.json gets their ``overbound`` block); ``input_path`` / ``input_format``: the input,
+    which a denoised record's bag copies (a bag input) or holds beside the denoised topic.
+    Returns the :class:`~.json_report.OutFiles` written (``files``: the names in ``out_dir``).
     """
     out_dir = Path(out_dir)
     try:
-        return _write_out_dir(out_dir, analysis, raw, denoised, report, topic, extra, exports)
+        return _write_out_dir(out_dir, record, exports, input_path, input_format, topic)
     except OSError as exc:  # name the user's folder, not the staging folder beside it
         raise InputError(out_dir, f'cannot write the report ({exc.strerror or exc})') from None
 
 
-def _write_out_dir(out_dir, analysis, raw, denoised, report, topic, extra, exports):
+def _write_out_dir(out_dir, record, exports, input_path, input_format, topic):
+    analysis, denoised = record.analysis, record.denoised
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f'.{out_dir.name}.', dir=out_dir.parent))
     try:
-        if extra is not None:
-            extra(staging)
-        report = report if report is not None else analysis_to_json(analysis)
-        if exports and exports[0]:
+        out = OutFiles()
+        if denoised is not None:
+            write_denoised_bag(staging, record, input_path, input_format)
+            out.denoised_bag = str(out_dir / DENOISED_BAG)
+        if record.dynamic is not None:
+            from .dynamic_plots import write_dynamic_plots
+            write_dynamic_plots(staging, record.dynamic)
+        if exports is not None and exports.names:
             from .exporters import write_exports
             overbound = {}
-            write_exports(staging, analysis, exports[0], inflate=exports[1], topic=topic,
-                          overbound=bool(exports[2:3] and exports[2]),
-                          horizon_s=exports[3] if len(exports) > 3 else None, summary=overbound)
-            if overbound:
-                report['overbound'] = overbound
+            write_exports(staging, analysis, exports.names, inflate=exports.inflate,
+                          topic=topic, overbound=exports.overbound,
+                          horizon_s=exports.horizon_s, summary=overbound,
+                          fits=record.overbound)
+            out.overbound = overbound or None
+        report = record_to_json(record, out)
         (staging / 'report.json').write_text(json.dumps(report, indent=1), encoding='utf-8')
         write_kalibr_yaml(staging / 'imu.yaml', analysis, topic)
-        write_results_csv(staging / 'allan_results.csv', analysis, denoised)
+        den = denoised.analysis if denoised is not None else None
+        write_results_csv(staging / 'allan_results.csv', analysis, den)
         figures = {sensor: plots.plot_adev(staging / f'adev_{sensor}.png', analysis, sensor,
-                                           denoised) for sensor in ('gyro', 'accel')}
-        plots.plot_timeseries(staging / 'timeseries.png', analysis, raw)
+                                           den) for sensor in ('gyro', 'accel')}
+        plots.plot_timeseries(staging / 'timeseries.png', analysis)
         from .html import write_analysis_page  # last: it lists and shows the files above
         write_analysis_page(staging, report, figures)
         out_dir.mkdir(exist_ok=True)
@@ -93,6 +105,32 @@ def _write_out_dir(out_dir, analysis, raw, denoised, report, topic, extra, expor
             if target.is_dir():  # a bag folder from an earlier run: replaced whole
                 shutil.rmtree(target)
             os.replace(staging / name, target)
-        return names
+        out.files = names
+        return out
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+#: The folder of the denoised bag in ``--out DIR``.
+DENOISED_BAG = 'denoised_bag'
+
+
+def write_denoised_bag(folder, record, input_path=None, input_format='auto'):
+    """
+    rosbag2 (MCAP) ``folder/denoised_bag`` with imu/data_denoised beside the input's topics.
+
+    A bag input is copied with the topic added; any other input (or none given) is written as
+    imu/data_raw (the record read) beside imu/data_denoised.
+    """
+    from ..formats.bag_writer import copy_bag_with_topic, write_imu_bag
+    dst = Path(folder) / DENOISED_BAG
+    fmt = input_format
+    if input_path is not None and fmt == 'auto':
+        from ..formats.readers import detect_format
+        fmt = detect_format(input_path)
+    if input_path is not None and fmt in ('rosbag2', 'ros1'):
+        copy_bag_with_topic(input_path, dst, 'imu/data_denoised', record.denoised.samples)
+    else:
+        write_imu_bag(dst, record.samples, topic='imu/data_raw', storage='mcap',
+                      extra_topics={'imu/data_denoised': record.denoised.samples})
+    return dst

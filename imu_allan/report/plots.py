@@ -233,12 +233,18 @@ class LiveFigure:
         return buf.getvalue()
 
 
-def plot_timeseries(path, analysis, raw):
-    """Raw samples per axis against time with outliers (Tukey F=3) marked in black."""
+def plot_timeseries(path, analysis):
+    """
+    Raw samples per axis against time with outliers (Tukey F=3) marked in black.
+
+    The whole record read (``analysis.samples``, warm-up included): the outlier indices count
+    in it.
+    """
     axes = list(analysis.axes)
     fig, subplots = plt.subplots(len(axes), 1, figsize=(8.0, 1.5 * len(axes) + 0.8), dpi=100,
                                  sharex=True, squeeze=False)
-    t = analysis.t - analysis.t[0]
+    raw = analysis.samples.data
+    t = analysis.samples.t - analysis.samples.t[0]
     step = max(1, t.size // 20000)  # plot at most ~20k points per axis; outliers all shown
     block = max(int(round(analysis.rate_hz)), 1)
     n_blocks = t.size // block

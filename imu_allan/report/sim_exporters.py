@@ -96,7 +96,8 @@ def _exporter(name, file_name, consumer, conversion, write, per_axis):
         lines = ''.join(f'  {line.replace("--", "- -")}\n' for line in header)
         return {file_name: f'<!--\n{lines}-->\n{text}'}
     return Exporter(name, (file_name,), consumer, 'per sample' if per_axis else 'continuous',
-                    conversion, build, render, per_axis=per_axis, model=SIM_MODEL)
+                    conversion, build, render, per_axis=per_axis, model=SIM_MODEL,
+                    overbound_over='axis' if per_axis else 'sensor')
 
 
 #: The simulators' exporters, in the order the registry lists them.

@@ -39,7 +39,7 @@ from imu_allan.core.model import NoiseModel
 from imu_allan.core.overbound import upper_bound
 from imu_allan.core.simulate import flicker_noise
 from imu_allan.errors import InputError
-from imu_allan.report.exporters import export, EXPORTERS, parse_inflate, parse_names, write_exports
+from imu_allan.report.exporters import export, EXPORTERS, write_exports
 import numpy as np
 import pytest
 import yaml
@@ -397,17 +397,6 @@ def test_white_only_gyro_marks_upper_limits_and_missing_sensor():
                                     terms=['white_noise'])
     out = export(fit, 'vins')
     assert out['gyr_w'] > 0 and out['acc_n'] is None
-
-
-def test_parse_names_and_inflate():
-    assert parse_names('all') == list(EXPORTERS)
-    assert parse_names('vins, kalibr,vins') == ['vins', 'kalibr']
-    with pytest.raises(InputError, match="unknown exporter 'nosuch'"):
-        parse_names('kalibr,nosuch')
-    assert parse_inflate('2') == (2.0, 2.0) and parse_inflate('2,10') == (2.0, 10.0)
-    for bad in ('0', '-1', 'x', '1,2,3', '1e9', 'nan'):
-        with pytest.raises(InputError, match='--inflate'):
-            parse_inflate(bad)
 
 
 def test_cli_writes_every_export_and_rejects_bad_names(tmp_path):

@@ -1,15 +1,17 @@
 """analyze on a bag with Imu + sensor_msgs/Temperature: slopes, range, moves, coincidences."""
 
+from types import SimpleNamespace
+
 from imu_allan.cli.analyze import _options, build_parser, run_one
 from imu_allan.core.model import thesis_gx3_25_model
+from imu_allan.core.record import COINCIDENCE_MARGIN, coincidences
 from imu_allan.core.simulate import simulate
-from imu_allan.core.temperature import TemperatureProfile
+from imu_allan.core.temperature import TemperatureChange, TemperatureProfile
 from imu_allan.core.units import AXES
 from imu_allan.device import gx3_protocol as p
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.samples import Samples
 from imu_allan.formats.temperature_bag import choose_temperature_topic, read_temperature
-from imu_allan.report.temperature_report import relate_events
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
@@ -89,6 +91,39 @@ def test_slopes_found_within_their_intervals(tmp_path, storage):
     assert 'bias slope' in text and 'gyro_x' in text
 
 
+def test_the_input_is_read_once_with_its_temperatures(tmp_path, monkeypatch):
+    """
+    Analyze reads a bag once: the Imu and the Temperature topic in the one read_samples call.
+
+    Counted: read_samples and read_temperature one call each, and the section is the one
+    computed from what that call delivered (Samples.temperature).
+    """
+    from imu_allan.formats import readers, temperature_bag
+    samples, temp_t, temp_c = recording(seconds=300.0)
+    path = tmp_path / 'rec'
+    write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', extra_topics={
+        '/imu/temperature': ('sensor_msgs/msg/Temperature',
+                             temperature_messages(temp_t, temp_c))})
+    calls = {'read_samples': [], 'read_temperature': []}
+
+    def counted(module, name):
+        real = getattr(module, name)
+
+        def wrapper(*args, **kwargs):
+            out = real(*args, **kwargs)
+            calls[name].append(out)
+            return out
+        monkeypatch.setattr(module, name, wrapper)
+    counted(readers, 'read_samples')
+    counted(temperature_bag, 'read_temperature')
+    report, _ = analyze(path)
+    assert len(calls['read_samples']) == 1 and len(calls['read_temperature']) == 1
+    delivered = calls['read_samples'][0].temperature
+    assert delivered is calls['read_temperature'][0]
+    assert np.array_equal(delivered.t, temp_t) and np.array_equal(delivered.celsius, temp_c)
+    assert report['temperature']['n_readings'] == temp_t.size
+
+
 def test_no_temperature_topic_no_section(tmp_path):
     """An Imu-only bag and a CSV: no temperature key, nothing else changes."""
     samples, _, _ = recording(seconds=120.0)
@@ -136,16 +171,20 @@ def test_topic_choice_and_coincidences():
         '/imu/temperature'
     assert choose_temperature_topic({'/b/t', '/a/t'}, '/imu/data_raw') == '/a/t'
     assert choose_temperature_topic(set(), '/imu/data_raw') is None
-    report = {'duration_s': 1000.0,
-              'dynamic': {'changes': [{'axis': 'gyro_x', 't_s': 300.0},
-                                      {'axis': 'gyro_y', 't_s': 900.0}]},
-              'verdict': {'warmup_s': 120.0},
-              'temperature': {'changes': [{'t_start_s': 100.0, 't_end_s': 320.0,
-                                           'from_c': 20.0, 'to_c': 30.0}]}}
-    relate_events(report)
-    got = report['temperature']['coincidences']
+    changes = [SimpleNamespace(axis='gyro_x', t_s=300.0),
+               SimpleNamespace(axis='gyro_y', t_s=900.0),
+               SimpleNamespace(axis='gyro_z', t_s=float('nan'))]  # no time: not related
+    moves = [TemperatureChange(t_start_s=100.0, t_end_s=320.0, from_c=20.0, to_c=30.0)]
+    got = [c.to_json() for c in coincidences(changes, 120.0, moves,
+                                             COINCIDENCE_MARGIN * 1000.0)]
     assert [g['temperature_change'] for g in got] == [0, None, 0]
     assert got[2]['event'] == 'warmup' and got[0]['axis'] == 'gyro_x'
+    assert list(got[0]) == ['event', 't_s', 'axis', 'temperature_change']  # report.json keys
+    # the margin widens the move: 330 s is 10 s past its end, inside 5 % of 1000 s, not of 100
+    late = [SimpleNamespace(axis='gyro_x', t_s=330.0)]
+    assert coincidences(late, 0.0, moves, COINCIDENCE_MARGIN * 1000.0)[0].temperature_change == 0
+    assert coincidences(late, 0.0, moves, COINCIDENCE_MARGIN * 100.0)[0].temperature_change \
+        is None
 
 
 def test_slopes_use_the_warm_up_the_estimate_leaves_out(tmp_path):
