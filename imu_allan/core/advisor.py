@@ -277,17 +277,25 @@ class _Forecast:
 
 
 def _best_chi2(problem, names, start):
-    """Smallest GLS chi^2 of ``names`` (one nonlinear parameter profiled near ``start``)."""
-    nonlinear = [t for t in names if len(TERM_PARAMETERS[t]) > 1]
-    if not nonlinear:
-        return problem.solve(shape_columns(problem, names, {}),
+    """
+    Smallest GLS chi^2 of ``names`` (one nonlinear parameter profiled near ``start``).
+
+    A position the problem fixes (a line's frequency) stays fixed; the problem's nuisance
+    lines are fitted alongside, as in the fit.
+    """
+    fixed = {t: p for t, p in problem.fixed.items() if t in names}
+    nonlinear = [t for t in names if len(TERM_PARAMETERS[t]) > 1 and t not in fixed]
+
+    def solve(positions):
+        return problem.solve(problem.with_nuisance(shape_columns(problem, names, positions)),
                              deterministic=deterministic_index(names))[1]
+    if not nonlinear:
+        return solve(fixed)
     name = nonlinear[0]
     centre = math.log(start.get(name) or math.sqrt(problem.tau[0] * problem.tau[-1]))
 
     def chi2(log_p):
-        return problem.solve(shape_columns(problem, names, {name: math.exp(log_p)}),
-                             deterministic=deterministic_index(names))[1]
+        return solve({**fixed, name: math.exp(log_p)})
     return min(bounded_minimum(chi2, centre - 2.0, centre + 2.0, xatol=0.02)[1], chi2(centre))
 
 

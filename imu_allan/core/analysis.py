@@ -20,6 +20,7 @@ from .allan import (
 )
 from .fit import fit_noise_model, FitError, FittedModel
 from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
+from .sensor import measure_sensor
 from .stamp_order import drop_isolated, without_dropped
 from .units import is_gyro, physical_limits, sample_unit
 from .warmup import find_warmup
@@ -50,6 +51,15 @@ class AnalysisOptions:
     #: Deviation kinds to compute (:data:`imu_allan.core.deviations.KINDS`); ``oadev`` is the
     #: estimate the fit uses, the others go into :attr:`Analysis.deviations`.
     estimators: tuple = ('oadev',)
+    #: measure the sensor's own processing (LSB, filter, lines) and fit where it does not
+    #: shape the curve (:mod:`.sensor`, :mod:`.fit.tau_range`); False: the plain IEEE fit
+    #: over every averaging time
+    sensor: bool = True
+    #: fit only these averaging times (s), (lo, hi); None: chosen from the data
+    tau_range: tuple = None
+    #: the device's filter window, s, when known (the 3DM-GX3-25's 0xDB window / 1 kHz);
+    #: its filter then replaces the measured one in the fit
+    filter_window_s: float = None
 
 
 @dataclass
@@ -89,6 +99,9 @@ class Analysis:
     #: with their warning; :mod:`.stamp_order`), before the warm-up cut; the input object
     #: itself when nothing was dropped.  Callers use it instead of applying the rule again.
     samples: object = None
+    #: The sensor's own processing measured from ``data`` (:class:`~.sensor.SensorReport`;
+    #: None when not asked, ``AnalysisOptions.sensor``).
+    sensor: object = None
 
 
 _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
@@ -224,14 +237,19 @@ def analyze_samples(samples, options=None):
         taus = tau_grid(n, options.points_per_decade, options.min_clusters,
                         m_max=int(options.tau_max * rate)) / rate
     pool = ThreadPoolExecutor(1, thread_name_prefix='imu_allan_checks')
+    measured = (pool.submit(measure_sensor, data, rate, samples.axes)
+                if options.sensor and not options.online else None)
     pending = pool.submit(_checks, samples, rate, outliers)
     pool.shutdown(wait=False)   # the thread ends with the checks
-    if options.online:
-        from .online import online_allan
-        result = online_allan(data, rate, t=t, axes=samples.axes)
+    sensor = None
+    if options.online:  # the node's pipeline, its sensor measurement included
+        from .online import run_online
+        pipeline = run_online(data, rate, t=t, axes=samples.axes)
+        result = pipeline.result()
         if result is None:
             raise InputError(where, "too short for the online estimator's shortest "
                                     'averaging time after the motion gate')
+        sensor = pipeline.sensor_report() if options.sensor else None
     else:
         result = allan_deviation(data, rate, taus=taus,
                                  points_per_decade=options.points_per_decade,
@@ -242,7 +260,11 @@ def analyze_samples(samples, options=None):
     try:
         # With OHDEV asked for, its curve decides a rate random walk against a rate ramp
         # where the Allan fit alone cannot (core/hadamard_check.py).
-        fit = fit_noise_model(result, terms=options.terms, deviations=deviations)
+        sensor = measured.result() if measured is not None else sensor
+        processing = (None if sensor is None else
+                      sensor.processing(options.filter_window_s))
+        fit = fit_noise_model(result, terms=options.terms, deviations=deviations,
+                              processing=processing, tau_range=options.tau_range)
     except FitError as exc:
         raise InputError(where, str(exc)) from None
     upper = _kalibr_upper_limits(fit)
@@ -257,7 +279,7 @@ def analyze_samples(samples, options=None):
                     t=t, upper_limits=upper,
                     integrity=getattr(samples, 'integrity', ''), warmup_s=warmup_s,
                     allow_motion=options.allow_motion, deviations=deviations,
-                    samples=samples)
+                    samples=samples, sensor=sensor)
 
 
 def _kalibr_upper_limits(fit):

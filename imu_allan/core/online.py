@@ -15,6 +15,7 @@ import numpy as np
 from .allan import AllanResult
 from .fit import fit_noise_model, FitError, FittedModel
 from .health import Health, RATE_SETTLE_S, RateFinder, STALE, StampMonitor, stream_health
+from .sensor import SensorAccumulator
 from .stationarity import StationarityGate
 from .streaming import StreamingAllan
 from .units import AXES, is_gyro, physical_limits
@@ -52,9 +53,16 @@ class OnlineAllan:
     """
 
     def __init__(self, rate_hz, axes=AXES, gate=True, gate_options=None, gap_factor=1.5,
-                 terms=None, settle_s=RATE_SETTLE_S, **estimator_options):
+                 terms=None, settle_s=RATE_SETTLE_S, sensor=True, filter_window_s=0.0,
+                 **estimator_options):
         self.axes = tuple(axes)
         self.terms = terms
+        #: measure the sensor's processing from the still samples (:class:`SensorAccumulator`)
+        #: and fit where it does not shape the curve; the device's filter window, s (0:
+        #: unknown, measured), replaces the measured filter in the fit when given
+        self.measure = sensor
+        self.filter_window_s = filter_window_s
+        self.sensor = None
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
         self.bad_stamps = 0  # samples whose stamp is no time (left out before everything)
@@ -80,6 +88,8 @@ class OnlineAllan:
                                (gate_options or {}).get('window_s') if gate else None)
         self.rate_hz = float(rate_hz)
         self.estimator = StreamingAllan(rate_hz, self.axes, **estimator_options)
+        if self.measure:
+            self.sensor = SensorAccumulator(rate_hz, self.axes)
         self.monitor = StampMonitor(rate_hz, gap_factor)
         if gate:
             gyro_columns = [i for i, a in enumerate(self.axes) if is_gyro(a)]
@@ -129,6 +139,7 @@ class OnlineAllan:
         bad = self._reject_nonphysical(data)
         if self.gate is None:
             self.estimator.update(data, None if bad is None else ~bad, brk)
+            self._measure(data, None if bad is None else ~bad.any(axis=1))
             return
         n_in, n_out = self._n_gated
         if bad is not None:
@@ -151,6 +162,16 @@ class OnlineAllan:
                     left.append((index[~here], flags[~here]))
             self._bad_in_gate = left
         self.estimator.update(out, use, brk_out)
+        self._measure(out, use if use.ndim == 1 else use.all(axis=1))
+
+    def _measure(self, data, use):
+        """Feed the sensor measurement the usable rows (still, every value physical)."""
+        if self.sensor is not None:
+            self.sensor.update(data if use is None else data[use])
+
+    def sensor_report(self):
+        """The sensor's processing measured so far (:class:`~.sensor.SensorReport`) or None."""
+        return None if self.sensor is None else self.sensor.report()
 
     def _reject_nonphysical(self, data):
         """
@@ -243,12 +264,22 @@ class OnlineAllan:
             return {}
         return {kind: est.deviation(kind, window) for kind in est.kinds if kind != 'oadev'}
 
-    def fit(self, result):
-        """Fit the noise terms to a result; None when it has too few averaging times."""
+    def processing(self):
+        """``{axis: Processing}`` for the fit (:meth:`SensorReport.processing`) or None."""
+        report = self.sensor_report()
+        return None if report is None else report.processing(self.filter_window_s or None)
+
+    def fit(self, result, processing=None):
+        """
+        Fit the noise terms to a result; None when it has too few averaging times.
+
+        ``processing``: the sensor's (default: :meth:`processing` now).
+        """
         if result is None or result.tau.size < 2:
             return None
         try:
-            return fit_noise_model(result, terms=self.terms)
+            return fit_noise_model(result, terms=self.terms,
+                                   processing=processing or self.processing())
         except FitError:
             return None
 
@@ -291,6 +322,8 @@ class StagedEstimate:
                            for kind, snap in snapshots.items() if kind != 'oadev'}
         self.result = None
         self.fitted = None
+        #: the sensor's processing, measured once for the cycle (every axis's fit uses it)
+        self.processing = pipeline.processing() if self.snapshot is not None else None
         self._parts = {}
         self._fits = {}
         n_axes = len(pipeline.axes)
@@ -311,7 +344,7 @@ class StagedEstimate:
         if kind == 'result':
             self._parts[j] = est.result_from(self.snapshot, [j])
         else:
-            fitted = self.pipeline.fit(self._parts[j])
+            fitted = self.pipeline.fit(self._parts[j], self.processing)
             if fitted is not None:
                 self._fits.update(fitted.fits)
         if not self._queue:
@@ -357,6 +390,17 @@ class _TagDelay:
         return out
 
 
+def run_online(data, rate_hz, t=None, axes=None, **options):
+    """Feed a whole record through an :class:`OnlineAllan` (``options``: its own); return it."""
+    data = np.asarray(data, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]
+    pipeline = OnlineAllan(rate_hz, axes, **options)
+    pipeline.feed(t, data)
+    return pipeline
+
+
 def online_allan(data, rate_hz, t=None, axes=None, gate=True, gate_options=None,
                  gap_factor=1.5, window=False, **estimator_options):
     """
@@ -389,11 +433,6 @@ def online_allan(data, rate_hz, t=None, axes=None, gate=True, gate_options=None,
         ``min_clusters``.
 
     """
-    data = np.asarray(data, dtype=float)
-    if data.ndim == 1:
-        data = data[:, None]
-    axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]
-    pipeline = OnlineAllan(rate_hz, axes, gate=gate, gate_options=gate_options,
-                           gap_factor=gap_factor, **estimator_options)
-    pipeline.feed(t, data)
+    pipeline = run_online(data, rate_hz, t, axes, gate=gate, gate_options=gate_options,
+                          gap_factor=gap_factor, sensor=False, **estimator_options)
     return pipeline.result(window=window)

@@ -161,8 +161,10 @@ class RecordAnalysis:
     dynamic: DynamicAnalysis = None
     temperature: TemperatureAnalysis = None
     overbound: OverboundValues = None
-    #: reserved: the sensor measured from the samples
-    sensor: object = None
+    @property
+    def sensor(self):
+        """The sensor's processing measured from the samples (:class:`~.sensor.SensorReport`)."""
+        return self.analysis.sensor
 
     @property
     def samples(self):

@@ -42,6 +42,7 @@ contributes MAX_EXAMINED / L non-overlapping Welch segments of L samples spread 
 and 2^15, and at most a quarter of a short record (not below 64).
 """
 
+import dataclasses
 from dataclasses import dataclass, field
 import math
 
@@ -220,15 +221,25 @@ class SensorReport:
     n_samples: int
     axes: dict
 
-    def processing(self):
+    def processing(self, filter_window_s=None):
         """
         ``{axis: Processing}``: what the fit needs of each axis (:mod:`.fit.tau_range`).
 
         The filter's length and moment (a negative moment, white phase noise's, is left to
         the quantization term), the lines as (frequency, amplitude), the humps as
-        (f_lo, f_hi, excess variance).
+        (f_lo, f_hi, excess variance).  ``filter_window_s``: the device's moving-average
+        window, s, when known: its filter (:meth:`.Processing.moving_average`) replaces the
+        measured one (a float-output device, where nothing else correlates the samples).
         """
-        return {name: ax.processing() for name, ax in self.axes.items()}
+        out = {}
+        for name, ax in self.axes.items():
+            proc = ax.processing()
+            if filter_window_s:
+                device = Processing.moving_average(filter_window_s * self.rate_hz)
+                proc = dataclasses.replace(proc, filter_length=device.filter_length,
+                                           filter_moment=device.filter_moment, source='device')
+            out[name] = proc
+        return out
 
     def to_json(self):
         """Return the ``sensor`` entry of report.json (SI; None for what was not measured)."""

@@ -6,6 +6,8 @@ One place for the rules the Kalibr file introduced and every exporter shares:
 * values are the fitted continuous-time coefficients (SI, :mod:`imu_allan.core.units`);
 * a term the fit did not select is replaced by its 95 % upper limit
   (:meth:`imu_allan.core.fit.FittedModel.upper_limit`) and remembered, so the file can mark it;
+  so is a value from an axis whose model the adequacy test rejects
+  (:mod:`imu_allan.core.fit.adequacy`);
 * ``inflate = (white, walk)`` multiplies the standard deviations: ``white`` the white noise N,
   ``walk`` the bias terms (random walk K, bias instability B);
 * a single-valued key takes the worst (largest) axis of its sensor; which axis, and whether it
@@ -157,7 +159,8 @@ class ExportValues:
         return limit, math.isfinite(limit)
 
     def _record(self, key, axes, upper, term=None):
-        self.used[key] = {'axes': list(axes), 'upper': [a for a, u in zip(axes, upper) if u]}
+        self.used[key] = {'axes': list(axes), 'upper': [a for a, u in zip(axes, upper) if u],
+                          'inadequate': [a for a in axes if self.inadequate(a)]}
         for axis in axes:
             if (axis, term) in self._last_overbound:
                 self.note_overbound(key, axis, *self._last_overbound[(axis, term)])
@@ -187,3 +190,13 @@ class ExportValues:
     def upper_limit_keys(self):
         """Keys (with axes) written as 95 % upper limits because the term was not detected."""
         return {k: u['upper'] for k, u in self.used.items() if u['upper']}
+
+    def inadequate(self, axis):
+        """Return whether the adequacy test rejects the model of ``axis`` (p < 0.001)."""
+        adequacy = getattr(self.fit, 'adequacy', None)
+        found = adequacy(axis) if adequacy is not None and axis in self.fit.axes else None
+        return found is not None and not found.adequate
+
+    def inadequate_keys(self):
+        """Keys (with axes) taken from an axis whose model the adequacy test rejects."""
+        return {k: u['inadequate'] for k, u in self.used.items() if u.get('inadequate')}

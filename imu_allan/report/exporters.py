@@ -120,6 +120,10 @@ def header_lines(exporter, values):
     for key, axes in values.upper_limit_keys().items():
         lines.append(f'{key}: not detected on {", ".join(axes)}: its 95 % upper limit is '
                      'written (UPPER LIMIT)')
+    for key, axes in values.inadequate_keys().items():
+        lines.append(f'{key}: from {", ".join(axes)}, whose noise model does not describe its '
+                     'Allan curve (adequacy test, report.json fit.adequacy): MODEL INADEQUATE, '
+                     'the value is not reliable')
     for key in [k for k, u in values.used.items() if not u['axes']]:
         lines.append(f'{key}: not measured (no such axis in the input): null')
     return lines
@@ -219,6 +223,7 @@ def _kalibr_build(values):
     from .kalibr import kalibr_values
     data, _ = kalibr_values(values)
     data.pop('upper_limits')
+    data.pop('inadequate')  # (the header says it, exporter_header)
     return {'rostopic': values.topic, **data}
 
 

@@ -30,6 +30,7 @@ import jinja2
 from markupsafe import Markup
 
 from .advice import format_duration
+from .fit_quality import misfit_sentence
 from ..core.units import conventional, si_unit
 
 TEMPLATES = Path(__file__).with_name('templates')
@@ -64,7 +65,9 @@ PNG_CAPTIONS = {
                          'window time and averaging time, changes marked.',
 }
 ADEV_CAPTION = ('Dots: measured overlapping Allan deviation per axis, shaded: its 68.3 % '
-                'interval; dashed: each fitted term alone; solid: the fitted model (their sum); '
+                'interval; dashed: each fitted term alone; solid: the fitted model (their sum, '
+                'with the lines fitted beside it); a band in an axis\'s colour from the left: '
+                'averaging times its fit left out (a resonance of the sensor shapes them); '
                 'grey fan: the slopes -1 (quantization), -1/2 (white noise), 0 (bias '
                 'instability), +1/2 (rate random walk), +1 (rate ramp).')
 
@@ -298,6 +301,45 @@ def _deviations(report):
     return out
 
 
+def _quality(report):
+    """Per axis: the adequacy verdict, the fitted span and why, the misfit in words."""
+    rows = []
+    for axis, entry in report['axes'].items():
+        fit = entry.get('fit') or {}
+        adequacy = fit.get('adequacy')
+        if adequacy is None:
+            continue
+        span = fit.get('tau_range_s') or [None, None]
+        rows.append({'axis': axis, 'adequate': adequacy['adequate'], 'p': fmt(adequacy['p'], 2),
+                     'chi2': fmt(adequacy['chi2'], 3), 'dof': adequacy['dof'],
+                     'span': [fmt(span[0], 3), fmt(span[1], 4)],
+                     'limited_by': fit.get('tau_range_limited_by'),
+                     'words': None if adequacy['adequate'] else misfit_sentence(axis, adequacy),
+                     'lines': [f'{fmt(ln["frequency_hz"], 3)} Hz' for ln in fit.get('lines', [])]})
+    return rows
+
+
+def _sensor(report):
+    """Per axis: what the samples say about the sensor's processing (report.json ``sensor``)."""
+    rows = []
+    for axis, s in ((report.get('sensor') or {}).get('axes') or {}).items():
+        lag = s.get('lag_correlation') or []
+        rows.append({'axis': axis, 'unit': s.get('unit', ''),
+                     'resolution': fmt(s.get('resolution')), 'distinct': s.get('distinct_values'),
+                     'repeated': fmt(100 * s['repeated_fraction'], 3)
+                     if s.get('repeated_fraction') is not None else '-',
+                     'quantization': s.get('quantization') or '-',
+                     'lag1': fmt(lag[0], 3) if lag else '-',
+                     'filter_length': s.get('filter_length'),
+                     'bandwidth': fmt(s.get('bandwidth_hz'), 3),
+                     'lines': ', '.join(f'{fmt(ln["frequency_hz"], 3)} Hz'
+                                        for ln in s.get('lines', [])) or '-',
+                     'humps': ', '.join(f'{fmt(h["frequency_range_hz"][0], 3)}-'
+                                        f'{fmt(h["frequency_range_hz"][1], 3)} Hz'
+                                        for h in s.get('humps', [])) or '-'})
+    return rows
+
+
 def analysis_context(report, folder, figures=None):
     """
     Everything the analysis page shows, from the report dict and the files in ``folder``.
@@ -327,7 +369,8 @@ def analysis_context(report, folder, figures=None):
         'report': report, 'coefficients': coefficient_rows(report), 'limits': _limits(report),
         'advice': advice_words(report.get('advice'), moving, bool(alternatives)),
         'svgs': svgs, 'pngs': pngs, 'files': _file_list(folder), 'alternatives': alternatives,
-        'deviations': _deviations(report), 'moving': moving,
+        'deviations': _deviations(report), 'moving': moving, 'quality': _quality(report),
+        'sensor': _sensor(report),
     }
 
 

@@ -17,6 +17,14 @@ import numpy as np
 from .advice import advice_sentence, advice_to_json
 from .dynamic_report import dynamic_json, dynamic_sentence
 from .export_values import motion_withheld
+from .fit_quality import (
+    adequacy_lines,
+    fit_json,
+    line_sentence,
+    sensor_json,
+    sensor_sentence,
+    span_line,
+)
 from .kalibr import kalibr_values
 from .temperature_report import temperature_json, temperature_sentence
 from ..core.units import sample_unit
@@ -50,7 +58,8 @@ def analysis_to_json(analysis, samples=None):
             'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis]),
                     'alternatives': analysis.fit.alternatives(axis),
                     'rejected': analysis.fit.rejected(axis),
-                    'decided_by': analysis.fit.decided_by(axis)},
+                    'decided_by': analysis.fit.decided_by(axis),
+                    **fit_json(analysis.fit, axis)},
         }
         if getattr(analysis, 'deviations', None):
             axes[axis]['deviations'] = {
@@ -123,9 +132,13 @@ def console_summary(analysis):
                     lines.append(f'  {"":8} {"  " + extra:17} {_fmt(e["value"]):>11} '
                                  f'[{_fmt(e["ci"][0]):>10}, {_fmt(e["ci"][1]):>10}] '
                                  f'{e["unit"]:>17}')
+    lines += [line for line in (span_line(analysis.fit), line_sentence(analysis.fit)) if line]
+    lines += adequacy_lines(analysis.fit)
     kalibr, per_axis = kalibr_values(analysis)
     kal = ', '.join(f'{k} {_fmt(v)}' + (' (upper limit)' if k in kalibr['upper_limits'] else '')
-                    for k, v in kalibr.items() if k not in ('update_rate', 'upper_limits'))
+                    + (' (model inadequate)' if k in kalibr['inadequate'] else '')
+                    for k, v in kalibr.items() if k not in ('update_rate', 'upper_limits',
+                                                            'inadequate'))
     if moved:
         kal = 'not given: the IMU moved (analyze --allow-motion gives the numbers anyway)'
     lines.append(f'Kalibr (continuous-time, worst axis): {kal}')
@@ -151,13 +164,15 @@ def denoised_json(part):
 
 #: report.json blocks of a record's parts, in report order: (key, RecordAnalysis field,
 #: renderer); a part that is None (not asked, or absent) has no block.
-BLOCKS = (('advice', 'advice', advice_to_json),
+BLOCKS = (('sensor', 'sensor', sensor_json),
+          ('advice', 'advice', advice_to_json),
           ('denoised', 'denoised', denoised_json),
           ('dynamic', 'dynamic', dynamic_json),
           ('temperature', 'temperature', temperature_json))
 
 #: Console lines of a record's parts after the summary, in order: (field, renderer).
-LINES = (('advice', advice_sentence),
+LINES = (('sensor', sensor_sentence),
+         ('advice', advice_sentence),
          ('temperature', temperature_sentence),
          ('dynamic', dynamic_sentence))
 

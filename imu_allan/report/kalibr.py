@@ -15,12 +15,13 @@ def kalibr_values(analysis):
 
     ``*_noise_density`` is the white-noise coefficient N; ``*_random_walk`` is the rate random
     walk K (bias random walk).  Where the data do not show a term, its 95 % upper limit is used
-    (Kalibr refuses zeros) and listed in ``upper_limits``.  Returns ``(values, per_axis)``;
+    (Kalibr refuses zeros) and listed in ``upper_limits``; a key whose axis's model the adequacy
+    test rejects is listed in ``inadequate``.  Returns ``(values, per_axis)``;
     per-axis entries are ``(value, is_upper_limit)``.  ``analysis`` may also be an
     :class:`ExportValues` (inflated, another rate).
     """
     values = analysis if isinstance(analysis, ExportValues) else ExportValues(analysis)
-    out = {'update_rate': values.rate_hz, 'upper_limits': []}
+    out = {'update_rate': values.rate_hz, 'upper_limits': [], 'inadequate': []}
     per_axis = {}
     for sensor, prefix in KEYS:
         for key, term in TERMS:
@@ -29,6 +30,8 @@ def kalibr_values(analysis):
             out[name] = values.worst(sensor, term, name)
             if values.used[name]['upper']:
                 out['upper_limits'].append(name)
+            if values.used[name]['inadequate']:
+                out['inadequate'].append(name)
     return out, per_axis
 
 
@@ -41,6 +44,9 @@ def kalibr_yaml_text(values, per_axis, topic='/imu/data_raw', header=()):
               '# the worst (largest) axis of each sensor, as Kalibr users expect.',
               '# Kalibr needs all four > 0: where the data do not show a term, its 95 % upper',
               '# limit is written (marked below); null means not even a limit was found.']
+    for key in values.get('inadequate', []):
+        lines.append(f'# {key}: MODEL INADEQUATE on its axis (report.json fit.adequacy): '
+                     'the noise model does not describe that curve; do not trust this value')
     for key, axes in per_axis.items():
         text = ', '.join(f'{a} {v:.6g}' + (' (upper limit, not detected)' if bound else '')
                          if math.isfinite(v) else f'{a} not detected'

@@ -137,14 +137,23 @@ def draw_adev(ax, result, fitted, axes, denoised=None, legend_below=False, devia
             named = True
             ax.plot(fine, total, '-', color=color, lw=1.2, label=f'{axis} model')
             lines.append((fine, total))
+            span = fitted.tau_range(axis) if hasattr(fitted, 'tau_range') else None
+            if span is not None and span.lo > tau[0] * 1.001:  # what the fit left out
+                ax.axvspan(tau[0], span.lo, color=color, alpha=0.07, lw=0)
         if denoised is not None:
             dj = denoised.axis_index(axis)
             ax.plot(denoised.tau, denoised.adev[:, dj], ':', color=color, lw=1.4,
                     label=f'{axis} denoised')
     draw_deviations(ax, deviations, axes)
-    _slope_guides(ax, tau, result.adev[:, [result.axis_index(a) for a in axes]], lines)
+    columns = [result.axis_index(a) for a in axes]
+    _slope_guides(ax, tau, result.adev[:, columns], lines)
     ax.set_xscale('log')
     ax.set_yscale('log')
+    # the measured curves set the scale: a term far below them (a line's nulls, a walk at
+    # the shortest tau) runs off the bottom instead of squeezing the data
+    low, high = np.nanmin(result.ci_low[:, columns]), np.nanmax(result.ci_high[:, columns])
+    if np.isfinite(low) and np.isfinite(high) and 0.0 < low < high:
+        ax.set_ylim(low / 4.0, high * 3.0)
     ax.set_xlabel('averaging time tau (s)')
     ax.set_ylabel(f'Allan deviation ({sample_unit(axes[0])})')
     ax.grid(True, which='both', color='0.92', lw=0.5)

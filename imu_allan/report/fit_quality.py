@@ -1,0 +1,145 @@
+"""
+What the reports say about a fit's quality and the sensor behind it: adequacy, span, processing.
+
+Renders (never computes) :class:`~imu_allan.core.fit.adequacy.Adequacy`, the fitted span
+(:class:`~imu_allan.core.fit.tau_range.TauRange`) and the sensor's processing
+(:class:`~imu_allan.core.sensor.SensorReport`) for report.json, the console, the HTML page and
+the node's diagnostics, in one wording.
+"""
+
+import math
+
+from ..core.units import conventional, is_gyro
+
+
+def fit_json(fitted, axis):
+    """The quality entries of report.json's ``axes.<axis>.fit`` (adequacy, span, lines)."""
+    fit = fitted.fits.get(axis)
+    if fit is None:
+        return {}
+    out = {}
+    if fit.adequacy is not None:
+        out['adequacy'] = fit.adequacy.to_json()
+    span = fit.tau_range
+    if span is not None:
+        out['tau_range_s'] = span.to_json()
+        out['tau_range_limited_by'] = span.limited_by
+        out['filter_moment'] = float(span.filter_moment)
+    out['lines'] = [{'frequency_hz': float(f), 'amplitude': float(a)}
+                    for f, a in sorted(fit.lines.items())]
+    return out
+
+
+def inadequate(fitted, axis):
+    """Return the adequacy of ``axis`` when the test rejects its model, else None."""
+    adequacy = fitted.adequacy(axis) if fitted is not None else None
+    return adequacy if adequacy is not None and not adequacy.adequate else None
+
+
+def misfit_sentence(axis, adequacy):
+    """
+    One sentence for people: where the model misses and by how much, and what bends it there.
+
+    ``adequacy``: report.json's ``fit.adequacy`` of ``axis`` (a rejected model).  "gyro_z: the
+    model does not describe 0.01-0.05 s (measured 1.6x the model): a 19 Hz line".
+    """
+    widened = f'; intervals widened {adequacy["interval_scale"]:.3g}x'
+    if not adequacy['misfit']:
+        return (f'{axis}: the model does not describe the curve (adequacy p = '
+                f'{adequacy["p"]:.2g}){widened}')
+    worst = adequacy['misfit'][0]
+    lo, hi = worst['tau_s']
+    span = f'{lo:.3g} s' if math.isclose(lo, hi) else f'{lo:.3g}-{hi:.3g} s'
+    text = (f'{axis}: the model does not describe {span} (measured {worst["ratio"]:.2g}x the '
+            f'model)')
+    if worst['effect']:
+        text += f': {worst["effect"]}'
+    more = len(adequacy['misfit']) - 1
+    if more:
+        text += f'; {more} more span{"s" if more > 1 else ""}'
+    return text + widened
+
+
+def adequacy_lines(fitted):
+    """Console lines: one per axis whose model the adequacy test rejects (p < 0.001)."""
+    return [misfit_sentence(axis, ad.to_json()) for axis in fitted.axes
+            if (ad := inadequate(fitted, axis)) is not None]
+
+
+_WHY = {'filter': "the sensor's filter correlates the samples",
+        'resonance': 'a resonance shapes the curve', 'asked': 'as asked'}
+
+
+def span_line(fitted):
+    """The fitted averaging times in one line, and why an axis starts later ('' if none does)."""
+    spans = {a: fitted.fits[a].tau_range for a in fitted.axes
+             if fitted.fits[a].tau_range is not None}
+    late = {a: s for a, s in spans.items() if s.limited_by not in (None, 'filter')}
+    filtered = [a for a, s in spans.items() if s.filter_moment > 0]
+    if not late and not filtered:
+        return ''
+    parts = []
+    if filtered:
+        parts.append("white noise takes the shape the sensor's filter gives it on "
+                     + ', '.join(filtered))
+    for axis, span in late.items():
+        parts.append(f'{axis} fitted from {span.lo:.3g} s ({_WHY[span.limited_by]} below)')
+    return 'fit: ' + '; '.join(parts)
+
+
+def line_sentence(fitted):
+    """The lines fitted beside the noise model, per axis ('' if none)."""
+    parts = []
+    for axis in fitted.axes:
+        fit = fitted.fits[axis]
+        lines = dict(fit.lines)
+        if 'sinusoid' in fit.terms:
+            term = fit.terms['sinusoid']
+            lines[term['frequency_hz']] = term['amplitude']
+        if lines:
+            parts.append(f'{axis} ' + ', '.join(
+                f'{f:.3g} Hz ({_amplitude(axis, a)})' for f, a in sorted(lines.items())))
+    return 'lines fitted (the sensor\'s, not noise): ' + '; '.join(parts) if parts else ''
+
+
+def _amplitude(axis, value):
+    conv, unit = conventional(axis, 'sinusoid', value)
+    return f'{conv:.3g} {unit}'
+
+
+def sensor_json(report):
+    """report.json ``sensor``: :meth:`~imu_allan.core.sensor.SensorReport.to_json`."""
+    return report.to_json()
+
+
+def sensor_sentence(report):
+    """The sensor's processing in one line: LSB, repeats, filter, per sensor."""
+    parts = []
+    for sensor in ('gyro', 'accel'):
+        axes = [ax for name, ax in report.axes.items() if is_gyro(name) == (sensor == 'gyro')]
+        if not axes:
+            continue
+        bits = []
+        lsb = [ax.resolution for ax in axes if ax.resolution]
+        if lsb:
+            conv, unit = _lsb(axes[0].axis, max(lsb))
+            bits.append(f'LSB {conv:.3g} {unit}')
+            coarse = [ax.axis for ax in axes if ax.quantization == 'coarse']
+            if coarse:
+                bits.append('coarse quantization on ' + ', '.join(coarse))
+        repeats = [ax.repeated_fraction for ax in axes if ax.repeated_fraction is not None]
+        if repeats:
+            bits.append(f'{100 * min(repeats):.0f}-{100 * max(repeats):.0f} % repeated samples')
+        rho = [ax.lag_correlation[0] for ax in axes if ax.lag_correlation]
+        if rho:
+            bits.append(f'lag-1 correlation {min(rho):.2f}-{max(rho):.2f}')
+        if bits:
+            parts.append(f'{sensor} ' + ', '.join(bits))
+    return 'sensor: ' + '; '.join(parts) if parts else ''
+
+
+def _lsb(axis, value):
+    """An LSB in the units people use for it (deg/s, mg)."""
+    if is_gyro(axis):
+        return math.degrees(value), 'deg/s'
+    return value / 9.80665 * 1e3, 'mg'
