@@ -46,14 +46,18 @@ class OnlineAllan:
         Terms to fit (default: automatic selection among the five IEEE terms).
     settle_s : float
         Stamp span that fixes a measured rate, s.
+    filter_window_s : float
+        Length of the moving average the IMU applies before it outputs, s (the 3DM-GX3-25's
+        0xDB window / 1000 Hz); 0: unknown.  Stored as :attr:`filter_window_s` for the fit.
     **estimator_options
         :class:`StreamingAllan` parameters (max_tau, window_s, stride_base, ...).
 
     """
 
     def __init__(self, rate_hz, axes=AXES, gate=True, gate_options=None, gap_factor=1.5,
-                 terms=None, settle_s=RATE_SETTLE_S, **estimator_options):
+                 terms=None, settle_s=RATE_SETTLE_S, filter_window_s=0.0, **estimator_options):
         self.axes = tuple(axes)
+        self.filter_window_s = float(filter_window_s)
         self.terms = terms
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start
