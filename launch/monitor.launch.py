@@ -8,6 +8,8 @@ Launch arguments:
 * ``imu_topic``: the Imu topic to monitor (remapped onto the nodes' ``imu/data_raw``);
 * ``rate_hz``: its sample rate, Hz; empty (the default) keeps the parameter files' value, which
   is 0 in the packaged ones: measured from the header stamps;
+* ``filter_window_s``: the moving average the IMU applies before it outputs, s, for allan;
+  empty (the default) keeps the parameter files' value (packaged: 0 = unknown);
 * ``params_file``: a parameter file for both nodes, applied after the packaged
   ``config/allan.yaml`` and ``config/denoise.yaml`` (sections ``/**/allan:``, ``/**/denoise:`` or
   ``/**:``);
@@ -26,6 +28,8 @@ ARGUMENTS = (
     ('imu_topic', 'imu/data_raw', 'sensor_msgs/Imu topic to monitor'),
     ('rate_hz', '', 'sample rate of imu_topic, Hz (empty: from the parameter files; the '
                     'packaged ones say 0 = measured from the stamps)'),
+    ('filter_window_s', '', 'moving average the IMU applies, s, for allan (empty: from the '
+                            'parameter files; the packaged one says 0 = unknown)'),
     ('params_file', '', 'extra parameter file for allan and denoise (empty: none)'),
     ('namespace', '', 'namespace of the nodes and their topics'),
 )
@@ -43,9 +47,12 @@ def monitor_nodes(context):
         params = [os.path.join(share, 'config', f'{name}.yaml')]
         if arg['params_file'].strip():
             params.append(arg['params_file'])
+        extra = dict(overrides)
+        if name == 'allan' and arg['filter_window_s'].strip():
+            extra['filter_window_s'] = float(arg['filter_window_s'])
         nodes.append(Node(package='imu_allan', executable=name, name=name,
                           namespace=arg['namespace'], output='screen',
-                          parameters=params + [overrides],
+                          parameters=params + [extra],
                           remappings=[('imu/data_raw', arg['imu_topic'])]))
     return nodes
 

@@ -9,6 +9,10 @@
    writing its report and plots to a folder; the last line printed is the path of its page,
    ``report.html``, to open in a browser.
 
+Both parts' data went through the 3DM-GX3-25's own processing (a moving average of
+``FILTER_WINDOW`` samples at 1 kHz, every tenth kept, float32), as a real unit's do; the allan
+node is told the window (``filter_window_s``).
+
 Parts that are missing are skipped with a note, so the demo runs whatever exists.
 """
 
@@ -22,6 +26,8 @@ import subprocess
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / 'demo_out'
 SECONDS = float(os.environ.get('DEMO_SECONDS', '60'))
+#: The device's gyro/accel window, samples at its internal 1 kHz (the factory value).
+FILTER_WINDOW = 15
 
 
 def executable(name):
@@ -64,8 +70,11 @@ def live_part(env):
         port = sim.stdout.readline().strip()
         print(f'demo: simulated 3DM-GX3-25 on {port}')
         procs.append(subprocess.Popen([exes['driver'], '--ros-args', '-p', f'port:={port}',
-                                       '-p', 'rate_hz:=100.0', '--log-level', 'warn'], env=env))
+                                       '-p', 'rate_hz:=100.0',
+                                       '-p', f'filter_window:={FILTER_WINDOW}',
+                                       '--log-level', 'warn'], env=env))
         procs.append(subprocess.Popen([exes['allan'], '--ros-args', '-p', 'rate_hz:=100.0',
+                                       '-p', f'filter_window_s:={FILTER_WINDOW / 1000.0}',
                                        '-p', 'publish_period:=5.0', '--log-level', 'warn'],
                                       env=env))
         procs.append(subprocess.Popen([exes['denoise'], '--ros-args', '--log-level', 'warn'],
@@ -79,6 +88,8 @@ def live_part(env):
 def offline_part(env):
     """Simulate 2 h of the thesis model, write an MCAP bag, run analyze; return the page path."""
     from imu_allan import simulate, thesis_gx3_25_model
+    from imu_allan.core.device_processing import DeviceProcessing
+    from imu_allan.core.units import STANDARD_GRAVITY
     from imu_allan.formats.bag_writer import write_imu_bag
     from imu_allan.formats.samples import Samples
     import numpy as np
@@ -92,9 +103,14 @@ def offline_part(env):
     shutil.rmtree(bag, ignore_errors=True)
     shutil.rmtree(report, ignore_errors=True)
     n = 100 * 7200
-    print(f'demo: simulating 2 h at 100 Hz of the thesis 3DM-GX3-25 model -> {bag}')
-    data = simulate(thesis_gx3_25_model(), n, 100.0, seed=7)
-    data[:, 5] -= 9.80665  # the simulator's gravity on -z, as gx3_sim does by default
+    print(f'demo: simulating 2 h at 100 Hz of the thesis 3DM-GX3-25 model through its '
+          f'{FILTER_WINDOW}-sample window -> {bag}')
+    # Rounded below, after gravity is added: the device sends float32 g, the driver scales.
+    processing = DeviceProcessing(window=FILTER_WINDOW, decimation=10, output_dtype=None)
+    data = simulate(thesis_gx3_25_model(), n, 100.0, seed=7, processing=processing)
+    data[:, :3] = data[:, :3].astype(np.float32)
+    accel_g = data[:, 3:] / STANDARD_GRAVITY + (0.0, 0.0, -1.0)  # gravity on -z, as gx3_sim
+    data[:, 3:] = accel_g.astype(np.float32) * STANDARD_GRAVITY
     write_imu_bag(bag, Samples(t=1.7e9 + np.arange(n) / 100.0, data=data), storage='mcap')
     print(f'demo: analyze {bag} --out {report}')
     subprocess.run([analyze, str(bag), '--out', str(report)], env=env, check=False)

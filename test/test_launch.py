@@ -17,7 +17,9 @@ import signal
 import subprocess
 import sys
 import time
+from types import ModuleType, SimpleNamespace
 
+from ament_index_python.packages import get_package_share_directory
 from conftest import executable, ros_env, spin_until
 import numpy as np
 import pytest
@@ -112,6 +114,84 @@ def decode_coeffs(msg):
     return np.asarray(msg.data).reshape(6, 5, 3)
 
 
+class Recorded:
+    """Stand-in for a launch class: keeps the arguments it was built with."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+STAND_INS = {'launch': ['LaunchDescription'],
+             'launch.actions': ['DeclareLaunchArgument', 'IncludeLaunchDescription',
+                                'OpaqueFunction'],
+             'launch.launch_description_sources': ['PythonLaunchDescriptionSource'],
+             'launch.substitutions': ['LaunchConfiguration'],
+             'launch_ros': [], 'launch_ros.actions': ['Node']}
+
+
+def expand(name_or_path, arguments):
+    """
+    ``{node name: Node keyword arguments}`` a launch file starts for ``arguments``.
+
+    Its arguments' defaults, updated with ``arguments``, go to its OpaqueFunctions; includes
+    are expanded the same way with their launch_arguments.  Needs the launch stand-ins.
+    """
+    path = name_or_path if os.sep in name_or_path else os.path.join(
+        get_package_share_directory('imu_allan'), 'launch', name_or_path)
+    spec = importlib.util.spec_from_file_location('launch_file_under_test', path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    entities = module.generate_launch_description().args[0]
+    config = {e.args[0]: e.kwargs['default_value'] for e in entities
+              if type(e).__name__ == 'DeclareLaunchArgument'}
+    config.update(arguments)
+    context = SimpleNamespace(launch_configurations=config)
+    nodes = {}
+    for entity in entities:
+        if type(entity).__name__ != 'OpaqueFunction':
+            continue
+        for out in entity.kwargs['function'](context):
+            if type(out).__name__ == 'Node':
+                nodes[out.kwargs['name']] = out.kwargs
+            else:  # IncludeLaunchDescription(PythonLaunchDescriptionSource(path), ...)
+                nodes.update(expand(out.args[0].args[0], dict(out.kwargs['launch_arguments'])))
+    return nodes
+
+
+def given(node, name):
+    """Return the value a node's parameter dicts give ``name`` (the last one wins), or None."""
+    values = [p[name] for p in node['parameters'] if isinstance(p, dict) and name in p]
+    return values[-1] if values else None
+
+
+def test_gx3_25_launch_gives_allan_the_drivers_filter_window(monkeypatch):
+    """
+    filter_window reaches the driver (taps) and the allan node (filter_window_s, s).
+
+    The launch files run against stand-ins that record what they are given (launch_ros is
+    not always importable: the test below then skips), so the wiring is checked everywhere.
+    """
+    from imu_allan.nodes import allan
+    for name, classes in STAND_INS.items():
+        module = ModuleType(name)
+        for cls in classes:
+            setattr(module, cls, type(cls, (Recorded,), {}))
+        monkeypatch.setitem(sys.modules, name, module)
+    param = next(p for p in allan.PARAMETERS if p.name == 'filter_window_s')
+    assert (param.default, param.range, param.read_only) == (0.0, (0.0, 1.0), True)
+    for arguments, taps in (({}, 15), ({'filter_window': '7'}, 7)):
+        nodes = expand('gx3_25.launch.py', {'port': '/dev/ttyX', **arguments})
+        assert sorted(nodes) == ['allan', 'denoise', 'driver']
+        assert given(nodes['driver'], 'filter_window') == taps
+        assert given(nodes['allan'], 'filter_window_s') == pytest.approx(taps / 1000.0)
+        assert given(nodes['denoise'], 'filter_window_s') is None
+        assert given(nodes['allan'], 'rate_hz') == given(nodes['driver'], 'rate_hz') == 100.0
+    # monitor.launch.py alone leaves it to the parameter files (packaged: 0, unknown)
+    assert given(expand('monitor.launch.py', {})['allan'], 'filter_window_s') is None
+    assert given(expand('monitor.launch.py', {'filter_window_s': '0.02'})['allan'],
+                 'filter_window_s') == 0.02
+
+
 @pytest.mark.parametrize('ros_node', [(os.getpid() + 53) % 100 + 100], indirect=True)
 def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
     """gx3_sim -> gx3_25.launch.py (driver + allan + denoise) -> imu/allan_coeffs; SIGINT."""
@@ -126,18 +206,37 @@ def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
         assert sim.stdout.readline().decode().strip() == port
         coeffs = []
         node.create_subscription(Float64MultiArray, 'imu/allan_coeffs', coeffs.append, 10)
+        # A window of 10 samples at decimation 10: each output averages its own 10 internal
+        # samples, so the data are white at the output rate (no dip at short tau that the
+        # fit would have to know of; the driver and allan get the window from the argument).
         launch = Launch(tmp_path, domain, 'gx3_25.launch.py', f'port:={port}',
-                        'rate_hz:=100.0', f'params_file:={params}')
+                        'rate_hz:=100.0', 'filter_window:=10', f'params_file:={params}')
         try:
             assert spin_until(executor, lambda: coeffs, 120), launch.log.read_text()
+            window = get_parameters(node, executor, '/allan', ['filter_window_s'])
+            taps = get_parameters(node, executor, '/driver', ['filter_window'])
         finally:
             status, out = launch.stop()  # the driver goes before the simulator
     finally:
         sim.send_signal(signal.SIGTERM)
         sim.wait(10)
+    assert window[0].double_value == pytest.approx(0.01) and taps[0].integer_value == 10
     table = decode_coeffs(coeffs[-1])
     assert np.isfinite(table[:, 1, 0]).sum() >= 3, table[:, 1]  # white noise, several axes
     check_clean_shutdown(status, out, ['driver', 'allan', 'denoise'])
+
+
+def get_parameters(node, executor, target, names):
+    """Return a node's parameters as ParameterValue messages (its get_parameters service)."""
+    from rcl_interfaces.srv import GetParameters
+    client = node.create_client(GetParameters, f'{target}/get_parameters')
+    try:
+        assert client.wait_for_service(timeout_sec=30), target
+        future = client.call_async(GetParameters.Request(names=names))
+        assert spin_until(executor, future.done, 30), target
+        return future.result().values
+    finally:
+        node.destroy_client(client)
 
 
 @pytest.mark.parametrize('ros_node', [(os.getpid() + 71) % 100 + 100], indirect=True)

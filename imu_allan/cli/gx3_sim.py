@@ -4,8 +4,10 @@ gx3_sim: a simulated LORD MicroStrain 3DM-GX3-25 on a pseudo-terminal.
 The simulator opens a pseudo-terminal in raw mode, prints the path a driver should open as the
 first line on stdout, and then behaves like a 3DM-GX3-25 with single-byte firmware
 (the DCP manual, docs/references.md): it answers the commands, streams continuous mode at
-1000 Hz / decimation, paced by the baud rate, with noise from
-:func:`imu_allan.core.simulate.simulate`.
+1000 Hz / decimation, paced by the baud rate, with the noise model's samples through the
+device's own processing: generated at the internal 1 kHz, averaged over the current 0xDB
+gyro/accel window (power-up 15 samples), decimated, sent as float32; one continuous stream
+for the whole run (:class:`imu_allan.core.noise_stream.NoiseStream`).
 
 Choices where the DCP manual is silent: unknown command bytes and a bare
 ``FA`` are ignored; an invalid continuous-command byte is ignored and the current one echoed;

@@ -47,6 +47,14 @@ class OnlineAllan:
         Terms to fit (default: automatic selection among the five IEEE terms).
     settle_s : float
         Stamp span that fixes a measured rate, s.
+    sensor : bool
+        Measure the sensor's processing from the still samples
+        (:class:`~imu_allan.core.sensor.SensorAccumulator`) and fit where it does not shape
+        the curve (:mod:`imu_allan.core.fit.tau_range`).
+    filter_window_s : float
+        Length of the moving average the IMU applies before it outputs, s (the 3DM-GX3-25's
+        0xDB window / 1000 Hz); 0: unknown (measured).  When given, its filter replaces the
+        measured one in the fit (:meth:`~imu_allan.core.sensor.SensorReport.processing`).
     **estimator_options
         :class:`StreamingAllan` parameters (max_tau, window_s, stride_base, ...).
 
@@ -56,12 +64,9 @@ class OnlineAllan:
                  terms=None, settle_s=RATE_SETTLE_S, sensor=True, filter_window_s=0.0,
                  **estimator_options):
         self.axes = tuple(axes)
+        self.filter_window_s = float(filter_window_s)
         self.terms = terms
-        #: measure the sensor's processing from the still samples (:class:`SensorAccumulator`)
-        #: and fit where it does not shape the curve; the device's filter window, s (0:
-        #: unknown, measured), replaces the measured filter in the fit when given
         self.measure = sensor
-        self.filter_window_s = filter_window_s
         self.sensor = None
         self._limits = np.asarray(physical_limits(self.axes))
         self.rejected_total = np.zeros(len(self.axes), np.int64)  # per axis, since the start

@@ -331,9 +331,12 @@ class Gx3Session:
 
     def __init__(self, port, baud, mode, rate_hz, on_batch, clock=time.time, log=None,
                  stall_timeout=1.0, reply_timeout=0.3, record_raw=None, poll_interval=0.005,
-                 time_sync=None, backoff=None, temperature_period=0.0, on_temperature=None):
+                 time_sync=None, backoff=None, temperature_period=0.0, on_temperature=None,
+                 filter_window=15):
         """Configure; call :meth:`run` in a thread and :meth:`stop` to end it."""
         self.decimation, self.flags = check_rate(rate_hz, baud, mode)
+        self.filter_window = int(filter_window)  # gyro/accel window sent with 0xDB, taps
+        self.sampling = None  # the 0xDB settings the device confirmed (SamplingSettings)
         self.code = MODES[mode]
         self.baud = baud
         self.link = SerialLink(port, baud)
@@ -659,12 +662,19 @@ class Gx3Session:
                                   lambda r, s=selector: r[1] == s)
             if reply is not None:
                 setattr(self, attr, p.decode_device_id_reply(reply)[1])
-        settings = p.SamplingSettings(decimation=self.decimation, flags=self.flags)
+        settings = p.SamplingSettings(decimation=self.decimation, flags=self.flags,
+                                      filter_window=self.filter_window)
         reply = self._request(p.cmd_sampling_settings(settings), p.SAMPLING_SETTINGS)
-        if reply is None or p.decode_sampling_reply(reply).decimation != self.decimation:
+        confirmed = None if reply is None else p.decode_sampling_reply(reply)
+        if confirmed is None or confirmed.decimation != self.decimation:
             self.last_error = 'sampling settings 0xDB not confirmed'
             self.log('warn', f'{self.link.port}: {self.last_error}')
             return False
+        self.sampling = confirmed
+        if confirmed.filter_window != self.filter_window:
+            self.log('warn', f'{self.link.port}: the device filters over '
+                             f'{confirmed.filter_window} samples, not the '
+                             f'{self.filter_window} asked for')
         reply = self._request(p.cmd_continuous(self.code), p.SET_CONTINUOUS,
                               lambda r: r[1] == self.code)
         if reply is None:

@@ -20,8 +20,9 @@ import tty
 import numpy as np
 
 from . import gx3_protocol as p
+from ..core.device_processing import DeviceProcessing
 from ..core.model import thesis_gx3_25_model
-from ..core.simulate import simulate
+from ..core.noise_stream import NoiseStream
 from ..core.temperature import TemperatureProfile
 from ..core.units import AXES, STANDARD_GRAVITY
 
@@ -41,6 +42,9 @@ BAUD_CONSTANTS = {b: getattr(termios, f'B{b}') for b in p.BAUD_RATES}
 #: What a receiver at the wrong baud rate makes of the bytes (a fixed scramble).
 GARBLE = bytes((b * 77 + 13) % 256 for b in range(256))
 ID_STRINGS = {0: '6223', 1: '6223.01234', 2: '3DM-GX3-25', 3: '5g 300d/s', 4: 'SIMULATED'}
+#: Longest gyro/accel window 0xDB accepts (1..32, gx3_protocol.SamplingSettings.clamped): the
+#: internal samples the noise stream keeps, so any window applies at once.
+FILTER_WINDOW_MAX = 32
 
 
 @dataclass
@@ -152,25 +156,54 @@ def _f32(values):
     return [float(v) for v in np.asarray(values, dtype=np.float32)]
 
 
-class NoiseSource:
-    """Noise rows (gyro rad/s, accel m/s^2) generated block-wise at the current rate."""
+def processing_of(settings):
+    """
+    Return the unit's gyro/accel processing for its 0xDB settings (window and decimation).
 
-    BLOCK_SECONDS = 20.0
+    Not rounded here: the float32 rounding happens on the wire, after gravity is added.
+    """
+    return DeviceProcessing(p.BASE_RATE_HZ, settings.filter_window, settings.decimation,
+                            output_dtype=None)
+
+
+class NoiseSource:
+    """
+    Noise rows (gyro rad/s, accel m/s^2) of the simulated unit, in AXES order.
+
+    One :class:`~imu_allan.core.noise_stream.NoiseStream` at the internal 1 kHz through the
+    device's current window and decimation: the noise goes on across blocks and settings (no
+    term restarts).  A change of settings drops the rest of the current block (at most
+    ``BLOCK_SECONDS`` of sensor time skipped).
+    """
+
+    BLOCK_SECONDS = 1.0
 
     def __init__(self, model, seed):
         """Wrap a NoiseModel and a seed."""
-        self.model = model
-        self.rng = np.random.default_rng(seed)
-        self.rate = None
-        self.block = np.zeros((0, 6))
+        self.stream = NoiseStream(model, processing_of(p.SamplingSettings()), seed, axes=AXES,
+                                  history=FILTER_WINDOW_MAX)
+        self.key = None  # (window, decimation) of the block
+        self.block = np.zeros((0, len(AXES)))
         self.i = 0
 
-    def next(self, rate_hz):  # noqa: A003 - the next noise sample
-        """Next sample (6 values in AXES order) at ``rate_hz``."""
-        if rate_hz != self.rate or self.i >= len(self.block):
-            n = max(16, int(self.BLOCK_SECONDS * rate_hz))
-            self.block = simulate(self.model, n, rate_hz, seed=self.rng, axes=AXES)
-            self.rate, self.i = rate_hz, 0
+    def prime(self, settings):
+        """Make the first block for ``settings`` now (the first records are then on time)."""
+        self._refill(settings)
+
+    def _refill(self, settings):
+        key = (settings.filter_window, settings.decimation)
+        if key != self.key:
+            self.stream.processing = processing_of(settings)
+            self.key = key
+        rate = self.stream.processing.output_rate_hz
+        self.block = self.stream.take(max(1, round(self.BLOCK_SECONDS * rate)))
+        self.i = 0
+
+    def next(self, settings):  # noqa: A003 - the next noise sample
+        """Next sample (6 values in AXES order) for the 0xDB ``settings`` in effect."""
+        if (settings.filter_window, settings.decimation) != self.key \
+                or self.i >= len(self.block):
+            self._refill(settings)
         row = self.block[self.i]
         self.i += 1
         return row
@@ -253,7 +286,7 @@ class Device:
         ``now`` (host time of the sample) sets the temperature, which shifts the biases by
         ``slope * (T - T_start)`` (``--temperature-slope``; T_start is the profile's start).
         """
-        row = self.noise.next(self.settings.rate_hz)
+        row = self.noise.next(self.settings)
         celsius = self.cfg.profile.start if now is None else self.temperature(now)
         shift = self.cfg.slopes * (celsius - self.cfg.profile.start)
         if shift.any():
@@ -552,8 +585,7 @@ class Simulator:
         self.device = Device(cfg, self.noise, now)
         # Generate the first noise block before announcing the port, so the first records
         # are not late.
-        self.noise.next(self.device.settings.rate_hz)
-        self.noise.i = 0
+        self.noise.prime(self.device.settings)
         self.line_free_at = now
         self.stream_time = 0.0       # seconds spent streaming (drives the fault schedule)
         self.stalled_until = None

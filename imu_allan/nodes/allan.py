@@ -83,6 +83,10 @@ PARAMETERS = [
     Param('rate_hz', 0.0, 'sample rate of imu/data_raw, Hz (tau0 = 1/rate_hz); 0 = measured '
                           'from the header stamps (median spacing over the first 2 s)',
           (0.0, 10000.0)),
+    Param('filter_window_s', 0.0, 'length of the moving average the IMU applies before it '
+                                  'outputs, s (3DM-GX3-25: the driver parameter filter_window '
+                                  '/ 1000 Hz, shown on its /diagnostics); 0 = unknown: '
+                                  'measured from the data', (0.0, 1.0), read_only=True),
     Param('publish_period', 10.0, 'seconds between publications (each cycle computes intervals '
                                   'and fits one axis at a time between message drains)',
           (0.1, 3600.0)),
@@ -193,7 +197,7 @@ def pipeline_options(p):
             'terms': parse_terms(p['terms']), 'gate_options': gate_options,
             'max_tau': p['max_tau'], 'points_per_decade': p['points_per_decade'],
             'stride_base': p['stride_base'], 'min_clusters': p['min_clusters'],
-            'window_s': p['window_s'],
+            'window_s': p['window_s'], 'filter_window_s': p['filter_window_s'],
             'estimators': parse_estimators(p['estimators'])}
 
 

@@ -20,7 +20,9 @@ Published (names relative, sensor-data QoS with QoS overrides enabled):
   board temperature in deg C, polled with 0xD1 every ``temperature_period`` s between data
   records (DCP-GX3 Eq. 15 on the TemperatureMag channel's 12-bit code; variance 0 = unknown;
   stamp: the reply's device timer mapped like the records');
-* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once per ``diagnostics_period``.
+* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once per ``diagnostics_period``, with the
+  device's processing as confirmed by 0xDB: ``filter_window_taps``, ``filter_window_s``,
+  ``decimation``, ``internal_rate_hz``.
 
 Stamps are the device timer mapped to the ROS clock (method: see
 :mod:`imu_allan.device.serial_link` and ``docs/driver.md``) plus ``time_offset``.
@@ -64,6 +66,11 @@ PARAMETERS = [
                             'baud cannot carry are refused (115200: 250 Hz, 230400: 333 Hz, '
                             '460800: 500 Hz, 921600: 1000 Hz for 31-byte records)',
           (1.0, 1000.0), read_only=True),
+    Param('filter_window', 15, 'gyro/accel moving-average window of the device, samples of '
+                               'its 1 kHz internal stream (0xDB; factory 15 = 15 ms): each '
+                               'output is the mean of the last filter_window of them; shown on '
+                               '/diagnostics, give the allan node filter_window / 1000 as '
+                               'filter_window_s', (1, 32), read_only=True),
     Param('mode', 'accel_rate', 'records streamed: ' + ', '.join(
         f'{m} (0x{c:02X})' for m, c in MODES.items()), read_only=True, choices=tuple(MODES)),
     Param('frame_id', 'imu_link', 'frame_id of the published messages', read_only=True),
@@ -140,7 +147,7 @@ class DriverNode(Node):
                 clock=self._now, log=self._log, stall_timeout=stall,
                 record_raw=cfg['record_raw'] or None,
                 temperature_period=cfg['temperature_period'],
-                on_temperature=self._on_temperature)
+                on_temperature=self._on_temperature, filter_window=cfg['filter_window'])
         except OSError as exc:
             raise InputError(cfg['record_raw'], f'cannot open for writing '
                                                 f'({exc.strerror})') from None
@@ -279,6 +286,9 @@ class DriverNode(Node):
         rate = (st.records - records_then) / (now - then) if now > then else 0.0
         self._diag_last = (now, st.records)
         device_rate = p.rate_for_decimation(self.decimation)
+        # The device's processing as it confirmed it with 0xDB (the requested one before that).
+        sampling = session.sampling or p.SamplingSettings(self.decimation,
+                                                          filter_window=self.cfg['filter_window'])
         state = session.state
         if state == 'streaming':
             if rate < 0.9 * device_rate and st.records > records_then:
@@ -293,6 +303,9 @@ class DriverNode(Node):
             'port': self.cfg['port'], 'baud': session.link.baud, 'mode': self.cfg['mode'],
             'rate_requested_hz': float(self.cfg['rate_hz']),
             'rate_device_hz': float(device_rate), 'rate_achieved_hz': float(rate),
+            'filter_window_taps': sampling.filter_window,
+            'filter_window_s': sampling.filter_window / p.BASE_RATE_HZ,
+            'decimation': sampling.decimation, 'internal_rate_hz': p.BASE_RATE_HZ,
             'packets': st.records, 'published': self.published,
             'checksum_failures': ps.bad_checksums, 'resyncs': ps.resyncs,
             'rejected_bytes': ps.rejected_bytes, 'dropped_packets': st.dropped,

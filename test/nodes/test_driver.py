@@ -270,7 +270,7 @@ def test_help_and_bad_arguments():
                          capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and out.stderr.startswith('gx3_sim: /nonexistent.yaml:')
     for params, words in ((['rate_hz:=1000', 'baud:=115200'], 'at most 250 Hz'),
-                          (['baud:=9600'], 'baud'),
+                          (['baud:=9600'], 'baud'), (['filter_window:=33'], 'filter_window'),
                           (['mode:=accel_rate_orientation', 'rate_hz:=1000',
                             'baud:=921600'], '500 Hz'),
                           (['mode:=euler'], 'mode')):
@@ -327,6 +327,15 @@ def test_clean_stream_values_units_stamps_rollover(node, procs, tmp_path):
         [1e-4, 0, 0, 0, 1e-4, 0, 0, 0, 1e-4], rel=1e-12)
     assert list(m.linear_acceleration_covariance) == pytest.approx(
         [4e-4, 0, 0, 0, 4e-4, 0, 0, 0, 4e-4], rel=1e-12)
+    # The device's processing, as the simulator confirmed it with 0xDB: the power-up window
+    # of 15 samples at 1 kHz, decimation 5 for 200 Hz.  The data carry it: outputs one apart
+    # share 10 of their 15 samples, a lag-1 correlation of 2/3 (standard error about 0.05
+    # with 500 messages; tolerance 0.2).
+    assert (diag['filter_window_taps'], diag['filter_window_s'], diag['decimation'],
+            diag['internal_rate_hz']) == ('15', '0.015', '5', '1000')
+    gyro = np.array([m.angular_velocity.x for m in msgs])
+    gyro -= gyro.mean()
+    assert np.dot(gyro[:-1], gyro[1:]) / np.dot(gyro, gyro) == pytest.approx(2 / 3, abs=0.2)
     # Diagnostics of a clean run.
     assert diag['_level'] == b'\x00'
     assert diag['device_model'] == '3DM-GX3-25' and diag['firmware'] == '1.1.30'
@@ -348,14 +357,19 @@ def test_mag_and_orientation_mode(node, procs, tmp_path):
     """0xCC at 100 Hz: imu/data quaternion, imu/mag in tesla, both matching imu/data_raw."""
     run = Run(node, procs, tmp_path, ['--seed', '5'],
               {'rate_hz': 100, 'mode': 'accel_rate_mag_orientation',
-               'orientation_stddev': 0.1, 'magnetic_field_stddev': 1e-6},
+               'orientation_stddev': 0.1, 'magnetic_field_stddev': 1e-6, 'filter_window': 7},
               mag=True, orientation=True)
     run.spin_until(lambda: len(run.raw) >= 150 and len(run.mag) >= 150
-                   and len(run.data) >= 150, 30)
+                   and len(run.data) >= 150 and run.diags
+                   and run.last_diag()['state'] == 'streaming', 30)
+    # The window the driver set with 0xDB, as the device echoed it.
+    diag = run.last_diag()
+    assert (diag['filter_window_taps'], diag['filter_window_s'], diag['decimation']) == \
+        ('7', '0.007', '10')
     # Run-time parameters: a covariance can change (validated), the port setup cannot.
     results = set_parameters(run, {'angular_velocity_stddev': 0.02, 'orientation_stddev': -1.0,
-                                   'rate_hz': 50.0})
-    assert [r.successful for r in results] == [True, False, False]
+                                   'rate_hz': 50.0, 'filter_window': 9})
+    assert [r.successful for r in results] == [True, False, False, False]
     assert 'orientation_stddev' in results[1].reason
     run.spin_until(lambda: run.raw[-1].angular_velocity_covariance[0] == pytest.approx(4e-4),
                    20)

@@ -83,6 +83,8 @@ def test_recorded_bag_gives_the_simulated_slope(node, procs, tmp_path):  # noqa:
     the interval, -0.4, -2.6, -0.4; -2.4, 0.0, n/a; -0.5, -1.5, -0.2 with every term fitted (the
     cause, in core.temperature); the same seeds' noise source without ROS gives the same
     errors, so they are these realisations (over 120 seeds: rms 1.0, no bias), not the path.
+    (Those were the noise source before issue 29; the continuous one through the device's
+    window gives seed 8 errors of -0.1, -0.5, -0.7.)
     """
     import json
     import subprocess
@@ -98,9 +100,13 @@ def test_recorded_bag_gives_the_simulated_slope(node, procs, tmp_path):  # noqa:
         Temperature, 'imu/temperature', temps.append,
         QoSProfile(depth=1000, reliability=qos_profile_sensor_data.reliability))
     try:
+        # filter_window 10 at decimation 10: white data at 100 Hz (each output averages its
+        # own 10 internal samples); the window-15 dip at short tau would need a fit that
+        # knows the window (filter_window_s), which the noise model behind the interval
+        # does not use yet.
         run = Run(node, procs, tmp_path, ['--seed', '8', '--temperature', 'ramp:20:40:30',
                                           '--temperature-slope', '5e-4,-3e-4,0'],
-                  {'rate_hz': 100, 'temperature_period': 0.5})
+                  {'rate_hz': 100, 'temperature_period': 0.5, 'filter_window': 10})
         run.spin_until(lambda: len(run.raw) >= 3600 and len(temps) >= 72, 90)
         run.stop()
     finally:
