@@ -206,11 +206,11 @@ def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
         assert sim.stdout.readline().decode().strip() == port
         coeffs = []
         node.create_subscription(Float64MultiArray, 'imu/allan_coeffs', coeffs.append, 10)
-        # A window of 10 samples at decimation 10: each output averages its own 10 internal
-        # samples, so the data are white at the output rate (no dip at short tau that the
-        # fit would have to know of; the driver and allan get the window from the argument).
+        # The factory window (15 taps at decimation 10) correlates consecutive samples: the
+        # driver and allan get it from the launch argument, and the fit gives white noise
+        # the shape it makes.
         launch = Launch(tmp_path, domain, 'gx3_25.launch.py', f'port:={port}',
-                        'rate_hz:=100.0', 'filter_window:=10', f'params_file:={params}')
+                        'rate_hz:=100.0', f'params_file:={params}')
         try:
             assert spin_until(executor, lambda: coeffs, 120), launch.log.read_text()
             window = get_parameters(node, executor, '/allan', ['filter_window_s'])
@@ -220,7 +220,7 @@ def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
     finally:
         sim.send_signal(signal.SIGTERM)
         sim.wait(10)
-    assert window[0].double_value == pytest.approx(0.01) and taps[0].integer_value == 10
+    assert window[0].double_value == pytest.approx(0.015) and taps[0].integer_value == 15
     table = decode_coeffs(coeffs[-1])
     assert np.isfinite(table[:, 1, 0]).sum() >= 3, table[:, 1]  # white noise, several axes
     check_clean_shutdown(status, out, ['driver', 'allan', 'denoise'])

@@ -25,10 +25,16 @@ import threading
 import time
 
 from .common import ArgumentParser, guarded
+from ..core.fit.adequacy import ADEQUACY_LEVEL
 from ..core.health import LEVEL_NAMES
 from ..core.units import AXES, conventional, IEEE_TERMS
 from ..errors import InputError
-from ..report.coeffs_layout import coefficient_terms, decode_coefficients, decode_deviation
+from ..report.coeffs_layout import (
+    coefficient_terms,
+    decode_adequacy,
+    decode_coefficients,
+    decode_deviation,
+)
 
 #: Terminal control: cursor home, then clear to the end of the screen (redraw in place).
 REDRAW = '\x1b[H\x1b[J'
@@ -86,6 +92,7 @@ class MonitorState:
         """Start empty; statuses named ``<node_name>: ...`` are kept."""
         self.prefix = f'{node_name}: '
         self.coeffs = None
+        self.adequacy = None  # each axis's adequacy p, from the coefficients' trailing block
         self.deviation = None
         self.statuses = {}
         self.received = {'coeffs': 0, 'deviation': 0, 'diagnostics': 0}
@@ -95,6 +102,10 @@ class MonitorState:
     def on_coeffs(self, msg):
         """``imu/allan_coeffs`` callback; a bad layout becomes an ERROR line, not a crash."""
         self._store('coeffs', decode_coefficients, msg)
+        try:
+            self.adequacy = decode_adequacy(msg)  # None from a publisher without the block
+        except InputError:
+            self.adequacy = None
 
     def on_deviation(self, msg):
         """``imu/allan_deviation`` callback."""
@@ -139,7 +150,9 @@ class MonitorState:
                'units': 'SI with conventional beside; noise coefficients are continuous-time, '
                         '68.3 % intervals',
                'axes': {} if self.coeffs is None else coefficient_terms(self.coeffs),
-               'deviation': None, 'status': dict(self.statuses)}
+               'deviation': None, 'status': dict(self.statuses),
+               'adequacy_p': (None if self.adequacy is None else
+                              {a: _finite(p) for a, p in zip(AXES, self.adequacy)})}
         if self.deviation is not None:
             tau, adev = self.deviation
             out['deviation'] = {'tau': [_finite(v) for v in tau],
@@ -198,8 +211,9 @@ def render(state, topics, width=99):
         shown = [t for t in IEEE_TERMS if t in ('white_noise', 'bias_instability')
                  or any(math.isfinite(v) for v in state.coeffs[:, IEEE_TERMS.index(t), 0])]
         rows = [[axis] + [format_interval(axis, t, state.coeffs[i, IEEE_TERMS.index(t)])
-                          for t in shown] for i, axis in enumerate(AXES)]
-        rows.insert(0, ['axis'] + [t.replace('_', ' ') for t in shown])
+                          for t in shown] + [_verdict(state.adequacy, i)]
+                for i, axis in enumerate(AXES)]
+        rows.insert(0, ['axis'] + [t.replace('_', ' ') for t in shown] + ['model'])
         widths = [max(len(row[k]) for row in rows) + 2 for k in range(len(rows[0]))]
         lines.append('continuous-time coefficients, value [68.3 % interval], conventional units')
         lines += [''.join(f'{c:{w}}' for c, w in zip(row, widths)).rstrip() for row in rows]
@@ -227,6 +241,14 @@ def render(state, topics, width=99):
         lines += [f'  {name}: {s["level"]} {s["message"]}'
                   for name, s in others.items() if s['level'] != 'OK']
     return lines
+
+
+def _verdict(adequacy, i):
+    """The adequacy of axis ``i`` in a word: fits, DOES NOT FIT, or - (unknown)."""
+    p = None if adequacy is None else float(adequacy[i])
+    if p is None or not math.isfinite(p):
+        return '-'
+    return 'fits' if p >= ADEQUACY_LEVEL else 'DOES NOT FIT'
 
 
 def _topic_names(node):

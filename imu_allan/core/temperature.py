@@ -222,6 +222,7 @@ def bias_slopes(t, data, rate_hz, axes, temp_t, temp_c, block_s=None, replicas=R
     """
     from .allan import allan_deviation
     from .fit import fit_noise_model, FitError
+    from .sensor import measure_sensor
     temp_t = np.asarray(temp_t, dtype=np.float64)
     temp_c = np.asarray(temp_c, dtype=np.float64)
     order = np.argsort(temp_t, kind='stable')
@@ -251,8 +252,11 @@ def bias_slopes(t, data, rate_hz, axes, temp_t, temp_c, block_s=None, replicas=R
     notes = []
     model = None
     try:
+        # (the sensor's filter shapes the shortest averaging times: the fit must know it)
         model = fit_noise_model(allan_deviation(resid, rate_hz, axes=tuple(axes)),
-                                terms=SLOPE_TERMS).model
+                                terms=SLOPE_TERMS,
+                                processing=measure_sensor(resid, rate_hz, axes).processing()
+                                ).model
     except (FitError, ValueError) as exc:
         notes.append(f'noise fit of the residuals failed ({exc}): white-noise intervals')
     out = {}

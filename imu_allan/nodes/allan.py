@@ -68,11 +68,13 @@ from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 from ..formats.imu_cdr import cdr_to_arrays, set_covariance_diagonals
 from ..report.coeffs_layout import (
+    adequacy_values,
     COEFF_LABELS,
     coefficient_table,
     DEVIATION_LABELS,
     deviation_table,
 )
+from ..report.fit_quality import adequacy_health
 
 DESCRIPTION = ('Live Allan deviation and noise coefficients (with 68.3 % intervals) of '
                'imu/data_raw: publishes imu/allan_coeffs, imu/allan_deviation and '
@@ -428,7 +430,9 @@ class AllanNode(Node):
                                                              DEVIATION_LABELS))
             table = coefficient_table(fitted, AXES) if fitted is not None else None
             if table is not None:
-                self._pub_coeffs.publish(multiarray(table, COEFF_LABELS))
+                msg = multiarray(table, COEFF_LABELS)
+                msg.data.extend(adequacy_values(fitted, AXES).tolist())  # after the table
+                self._pub_coeffs.publish(msg)
                 # robot_localization reads per-message variances: N^2 f (NaN: keep the driver's)
                 white = table[:, IEEE_TERMS.index('white_noise'), 0]
                 if self.params['covariance_mode'] == 'overbound' and result is not None:
@@ -443,7 +447,7 @@ class AllanNode(Node):
                                'cycle_wall_s': time.monotonic() - self._cycle_wall}
             self._start_advice(result, fitted)
             self._feed_pending()  # the stream's counts of every sample taken so far
-            self._pub_diag.publish(self._diagnostics(result, table))
+            self._pub_diag.publish(self._diagnostics(result, table, fitted))
         else:
             self._cycle_cpu += time.perf_counter() - start
 
@@ -482,7 +486,7 @@ class AllanNode(Node):
         self.model_file = self.params['model_file']
         self.model = NoiseModel.from_yaml(self.model_file) if self.model_file else None
 
-    def _diagnostics(self, result, table):
+    def _diagnostics(self, result, table, fitted=None):
         prefix = f'{self.get_name()}: '
         silence = (time.monotonic() - self._last_arrival
                    if self._last_arrival is not None else math.inf)
@@ -507,6 +511,7 @@ class AllanNode(Node):
             stream.values.update({f'samples_used.{a}': int(n) for a, n, r in zip(
                 p.axes, p.estimator.n_used_axes, p.rejected_total) if r})
         records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
+        records += adequacy_health(fitted, AXES, prefix)
         records.append(self._advice_status)
         if self._change is not None:
             records += self._change.health(prefix)

@@ -35,7 +35,7 @@ from ..core.health import RateFinder
 from ..core.units import AXES, IEEE_TERMS
 from ..errors import InputError
 from ..formats.imu_adapter import imus_to_arrays
-from ..report.coeffs_layout import decode_table
+from ..report.coeffs_layout import ADEQUACY_VALUES, decode_table
 
 DESCRIPTION = ('Wavelet (PyWavelets) or median denoising of imu/data_raw on overlapping blocks '
                'with bounded latency; publishes imu/data_denoised with the original stamps.')
@@ -97,7 +97,7 @@ def white_noise_from_coeffs(data, dims):
     """
     if tuple(size for _, size in dims) != (len(AXES), len(IEEE_TERMS), 3):
         return None
-    table = decode_table(data, dims)
+    table = decode_table(data, dims, ADEQUACY_VALUES)  # (the adequacy block follows)
     n = table[:, IEEE_TERMS.index('white_noise'), 0]
     return n if np.all(np.isfinite(n)) and np.all(n > 0) else None
 

@@ -3,7 +3,12 @@ The numbers on ``imu/allan_coeffs`` and ``imu/allan_deviation`` (the contract la
 
 ``imu/allan_coeffs``: dims ``axis`` (6) x ``term`` (5: :data:`~imu_allan.core.units.IEEE_TERMS`)
 x ``stat`` (3: value, ci_low, ci_high; 68.3 %), row-major, ``data_offset`` 0, SI units,
-continuous-time coefficients, NaN where a term is not detected.  ``imu/allan_deviation``: dims
+continuous-time coefficients, NaN where a term is not detected.  After those 90 numbers, which
+the dims describe, come 6 more (:data:`ADEQUACY_VALUES`): each axis's adequacy p
+(:mod:`imu_allan.core.fit.adequacy`; the model describes the curve when p >= 0.001; NaN: not
+fitted).  Readers that index by the dims or by fixed offsets are unaffected (the table's place
+and strides did not change); :func:`decode_adequacy` reads the trailing block, and a publisher
+without it (older releases) gives None.  ``imu/allan_deviation``: dims
 ``row`` (7: tau, then the six axes) x ``tau``; ``imu/allan_deviation/<kind>`` (mdev, ohdev) the
 same with that deviation.  The node encodes with these functions; users
 and tools (``monitor``) decode with :func:`decode_coefficients` and :func:`decode_deviation`,
@@ -18,6 +23,8 @@ from ..core.units import AXES, conventional, IEEE_TERMS, si_unit
 from ..errors import InputError
 
 COEFF_LABELS = ('axis', 'term', 'stat')
+#: Values after the coefficient table: the adequacy p of each axis (module docstring).
+ADEQUACY_VALUES = len(AXES)
 DEVIATION_LABELS = ('row', 'tau')
 STATS = ('value', 'ci_low', 'ci_high')
 
@@ -44,6 +51,31 @@ def coefficient_table(fitted, axes=AXES):
     return out
 
 
+def adequacy_values(fitted, axes=AXES):
+    """The trailing block of ``imu/allan_coeffs``: each axis's adequacy p (NaN: not fitted)."""
+    out = np.full(len(axes), np.nan)
+    for i, axis in enumerate(axes):
+        adequacy = fitted.adequacy(axis) if fitted is not None and axis in fitted.fits else None
+        if adequacy is not None and math.isfinite(adequacy.p):
+            out[i] = adequacy.p
+    return out
+
+
+def decode_adequacy(source, dims=None):
+    """
+    Each axis's adequacy p from ``imu/allan_coeffs`` (6,), or None without the trailing block.
+
+    The model of an axis describes its curve when p >= 0.001 (:data:`ADEQUACY_LEVEL` of
+    :mod:`imu_allan.core.fit.adequacy`).
+    """
+    data, dims = _layout(source, dims, 'imu/allan_coeffs')
+    values = np.asarray(data, dtype=float)
+    table = int(np.prod([size for _, size in dims]))
+    if values.size < table + ADEQUACY_VALUES:
+        return None
+    return values[table:table + ADEQUACY_VALUES]
+
+
 def deviation_table(result, axes=AXES):
     """
     Return the ``imu/allan_deviation`` numbers: array (1 + len(axes), T): tau then ADEV per axis.
@@ -63,17 +95,19 @@ def deviation_table(result, axes=AXES):
     return out
 
 
-def decode_table(data, dims):
+def decode_table(data, dims, trailing=0):
     """
     Array of a row-major multiarray payload: ``data`` (flat) and ``dims`` ((label, size)...).
 
-    Raises ValueError when the sizes do not match the data (``data_offset`` must be 0).
+    Raises ValueError when the sizes do not match the data (``data_offset`` must be 0);
+    ``trailing`` values after the table are allowed (the adequacy block of
+    ``imu/allan_coeffs``).
     """
     sizes = tuple(int(size) for _, size in dims)
     values = np.asarray(data, dtype=float)
-    if int(np.prod(sizes)) != values.size:
+    if values.size not in {int(np.prod(sizes)), int(np.prod(sizes)) + trailing}:
         raise ValueError(f'layout {sizes} does not match {values.size} values')
-    return values.reshape(sizes)
+    return values[:int(np.prod(sizes))].reshape(sizes)
 
 
 def _layout(source, dims, topic):
@@ -110,7 +144,7 @@ def decode_coefficients(source, dims=None):
         raise InputError('imu/allan_coeffs', f'sizes {[size for _, size in dims]}, expected '
                                              f'{list(expected)}')
     try:
-        return decode_table(data, dims)
+        return decode_table(data, dims, ADEQUACY_VALUES)
     except ValueError as exc:
         raise InputError('imu/allan_coeffs', str(exc)) from None
 

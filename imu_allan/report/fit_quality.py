@@ -9,6 +9,7 @@ the node's diagnostics, in one wording.
 
 import math
 
+from ..core.health import Health, OK, WARN
 from ..core.units import conventional, is_gyro
 
 
@@ -64,6 +65,34 @@ def adequacy_lines(fitted):
     """Console lines: one per axis whose model the adequacy test rejects (p < 0.001)."""
     return [misfit_sentence(axis, ad.to_json()) for axis in fitted.axes
             if (ad := inadequate(fitted, axis)) is not None]
+
+
+def adequacy_health(fitted, axes, prefix=''):
+    """
+    Return the ``/diagnostics`` records of the fit's adequacy, one per axis fitted.
+
+    OK, or WARN saying where the model misses (:func:`misfit_sentence`); values: p, chi^2,
+    dof, the intervals' widening and the fitted span.
+    """
+    out = []
+    for axis in axes:
+        adequacy = fitted.adequacy(axis) if fitted is not None and axis in fitted.fits else None
+        if adequacy is None:
+            continue
+        span = fitted.tau_range(axis)
+        values = {'p': adequacy.p, 'chi2': adequacy.chi2, 'dof': adequacy.dof,
+                  'interval_scale': adequacy.scale}
+        if span is not None:
+            values.update({'tau_lo_s': span.lo, 'tau_hi_s': span.hi,
+                           'limited_by': span.limited_by or 'none'})
+        if adequacy.adequate:
+            out.append(Health(f'{prefix}{axis} model', OK,
+                              f'the noise model describes the curve (p = {adequacy.p:.2g})',
+                              values))
+        else:
+            out.append(Health(f'{prefix}{axis} model', WARN,
+                              misfit_sentence(axis, adequacy.to_json()), values))
+    return out
 
 
 _WHY = {'filter': "the sensor's filter correlates the samples",

@@ -100,13 +100,11 @@ def test_recorded_bag_gives_the_simulated_slope(node, procs, tmp_path):  # noqa:
         Temperature, 'imu/temperature', temps.append,
         QoSProfile(depth=1000, reliability=qos_profile_sensor_data.reliability))
     try:
-        # filter_window 10 at decimation 10: white data at 100 Hz (each output averages its
-        # own 10 internal samples); the window-15 dip at short tau would need a fit that
-        # knows the window (filter_window_s), which the noise model behind the interval
-        # does not use yet.
+        # the driver's default window (15 taps at decimation 10): the noise model behind the
+        # slope's interval is fitted knowing the filter it puts on the samples
         run = Run(node, procs, tmp_path, ['--seed', '8', '--temperature', 'ramp:20:40:30',
                                           '--temperature-slope', '5e-4,-3e-4,0'],
-                  {'rate_hz': 100, 'temperature_period': 0.5, 'filter_window': 10})
+                  {'rate_hz': 100, 'temperature_period': 0.5})
         run.spin_until(lambda: len(run.raw) >= 3600 and len(temps) >= 72, 90)
         run.stop()
     finally:
