@@ -28,14 +28,18 @@ from numpy.lib.stride_tricks import sliding_window_view
 
 #: Line search: background half-width and gap (bins), false-alarm probability per axis.
 LINE_HALF_WIDTH, LINE_GAP, LINE_FALSE_ALARM = 16, 2, 0.005
+#: The line background's median is taken at every this many bins, interpolated between.
+BACKGROUND_STEP = 4
 #: First bin searched for lines (the median window must fit above bin 0 and 1).
 FIRST_BIN = LINE_HALF_WIDTH + LINE_GAP + 3
 #: Bins either side of a line's peak bin left out of the white fit (Hann leakage < 1e-4).
 LINE_MASK = 4
 #: The cosine series alone is fitted above fs / this; about this many bands of bins.
 FIT_LOW_FRACTION, BANDS = 100.0, 256
-#: Most lags fitted; significance of a lag (standard errors); lags of the first masking fit.
-MAX_LAGS, LAG_SIGNIFICANCE, START_LAGS = 16, 4.5, 2
+#: Most lags fitted; significance of a lag (standard errors).
+MAX_LAGS, LAG_SIGNIFICANCE = 16, 4.5
+#: Lags of the fits that find the bands to leave out, tried in turn (few first).
+MASK_LAGS_TRIED = (2, 3, 4, 6, 8, 12, 16)
 #: Band z above which a band is left out of the fit; largest mean z^2 of the bands kept.
 MASK_Z, MASK_CHI2 = 3.0, 2.0
 #: Hump: bands above the white part by this many std errors each, and together (sum / sqrt n).
@@ -124,24 +128,23 @@ class Welch:
 
     def add(self, segs):
         """Add segments (K, L); those holding a non-finite value are skipped."""
-        # eight at a time: small temporaries are reused from the heap, where 2^19-sample ones
+        # eight at a time: small temporaries are reused from the heap, where 2^18-sample ones
         # would be mapped afresh and page-faulted on every call (3x the time here)
         for i in range(0, segs.shape[0], 8):
             part = segs[i:i + 8]
-            with np.errstate(invalid='ignore', over='ignore'):
-                spec = np.fft.rfft(part * self.window, axis=1)
-            power = np.einsum('ij,ij->j', spec.real, spec.real)
-            power += np.einsum('ij,ij->j', spec.imag, spec.imag)
+            power = self._power(part)
             if not np.all(np.isfinite(power)):
-                good = np.all(np.isfinite(part), axis=1)
-                if not good.any():
-                    continue
-                spec = np.fft.rfft(part[good] * self.window, axis=1)
-                power = np.einsum('ij,ij->j', spec.real, spec.real)
-                power += np.einsum('ij,ij->j', spec.imag, spec.imag)
-                part = part[good]
+                part = part[np.all(np.isfinite(part), axis=1)]
+                power = self._power(part)
             self.sum += power
             self.count += part.shape[0]
+
+    def _power(self, part):
+        """Sum over segments of |FFT(segment x window)|^2 at bins 0..L/2."""
+        with np.errstate(invalid='ignore', over='ignore'):
+            spec = np.fft.rfft(part * self.window, axis=1)
+        return (np.einsum('ij,ij->j', spec.real, spec.real)
+                + np.einsum('ij,ij->j', spec.imag, spec.imag))
 
     def psd(self, rate_hz):
         """One-sided PSD (SI^2/Hz) at bins 0..L/2 (only 1..L/2-1 are used)."""
@@ -199,8 +202,12 @@ def find_lines(psd, nu, length, rate_hz):
         return [], background, mask
     ext = np.concatenate([psd[:half], psd[half - 1:half - 1 - reach:-1]])
     cols = np.r_[0:LINE_HALF_WIDTH, LINE_HALF_WIDTH + 2 * LINE_GAP + 1:2 * reach + 1]
-    windows = sliding_window_view(ext, 2 * reach + 1)[lo - reach:hi + 1 - reach]
-    background[lo:hi + 1] = np.median(windows[:, cols], axis=1) / _median_factor(nu)
+    # the median at every BACKGROUND_STEP-th bin, linear between (a quarter of the cost; the
+    # level moves little over 4 bins, and a line near an anchor only raises it: conservative)
+    anchors = np.unique(np.r_[np.arange(lo, hi + 1, BACKGROUND_STEP), hi])
+    windows = sliding_window_view(ext, 2 * reach + 1)[anchors - reach]
+    level = np.median(windows[:, cols], axis=1) / _median_factor(nu)
+    background[lo:hi + 1] = np.interp(np.arange(lo, hi + 1), anchors, level)
     bins = np.arange(lo, hi + 1)
     level = background[lo:hi + 1]
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -390,7 +397,7 @@ def fit_white(psd, nu, length, rate_hz, line_mask, background):
     """
     Fit the white part of a Welch PSD and find the humps above it; WhitePart or None.
 
-    First the bands to leave out: with k lags (k = :data:`START_LAGS`, 3, ...) the bands more
+    First the bands to leave out: with k lags (k in :data:`MASK_LAGS_TRIED`) the bands more
     than :data:`MASK_Z` standard errors above the fit are left out and the fit repeated until
     that settles (a resonance pulls a first fit up and makes it ring; the bands left out
     shrink back as the fit relaxes), widened by a band and humps by half their width either
@@ -409,7 +416,7 @@ def fit_white(psd, nu, length, rate_hz, line_mask, background):
     lags = int(min(MAX_LAGS, max(high_bands // 4 - 3, 0)))
     bands = _Bands(psd, background, line_mask, nu, length, rate_hz, lags)
     mask = None
-    for k in range(min(START_LAGS, lags), lags + 1):
+    for k in sorted({min(k, lags) for k in MASK_LAGS_TRIED}):
         mask = _settle_mask(bands, k)
         if mask is not None:
             break
@@ -440,10 +447,12 @@ def _settle_mask(bands, lags):
     filter stays off everywhere), or fewer than half the bands are kept.
     """
     mask = np.zeros(bands.y.size, dtype=bool)
+    use_low = None
     for it in range(12):
-        fit = _Fit(bands, mask, lags)
+        fit = _Fit(bands, mask, lags, use_low)
         if fit.coef is None:
             return None
+        use_low = fit.use_low     # tried once: the mask hardly changes it
         z = bands.z(fit.model(bands))
         grown = z > MASK_Z
         if it >= 3:     # from here on only grow: a band at a spectral null can flip back

@@ -71,7 +71,8 @@ def test_the_analysed_stamps_and_samples_agree(record):
 def test_every_part_is_named_and_computed_once(record):
     assert isinstance(record, RecordAnalysis)
     assert record.steps == ['Allan deviation and fit', 'denoising', 'dynamic Allan deviation']
-    assert record.sensor is None                        # reserved slot
+    assert set(record.sensor.axes) == set(AXES)          # measured with the estimate
+    assert record.sensor is record.analysis.sensor
     assert set(record.advice.axes) == set(AXES) and record.advice.targets
     # denoised: the analysed rows, denoised, with their own stamps
     den = record.denoised
