@@ -385,6 +385,10 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
         return fit
     base = tuple(problem.fixed)
     candidates = list(IEEE_TERMS) if problem.tau.size >= 4 else ['white_noise']
+    if span is not None and span.limited_by == 'resonance':
+        # beyond the cut a resonance's tail falls as 1/tau^2, quantization's shape: what is
+        # left of it would pass for quantization (a 10 % lower N on a real gyro)
+        candidates.remove('quantization')
     best, best_bic = None, math.inf
     penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
     scored = []
