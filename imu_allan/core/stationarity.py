@@ -5,11 +5,8 @@ ROS-free, streaming, bounded memory.  The stream is cut into windows of ``window
 (counted in samples from the start of the stream, so decisions do not depend on how the stream
 is chunked).  A window is *raw-moving* when, on any axis,
 
-* its standard deviation, its most extreme sample left out, exceeds ``std_factor`` x the noise
-  floor of that axis (vibration, shaking; a single spike is not motion: real records carry
-  them, 4255 beyond Tukey's fences in one static ADIS16405 run, and each once cost the
-  estimate a window, its neighbour and the hold, 0.5-0.7 % of the record in short cuts that
-  left no span longer than 200-250 s for the longest averaging times), or
+* its standard deviation exceeds ``std_factor`` x the noise floor of that axis (vibration,
+  shaking), or
 * its mean differs from the previous window's mean by more than ``step_factor`` x the floor x
   sqrt(2 / w) (w samples per window: that is the standard deviation of the difference of two
   window means of white noise, so ``step_factor`` = 8 is an 8-sigma test; it catches tilts,
@@ -20,13 +17,17 @@ is chunked).  A window is *raw-moving* when, on any axis,
   windows over ``reference_s`` seconds) by more than ``gyro_delta_max`` rad/s (gyro vector:
   slow steady turns, slow ramps that the step test misses) or ``accel_delta_max`` m/s^2
   (accelerometer vector: slow tilts), or by ``step_factor`` standard deviations of the window
-  means' vector norm where that is more (the limits are never stricter than the noise).  When
+  means' vector norm where that is more (never stricter than the noise: a static ADIS16405's
+  accelerometer 0.2-s means crossed 0.05 m/s^2 about once a minute, and every crossing cost a
+  second, 0.7 % of the record in short cuts that left no span longer than 250 s for the
+  longest averaging times).  When
   the data stay quiet (no spread or step alarm) but
   away from the reference for ``settle_s`` seconds (accelerometer only: a new resting pose) or
   ``reacquire_s`` seconds (gyro: a persistent shift is taken for a bias change after that long),
   the reference jumps to the new level.
 
-The noise floor of each axis is the ``floor_quantile`` quantile of the standard deviations of
+Every window statistic leaves out the window's most extreme sample per axis: a single spike is
+not motion (motion moves every sample).  The noise floor of each axis is the ``floor_quantile`` quantile of the standard deviations of
 the last ``floor_windows`` windows (moving or not), so it follows a real change of the noise
 level within a minute and stays correct as long as the IMU is still for more than that share
 of the time.  A window is finally excluded when it, the next window (motion starting inside it)
@@ -271,18 +272,18 @@ class StationarityGate:
 
 def _window_stats(windows):
     """
-    Per window (k, w, A): the mean, and the standard deviation without its most extreme sample.
+    Per window (k, w, A): the mean and standard deviation without its most extreme sample.
 
-    The spread test's statistic (module docstring): one spike leaves it where the noise is.
+    The tests' statistics (module docstring): one spike leaves them where the noise is.
     """
-    means = windows.mean(axis=1)
     w = windows.shape[1]
+    sums = windows.sum(axis=1)
     extreme = np.take_along_axis(
-        windows, np.abs(windows - means[:, None, :]).argmax(axis=1)[:, None, :], axis=1)[:, 0]
-    rest = windows.sum(axis=1) - extreme
-    rest_sq = np.einsum('kwa,kwa->ka', windows, windows) - extreme * extreme
-    var = rest_sq / (w - 1) - (rest / (w - 1)) ** 2
-    return means, np.sqrt(np.maximum(var, 0.0))
+        windows, np.abs(windows * w - sums[:, None, :]).argmax(axis=1)[:, None, :],
+        axis=1)[:, 0]
+    rest = (sums - extreme) / (w - 1)
+    rest_sq = (np.einsum('kwa,kwa->ka', windows, windows) - extreme * extreme) / (w - 1)
+    return rest, np.sqrt(np.maximum(rest_sq - rest * rest, 0.0))
 
 
 def stationary_mask(data, rate_hz, **options):
