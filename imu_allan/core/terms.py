@@ -148,21 +148,6 @@ def white_shape(tau):
     return 1.0 / np.asarray(tau, dtype=float)
 
 
-def filtered_white_shape(tau, rate_hz, filter_moment):
-    """
-    AVAR per unit N^2 of white noise the sensor filtered: 1/tau - 1.5 (D/S) / (fs tau^2).
-
-    N is the density at low frequency (continuous time, as unfiltered).  A filter (or
-    sample-and-hold) correlates the samples: with R_k their autocovariance, zero beyond lag L,
-    S = R_0 + 2 sum R_k (= N^2 fs) and D = 2 sum k R_k, the AVAR of m-sample averages is
-    Var(mean) - Cov(adjacent means) = (S / m - D / m^2) - D / (2 m^2) = S / m - 1.5 D / m^2
-    for every m >= L (both sums then hold every lag), i.e. N^2 / tau - 1.5 (D / S) N^2 /
-    (fs tau^2).  ``filter_moment`` is D / S, in samples (:mod:`.fit.tau_range`).
-    """
-    tau = np.asarray(tau, dtype=float)
-    return 1.0 / tau - 1.5 * filter_moment / (rate_hz * tau * tau)
-
-
 def random_walk_shape(tau, rate_hz=None):
     """
     AVAR of a rate random walk per unit K^2: tau / 3.

@@ -37,7 +37,7 @@ from ..bisection import guided, log_ratio, run
 from ..bounded_min import bounded_minimum
 from ..edf import _gammainccinv, CI_LEVEL
 from ..nnls import nnls_scaled
-from ..terms import filtered_white_shape, sinusoid_shape, TERMS
+from ..terms import sinusoid_shape, TERMS
 from ..units import ALL_TERMS, conventional, IEEE_TERMS, si_unit
 
 #: Correlation width (decades) of AVAR estimates vs noise exponent alpha (measured, see doc).
@@ -83,6 +83,8 @@ class AxisFit:
     problem: object = None
     #: the span's nuisance lines, fitted: frequency (Hz) -> amplitude (SI, peak)
     lines: dict = field(default_factory=dict)
+    #: the filter's deficit c (SI^2): AVAR - c tau0 / tau^2, 1.5 (D / S) N^2 (:mod:`.tau_range`)
+    filter_deficit: float = 0.0
 
 
 class FitError(ValueError):
@@ -130,9 +132,10 @@ class Problem:
         ``duration_s`` (the record length) gives a rate ramp's drift variance
         (:func:`ramp_drift_variance`); without it a ramp's interval lacks that part.
         ``span`` (a :class:`.tau_range.TauRange`): keep only its averaging times (those the
-        sensor's own processing does not shape), give white noise the shape its filter makes
-        (``filter_moment``: :func:`~imu_allan.core.terms.filtered_white_shape`) and fix the
-        frequency of its line (a ``sinusoid`` fitted on this problem keeps it, unprofiled).
+        sensor's own processing does not shape), fix the frequency of its line (a
+        ``sinusoid`` fitted on this problem keeps it, unprofiled) and carry its nuisance
+        columns in every fit: its other lines, and where the sensor filters, the deficit its
+        filter makes, -tau0 / tau^2 (:mod:`.tau_range`), their sizes fitted.
         """
         self.duration_s = duration_s
         tau = np.asarray(tau, dtype=float)
@@ -147,12 +150,15 @@ class Problem:
         self.span = span
         self.fixed = ({'sinusoid': span.line[0]} if span is not None and span.line is not None
                       else {})
-        self.filter_moment = span.filter_moment if span is not None else 0.0
-        #: the span's other lines: nuisance columns every fit of this problem carries, their
-        #: amplitudes fitted (the sensor's, not noise terms), per unit amplitude^2
+        #: the span's other lines (Hz) and whether its filter's deficit is fitted: nuisance
+        #: columns every fit of this problem carries (the sensor's, not noise terms), a line
+        #: per unit amplitude^2, the deficit -tau0 / tau^2 per unit (SI^2)
         self.lines = tuple(f for f, _ in span.lines) if span is not None else ()
-        self.nuisance = (np.column_stack([sinusoid_shape(self.tau, f) for f in self.lines])
-                         if self.lines else None)
+        self.filtered = bool(span is not None and span.filter_moment > 0.0)
+        shapes = [sinusoid_shape(self.tau, f) for f in self.lines]
+        if self.filtered:
+            shapes.append(-1.0 / (self.rate_hz * self.tau * self.tau))
+        self.nuisance = np.column_stack(shapes) if shapes else None
         self.corr = correlation_matrix(self.tau, self.alpha, self.correlation_widths,
                                        self.correlation_tails) + 1e-9 * np.eye(ok.sum())
         self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(self.corr)))
@@ -165,10 +171,7 @@ class Problem:
         if position is not None:
             return TERMS[name].shape(self.tau, self.rate_hz, position)
         if name not in self._columns:  # profiles and forecasts ask again for every trial
-            self._columns[name] = (
-                filtered_white_shape(self.tau, self.rate_hz, self.filter_moment)
-                if name == 'white_noise' and self.filter_moment
-                else TERMS[name].shape(self.tau, self.rate_hz, None))
+            self._columns[name] = TERMS[name].shape(self.tau, self.rate_hz, None)
         return self._columns[name]
 
     def with_nuisance(self, columns):
@@ -309,10 +312,11 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
         profiles[name] = (grid, values, logp, chi2_at)
     coef, chi2, g = evaluate(nonlinear)
     fit = AxisFit(chi2=chi2, n_points=problem.tau.size)
-    coef, lines = coef[:len(names)], coef[len(names):]
-    fit.lines = {f: math.sqrt(c) for f, c in zip(problem.lines, lines) if c > 0}
+    coef, extra = coef[:len(names)], coef[len(names):]
+    fit.lines = {f: math.sqrt(c) for f, c in zip(problem.lines, extra) if c > 0}
+    fit.filter_deficit = float(extra[-1]) if problem.filtered else 0.0
     active = coef > 0
-    used = np.concatenate([active, lines > 0])  # the nuisance columns count for the covariance
+    used = np.concatenate([active, extra > 0])  # the nuisance columns count for the covariance
     try:  # (the terms come first: their block of the inverse is their marginal covariance)
         cov = np.linalg.inv(g[:, used].T @ g[:, used])[:active.sum(), :active.sum()]
     except np.linalg.LinAlgError:
@@ -385,9 +389,10 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
         return fit
     base = tuple(problem.fixed)
     candidates = list(IEEE_TERMS) if problem.tau.size >= 4 else ['white_noise']
-    if span is not None and span.limited_by == 'resonance':
-        # beyond the cut a resonance's tail falls as 1/tau^2, quantization's shape: what is
-        # left of it would pass for quantization (a 10 % lower N on a real gyro)
+    if problem.filtered or (span is not None and span.limited_by == 'resonance'):
+        # a filter's deficit, and beyond its cut a resonance's tail, have quantization's
+        # shape (1/tau^2): quantization cannot be told from them (a resonance's rest passed
+        # for it and took 10 % off N on a real gyro)
         candidates.remove('quantization')
     best, best_bic = None, math.inf
     penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))

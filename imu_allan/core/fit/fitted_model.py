@@ -269,7 +269,7 @@ def _assess(fit, rate_hz, processing):
         * problem.column(name, params.get(TERMS[name].position) if TERMS[name].position
                          else None)
         for name, params in fit.terms.items()])
-    nuisance = _nuisance_avar(fit, tau)
+    nuisance = _nuisance_avar(fit, tau, deficit=True)
     if nuisance:
         columns = np.column_stack([columns] + nuisance)
     names = list(fit.terms)
@@ -287,9 +287,17 @@ def _assess(fit, rate_hz, processing):
     widen(fit, fit.adequacy.scale)
 
 
-def _nuisance_avar(fit, tau):
-    """AVAR (per tau) of each nuisance line the fit carries, a list of arrays."""
-    return [a * a * sinusoid_shape(tau, f) for f, a in fit.lines.items()]
+def _nuisance_avar(fit, tau, deficit=False):
+    """
+    AVAR (per tau) of each nuisance line the fit carries, a list of arrays.
+
+    ``deficit``: also the filter's deficit (for the fitted averaging times only: below the
+    filter's reach its closed form does not hold, so the drawn model leaves it out).
+    """
+    out = [a * a * sinusoid_shape(tau, f) for f, a in fit.lines.items()]
+    if deficit and fit.filter_deficit:
+        out.append(-fit.filter_deficit / (fit.problem.rate_hz * np.asarray(tau) ** 2))
+    return out
 
 
 #: The Gauss-Markov hump is tried where the adequacy test's p falls below this ...
