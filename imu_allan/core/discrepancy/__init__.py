@@ -34,6 +34,8 @@ Everything is SI (rad/s, m/s^2, s, Hz) and ROS-free.  Modules: :mod:`.band` (ste
 """
 
 from .band import ALPHA, Band, excursion_band, Gap, measure_gap, model_band, pool_simulations
+from .evidence import Recording
+from .findings import find_discrepancies, Finding, FindingsResult
 from .logfit import AxisFit, fit_terms, FitProblem, improvement_test, position_range
 from .workflow import (
     Candidate,
@@ -49,7 +51,8 @@ from .workflow import (
 )
 
 __all__ = ['ALPHA', 'AxisFit', 'Band', 'Candidate', 'DEFAULT_START', 'DiscrepancyResult',
-           'evaluate_candidates', 'excursion_band', 'fit_terms', 'FitProblem', 'Gap',
-           'gap_summary', 'improvement_test', 'measure_gap', 'model_band', 'pool_simulations',
-           'position_range', 'run_discrepancy', 'run_samples', 'sample_rate', 'start_model',
-           'Step']
+           'evaluate_candidates', 'excursion_band', 'find_discrepancies', 'Finding',
+           'FindingsResult', 'fit_terms', 'FitProblem', 'Gap', 'gap_summary',
+           'improvement_test', 'measure_gap', 'model_band', 'pool_simulations',
+           'position_range', 'Recording', 'run_discrepancy', 'run_samples', 'sample_rate',
+           'start_model', 'Step']
