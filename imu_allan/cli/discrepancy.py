@@ -18,8 +18,9 @@ Bad input: one line on stderr naming the file and the problem, exit status 2.
 
 import json
 import os
+import sys
 
-from .common import ArgumentParser, bounded_int, check_out_dir, emit, guarded
+from .common import ArgumentParser, bounded_int, check_out_dir, emit, EXIT_BAD_INPUT, guarded
 from ..core.model import NoiseModel
 from ..errors import InputError
 from ..formats import FORMATS
@@ -148,12 +149,23 @@ def _one(args, model, sim, terms):
 
 
 def _several(args, model, sim):
-    """Several recordings of one configuration: the findings against the stated model."""
+    """
+    Several recordings of one configuration: the findings against the stated model.
+
+    A recording that cannot be read is left out, said in one stderr line and in the notes,
+    and the command exits 2 after reporting on the others (as ``analyze`` does).
+    Returns ``(text, errors)``.
+    """
     from ..core.discrepancy import find_discrepancies, Recording
     from ..report.discrepancy_report import runs_report_dict, runs_summary_text
-    recordings, models, notes = [], [], []
+    recordings, models, notes, errors = [], [], [], []
     for path in args.inputs:
-        samples, rate, stated, cov_notes = _read(path, args)
+        try:
+            samples, rate, stated, cov_notes = _read(path, args)
+        except (InputError, OSError) as exc:
+            errors.append(str(exc) if isinstance(exc, InputError) else
+                          f'{path}: {exc.strerror or exc}')
+            continue
         stated_model, note = _stated_model(model, sim, rate)
         if note and note not in notes:
             notes.append(note)
@@ -165,17 +177,19 @@ def _several(args, model, sim):
         recordings.append(Recording(samples.data, rate, samples.axes,
                                     samples.source or path, stated))
         models.append(stated_model)
+    if not recordings:
+        raise InputError(args.inputs[0], errors[0].split(': ', 1)[-1])
     try:
         findings = find_discrepancies(recordings, models)
     except ValueError as exc:  # a record too short for any averaging-time grid
         raise InputError(args.inputs[0], str(exc)) from None
     if sim is not None:
         sim.suggest(findings.findings, [r.rate_hz for r in recordings])
-    findings.notes[:0] = notes
+    findings.notes[:0] = notes + [f'left out: {e}' for e in errors]
     report = runs_report_dict(findings, models[0], [r.source for r in recordings])
     if args.out:
         _write(args.out, report, lambda folder: None)
-    return json.dumps(report, indent=2) if args.json else runs_summary_text(report)
+    return (json.dumps(report, indent=2) if args.json else runs_summary_text(report)), errors
 
 
 def _write(out, report, files):
@@ -202,12 +216,15 @@ def main(argv=None):
     if args.out:
         check_out_dir(args.out)
     model, sim = _read_model(args.model)
+    errors = []
     if len(args.inputs) == 1:
         text = _one(args, model, sim, terms)
     else:
-        text = _several(args, model, sim)
+        text, errors = _several(args, model, sim)
     emit(text)
     if args.out and not args.json:
         emit(f'report and plots written to {args.out}; open '
              f'{os.path.join(args.out, "report.html")}')
-    return 0
+    for error in errors:
+        sys.stderr.write(f'discrepancy: {error}\n')
+    return EXIT_BAD_INPUT if errors else 0

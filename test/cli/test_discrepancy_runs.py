@@ -160,9 +160,23 @@ def test_correct_gz_reading_is_consistent_in_one_recording(gz_csvs, tmp_path):
     assert report['steps'] == []
 
 
+def test_an_unreadable_recording_is_left_out_and_said(gz_csvs, tmp_path):
+    """The others are compared; the bad one is one stderr line and a note; exit status 2."""
+    paths, sdf = gz_csvs
+    missing = tmp_path / 'nope.csv'
+    proc = run_command('discrepancy', paths[0], missing, paths[2], '--model', sdf, '--json',
+                       timeout=300)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and str(missing) in lines[0] and 'no such file' in lines[0]
+    report = json.loads(proc.stdout)
+    assert len(report['recordings']) == 2
+    assert any(str(missing) in n for n in report['notes'])
+
+
 @pytest.mark.parametrize('args, needle', [
     (['{a}', '{b}'], 'give --model'),
-    (['{a}', '{missing}', '--model', '{sdf}'], 'no such file'),
+    (['{missing}', '{missing}', '--model', '{sdf}'], 'no such file'),
     (['{a}', '{b}', '--model', '{sdf}', '--out', '{a}'], 'not a folder'),
     (['{a}', '{b}', '--model', '{bad}'], 'bad.sdf'),
 ])

@@ -28,9 +28,20 @@ to the data), the workflow
    over the T_eff positions their hump could take);
 6. adds it, refits, re-simulates, re-measures, and repeats until nothing significant is left.
 
+A step that raises the gap is not kept (the next candidate gets its turn).
+
+Several recordings of one configuration (any rates, any runs) are compared with the model they
+state by :func:`find_discrepancies`: each term's factor (measured / stated) and how it scales
+with the sample rate, its correlation time, whether it is there at all and is the process
+stated, the turn-on bias across runs, the drift's sign, and the messages' covariance; each
+disagreement is a :class:`Finding` of one class.
+
 Everything is SI (rad/s, m/s^2, s, Hz) and ROS-free.  Modules: :mod:`.band` (steps 2-4),
-:mod:`.logfit` (the fit of step 5), :mod:`.workflow` (steps 1, 5, 6 and the online summary).
-``docs/discrepancy.md`` explains the method and the validation results.
+:mod:`.logfit` (the fit of step 5), :mod:`.workflow` (steps 1, 5, 6 and the online summary);
+:mod:`.evidence` (one recording against a stated model), :mod:`.pooling` (factors over
+recordings and rates), :mod:`.runs` (turn-on bias and drift across runs), :mod:`.findings`
+(the classes and the decision).  ``docs/discrepancy.md`` explains the method and the
+validation results.
 """
 
 from .band import ALPHA, Band, excursion_band, Gap, measure_gap, model_band, pool_simulations

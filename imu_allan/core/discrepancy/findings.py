@@ -93,7 +93,7 @@ class FindingsResult:
     z_crit: float
     alpha: float
     notes: list = field(default_factory=list)
-    evidence: list = field(default_factory=list)
+    evidence: dict = field(default_factory=dict)  # {axis: [AxisEvidence per recording]}
 
     @property
     def consistent(self):
@@ -348,7 +348,7 @@ def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
                                                     f.axis in drifting)]
     findings.sort(key=lambda f: (CLASSES.index(f.cls), f.axis))
     return FindingsResult(findings, summaries, sorted(per_axis), n_tests, z_crit, alpha,
-                          notes, [per_axis])
+                          notes, per_axis)
 
 
 def fisher(p_values):
