@@ -84,7 +84,7 @@ GZ_WHITE = _gz_only(('stddev',))
 GZ_DYNAMIC = _gz_only(('stddev', 'dynamic_bias_stddev', 'dynamic_bias_correlation_time'))
 GZ_SIGN = {'accel': {'stddev': GZ['accel']['stddev'], 'bias_mean': GZ['accel']['bias_mean'],
                      'bias_stddev': GZ['accel']['bias_stddev']}}
-HECTOR = {'drift': 0.005, 'frequency': 1.0 / 3600.0, 'white': 1e-4}
+HECTOR = {'drift': 0.01, 'frequency': 1.0 / 3600.0, 'white': 1e-4}
 #: A "bounded" bias whose correlation time lies inside a half-hour record, for the
 #: wrong-process case (no real default is short enough: PX4's 300 s needs 3 h records).
 SHORT_GM = {'density': 2e-4, 'random_walk': 4e-5, 'tau': 20.0, 'turn_on': 0.0}
@@ -107,7 +107,7 @@ CASES = [
          lambda axes, rate: NoiseModel({a: {**_gz_white_model(axes, rate)[a], **_gm(
              GZ[sp.sensor(a)]['dynamic_bias_stddev'],
              GZ[sp.sensor(a)]['dynamic_bias_correlation_time'])} for a in axes}),
-         'bias_scale', 'gauss_markov', math.sqrt(400.0 / 2.0), minutes=30.0,
+         'bias_scale', 'gauss_markov', math.sqrt(400.0 / 2.0), minutes=60.0,
          rates=(100.0, 250.0)),
     Case('hector_drift_dt', 'hector_gazebo sensor_model.h',
          lambda axes, n, rate, seed, correct: np.column_stack([sp.hector_axis(
