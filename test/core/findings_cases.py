@@ -145,6 +145,15 @@ CASES = [
              SHORT_GM['random_walk'] * math.sqrt(SHORT_GM['tau'] / 2.0), SHORT_GM['tau'])}
              for a in axes}),
          'wrong_process', 'gauss_markov', 1.0, rates=(100.0, 250.0), minutes=30.0),
+    Case('bounded_for_walk', 'PX4 RandomWalk read as a random walk: the plugin bounds it',
+         lambda axes, n, rate, seed, correct: sp.px4_run(
+             axes, n, rate, seed, config={'gyro': SHORT_GM, 'accel': SHORT_GM},
+             turn_on=False, walk=correct),
+         lambda axes, rate: NoiseModel({a: {**_white(SHORT_GM['density']),
+                                            'rate_random_walk': {
+                                                'value': SHORT_GM['random_walk']}}
+                                        for a in axes}),
+         'wrong_process', 'rate_random_walk', 1.0, rates=(100.0, 250.0), minutes=30.0),
     Case('dynamic_bias_ignored', 'gz-sensors before the dynamic bias (ApplyImpl without dt)',
          lambda axes, n, rate, seed, correct: sp.gz_run(
              axes, n, rate, seed, GZ_DYNAMIC, dynamic=correct),

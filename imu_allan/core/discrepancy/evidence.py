@@ -258,15 +258,19 @@ def _position_p(delta_q, fit, rest, cols, prob):
     return min(1.0, p * max(prob.t_eff, 1.0))
 
 
-def _gm_drive_estimate(fit, term, stated):
-    """ln(driving density measured / stated) of a Gauss-Markov, from a fit with tau_c free."""
-    sigma, tau_c = TERMS[term].unpack(fit.terms[term])
-    s0, t0 = TERMS[term].unpack(stated)
-    i, k = fit.names.index((term, 'amp')), fit.names.index((term, 'pos'))
+def _log_drive(fit):
+    """
+    Return ln(driving density) of the fit's Gauss-Markov (tau_c free) and its standard error.
+
+    The driving density sigma sqrt(2 / tau_c) is what a walk and a Gauss-Markov share below
+    tau_c: ln sigma - ln tau_c / 2 + const, its variance from the two logs' covariance.
+    """
+    sigma, tau_c = TERMS['gauss_markov'].unpack(fit.terms['gauss_markov'])
+    i, k = fit.names.index(('gauss_markov', 'amp')), fit.names.index(('gauss_markov', 'pos'))
     c = fit.cov
     var = c[i, i] + 0.25 * c[k, k] - c[i, k]
     se = math.sqrt(var) if np.isfinite(var) and var > 0 else math.inf
-    return math.log(sigma * math.sqrt(2.0 / tau_c)) - math.log(s0 * math.sqrt(2.0 / t0)), se
+    return math.log(sigma * math.sqrt(2.0 / tau_c)), se
 
 
 def _wide(measured):
@@ -285,6 +289,34 @@ def _free_position(y, measured, j, names, fit, fixed):
     return free, _position_p(q_fixed - free.q, free, rest, pos, prob)
 
 
+def _bounded_walk(y, measured, j, names, fit, fixed, rate):
+    """
+    Try a stated random walk as a Gauss-Markov with its tau_c free.
+
+    Returns ``(process evidence, the fit with the Gauss-Markov in its place)`` when that fit
+    bends inside the span (its hump's peak before the longest averaging time), else
+    ``(None, None)``.  The evidence's p-value is that of the position (a walk is the
+    Gauss-Markov's tau_c -> inf limit), with the look-elsewhere factor.
+    """
+    t_max = float(measured.tau[-1])
+    alt = [t for t in names if t != 'rate_random_walk'] + ['gauss_markov']
+    k_stated = fit.terms['rate_random_walk']['value']
+    init = {t: fit.terms[t] for t in alt if t in fit.terms}
+    init['gauss_markov'] = {'sigma': k_stated * math.sqrt(t_max / 2.0), 'tau_c': t_max}
+    prob, bounded = _refit(y, measured, j, alt, init, fixed, _wide(measured))
+    pos = [bounded.names.index(('gauss_markov', 'pos'))]
+    rest = [i for i in range(bounded.jac.shape[1]) if i not in pos]
+    walk_q = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
+    p = _position_p(walk_q - bounded.q, bounded, rest, pos, prob)
+    tau_fit = bounded.terms['gauss_markov']['tau_c']
+    if bounded.at_bound['gauss_markov']['tau_c'] or \
+            tau_fit * TERMS['gauss_markov'].peak_ratio >= t_max:
+        return None, None
+    log_k, se_k = _log_drive(bounded)
+    return {'term': 'rate_random_walk', 'kind': 'bounded', 'p_value': p,
+            'estimate': LogEstimate(log_k, se_k, rate), 'tau_c_fit': tau_fit}, bounded
+
+
 def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, freed=None):
     """
     Position factors of stated Gauss-Markov terms, and the wrong-process evidence.
@@ -297,7 +329,6 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
     t_max = float(tau[-1])
     spec = TERMS['gauss_markov']
     positions, position_p, free_scales, process = {}, {}, {}, None
-    wide = _wide(measured)
     if 'gauss_markov' in needed:
         free, p = freed or _free_position(y, measured, j, names, fit, fixed)
         tau_fit = free.terms['gauss_markov']['tau_c']
@@ -316,32 +347,11 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
                 _log_sd(free, 'gauss_markov', 'amp') * POSITION_SE_INFLATION, rate)
         # the data keep rising where the stated Gauss-Markov would have levelled off
         if (tau_fit > t_max or at_top) and spec.peak_ratio * tau_stated < 0.5 * t_max:
-            log_k, se_k = _gm_drive_estimate(free, 'gauss_markov', stated['gauss_markov'])
+            log_k, se_k = _log_drive(free)
+            s0 = stated['gauss_markov']['sigma']
             process = {'term': 'gauss_markov', 'kind': 'walk', 'p_value': p,
-                       'estimate': LogEstimate(log_k, se_k, rate), 'tau_c_fit': tau_fit}
-    if 'rate_random_walk' in needed and 'gauss_markov' not in names:
-        # a stated walk tried as a bounded Gauss-Markov with its tau_c free
-        alt = [t for t in names if t != 'rate_random_walk'] + ['gauss_markov']
-        k_stated = stated['rate_random_walk']['value']
-        init = {t: fit.terms[t] for t in alt if t in fit.terms}
-        init['gauss_markov'] = {'sigma': k_stated * math.sqrt(t_max / 2.0), 'tau_c': t_max}
-        prob, bounded = _refit(y, measured, j, alt, init, fixed, wide)
-        cols = [i for i, (t, _) in enumerate(bounded.names) if t == 'gauss_markov']
-        rest = [i for i in range(bounded.jac.shape[1]) if i not in cols]
-        walk_q = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
-        p = _position_p(walk_q - bounded.q, bounded, rest, cols[1:], prob)
-        tau_fit = bounded.terms['gauss_markov']['tau_c']
-        if not bounded.at_bound['gauss_markov']['tau_c'] and tau_fit * spec.peak_ratio < t_max:
-            sigma = bounded.terms['gauss_markov']['sigma']
-            i, k = bounded.names.index(('gauss_markov', 'amp')), \
-                bounded.names.index(('gauss_markov', 'pos'))
-            c = bounded.cov
-            var = c[i, i] + 0.25 * c[k, k] - c[i, k]
-            se = math.sqrt(var) if np.isfinite(var) and var > 0 else math.inf
-            process = {'term': 'rate_random_walk', 'kind': 'bounded', 'p_value': p,
-                       'estimate': LogEstimate(math.log(sigma * math.sqrt(2.0 / tau_fit)
-                                                        / k_stated), se, rate),
-                       'tau_c_fit': tau_fit}
+                       'estimate': LogEstimate(log_k - math.log(s0 * math.sqrt(
+                           2.0 / tau_stated)), se_k, rate), 'tau_c_fit': tau_fit}
     return positions, position_p, free_scales, process
 
 
@@ -432,6 +442,21 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
                                               rate), alpha).value
     first = _refit(y, measured, j, names, stated, fixed)
     held, fit, freed = _free_gauss_markov(y, measured, j, names, first[1], fixed)
+    replaced = None
+    if 'rate_random_walk' in stated and 'gauss_markov' not in stated:
+        ev.process, bounded = _bounded_walk(y, measured, j, names, fit, fixed, rate)
+        if ev.process is not None:
+            # the stated walk stands in for the data's bounded bias; the process is kept in
+            # the walk's place (with its fitted tau_c) for what follows, so that a missing
+            # effect is not invented to bend the walk, and its stated K is not scaled
+            ev.process['estimate'].log -= math.log(stated['rate_random_walk']['value'])
+            if ev.process['p_value'] < ADOPT_P:
+                replaced = 'rate_random_walk'
+                names = [t for t in names if t != replaced] + ['gauss_markov']
+                fixed = dict(fixed, gauss_markov=bounded.terms['gauss_markov']['tau_c'])
+                held = dict(fixed)
+                fit = bounded
+                first = _refit(y, measured, j, names, bounded.terms, fixed)
     # effects the stated terms lack: only when the refitted stated terms leave the band
     for _ in range(MAX_MISSING):
         band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
@@ -466,6 +491,8 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
         prob, fit = first
     needed = set()
     for term, params in stated.items():
+        if term == replaced:
+            continue
         a0 = _amp(params, term)
         p_drop = _drop_test(prob, fit, names, term, fixed) if len(names) > 1 else 0.0
         if p_drop > NOT_NEEDED_P:
@@ -478,5 +505,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
         ev.scales[term] = LogEstimate(math.log(_amp(fit.terms[term], term) / a0),
                                       _log_sd(fit, term, 'amp') * AMPLITUDE_SE_INFLATION,
                                       rate)
-    ev.positions, ev.position_p, ev.free_scales, ev.process = _process_tests(
+    positions, position_p, free_scales, process = _process_tests(
         y, measured, j, names, fit, fixed, stated, rate, needed, freed)
+    ev.positions, ev.position_p, ev.free_scales = positions, position_p, free_scales
+    ev.process = ev.process or process
