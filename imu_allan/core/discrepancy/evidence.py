@@ -26,8 +26,9 @@ import math
 
 import numpy as np
 
-from .band import ALPHA, measure_gap, model_band
+from .band import ALPHA, measure_gap, measured_band, model_band
 from .logfit import fit_terms, FitProblem, improvement_test
+from .workflow import evaluate_candidates
 from ..allan import allan_deviation
 from ..terms import TERMS
 
@@ -152,9 +153,8 @@ def _positions(terms):
 
 def _refit(y, measured, j, names, init, fixed, ranges=None):
     """Fit ``names`` twice: against the measured curve's own band, then the fitted model's."""
-    from .workflow import _measured_band
     tau, rate = measured.tau, measured.rate_hz
-    first = fit_terms(FitProblem(y, tau, rate, _measured_band(measured, j)), names, init=init,
+    first = fit_terms(FitProblem(y, tau, rate, measured_band(measured, j)), names, init=init,
                       fixed_positions=fixed, ranges=ranges)
     band = model_band(first.terms, tau, measured.m, measured.n_samples, rate)
     prob = FitProblem(y, tau, rate, band)
@@ -434,7 +434,6 @@ def _free_gauss_markov(y, measured, j, names, fit, fixed):
 
 def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
     """Fill the Allan-variance evidence of one axis (see the module docstring)."""
-    from .workflow import evaluate_candidates
     tau = measured.tau
     names = list(stated)
     fixed = _positions(stated)

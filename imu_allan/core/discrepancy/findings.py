@@ -40,7 +40,7 @@ from scipy.stats import chi2
 from .band import ALPHA
 from .evidence import LogEstimate, measure_recording
 from .pooling import pool, Z95, z_critical
-from .runs import drive_test, turn_on_tests
+from .runs import drive_test, MIN_RUNS, turn_on_tests
 from ..terms import TERMS
 from ..units import sensor_of
 
@@ -318,6 +318,7 @@ def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
     findings = []
     decaying = set()
     stated_terms = {}
+    few_runs = []
     for axis, evs in per_axis.items():
         stated_terms[axis] = evs[0].stated
         findings += _axis_findings(axis, evs, z_crit, p_crit)
@@ -327,11 +328,14 @@ def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
             findings += runs
             if decays:
                 decaying.add(axis)
-            if len(evs) < 3:
-                notes.append(f'{axis}: the turn-on bias needs at least 3 runs to be compared')
+            if len(evs) < MIN_RUNS:
+                few_runs.append(axis)
         meta = _metadata_finding(axis, evs, z_crit)
         if meta is not None:
             findings.append(meta)
+    if few_runs:
+        notes.append(f'turn-on bias of {", ".join(few_runs)}: compared across runs from '
+                     f'{MIN_RUNS} recordings on ({len(recordings)} given)')
     for sensor in ('gyro', 'accel'):
         group = {a: evs for a, evs in per_axis.items()
                  if sensor_of(a) == sensor and a not in decaying}

@@ -46,7 +46,7 @@ class Pooled:
     n: int = 0
 
     def factor(self):
-        """Return the pooled factor (at 1 Hz when it scales with the rate)."""
+        """Return the pooled value, at 1 Hz when it scales with the rate."""
         return math.exp(self.log)
 
     def interval(self, z=1.0):

@@ -4,9 +4,8 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
-from scipy.special import digamma, polygamma
 
-from .band import ALPHA, Band, measure_gap, model_band, pool_simulations
+from .band import ALPHA, measure_gap, measured_band, model_band, pool_simulations
 from .logfit import AxisFit, fit_terms, FitProblem, improvement_test
 from ..allan import allan_deviation, avar_fast
 from ..model import ModelError, NoiseModel
@@ -220,15 +219,6 @@ class DiscrepancyResult:
         }
 
 
-def _measured_band(measured, j):
-    """Band from the measured curve itself (used only to start a --terms fit)."""
-    nu = np.maximum(measured.edf[:, j], 1.0)
-    half = nu / 2.0
-    center = np.log(measured.adev[:, j]) + 0.5 * (digamma(half) - np.log(half))
-    return Band(measured.tau, measured.avar[:, j], nu, measured.alpha[:, j], center,
-                0.5 * np.sqrt(polygamma(1, half)))
-
-
 def _simulate_axis(axis_terms, axis, measured, n_sims, rng):
     """ln(adev) of ``n_sims`` simulated runs of one axis through the same estimator (K, T)."""
     model = NoiseModel({axis: axis_terms}, measured.rate_hz)
@@ -268,7 +258,7 @@ def start_model(measured, axes, terms, alpha=ALPHA):
     for axis in axes:
         j = list(measured.axes).index(axis)
         y = np.log(measured.adev[:, j])
-        band = _measured_band(measured, j)
+        band = measured_band(measured, j)
         fit = fit_terms(FitProblem(y, measured.tau, measured.rate_hz, band), list(terms))
         # second pass with the spread the fitted model itself implies
         band = model_band(fit.terms, measured.tau, measured.m, measured.n_samples,
