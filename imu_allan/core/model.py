@@ -17,6 +17,11 @@ files hold.  Model file format (YAML, SI units, continuous time)::
 
 Single-parameter terms take a number; ``gauss_markov`` takes ``sigma`` (stationary std) and
 ``tau_c`` (correlation time, s); ``sinusoid`` takes ``amplitude`` and ``frequency_hz``.
+
+The run-to-run term ``turn_on_bias: {mean: ..., sigma: ...}`` (rad/s or m/s^2, per sensor or
+per axis, :data:`imu_allan.core.terms.TURN_ON_BIAS`) states the constant bias drawn at each
+start: it is not noise within a run (the simulator and the Allan variance ignore it), it is
+what several runs of one configuration are compared with.
 """
 
 import copy
@@ -26,6 +31,7 @@ import math
 import os
 import stat
 
+from .terms import TURN_ON_BIAS
 from .units import ALL_TERMS, AXES, sensor_of, TERM_PARAMETERS
 from ..errors import InputError
 
@@ -205,12 +211,29 @@ def _check_params(axis, term, params, where, rate_hz=None):
     return out
 
 
+def _check_turn_on(axis, params, where):
+    """Validate one axis's ``turn_on_bias`` entry; return ``{'mean': float, 'sigma': float}``."""
+    params = as_mapping(params, where, f'{axis}.{TURN_ON_BIAS.name}')
+    if set(params) != set(TURN_ON_BIAS.params):
+        raise ModelError(where, f'{axis}.{TURN_ON_BIAS.name} needs '
+                                f'{", ".join(TURN_ON_BIAS.params)}')
+    return {'mean': as_number(params['mean'], where, f'{axis}.{TURN_ON_BIAS.name}.mean',
+                              -MAX_PARAMETER),
+            'sigma': as_number(params['sigma'], where, f'{axis}.{TURN_ON_BIAS.name}.sigma')}
+
+
 @dataclass
 class NoiseModel:
-    """Noise terms per axis: ``terms[axis][term] = {param: value}`` (SI, continuous time)."""
+    """
+    Noise terms per axis: ``terms[axis][term] = {param: value}`` (SI, continuous time).
+
+    ``turn_on_bias[axis] = {'mean', 'sigma'}`` (SI) is the run-to-run constant bias, where the
+    model states one (empty otherwise).
+    """
 
     terms: dict = field(default_factory=dict)
     rate_hz: float = None
+    turn_on_bias: dict = field(default_factory=dict)
 
     def __post_init__(self):
         """Validate and normalise the parameters."""
@@ -221,6 +244,12 @@ class NoiseModel:
             checked[axis] = {t: _check_params(axis, t, p, 'model', self.rate_hz) for t, p in
                              as_mapping(axis_terms, 'model', axis).items()}
         self.terms = checked
+        turn_on = {}
+        for axis, params in as_mapping(self.turn_on_bias, 'model', 'turn_on_bias').items():
+            if axis not in AXES:
+                raise ModelError('model', f'unknown axis {axis!r} (known: {", ".join(AXES)})')
+            turn_on[axis] = _check_turn_on(axis, params, 'model')
+        self.turn_on_bias = turn_on
 
     @property
     def axes(self):
@@ -235,21 +264,25 @@ class NoiseModel:
         """Return a copy with ``term`` set (or replaced) on ``axis``."""
         terms = copy.deepcopy(self.terms)
         terms.setdefault(axis, {})[term] = params
-        return NoiseModel(terms, self.rate_hz)
+        return NoiseModel(terms, self.rate_hz, copy.deepcopy(self.turn_on_bias))
 
     def subset(self, axes):
         """Return a copy restricted to the given axes (missing axes get no terms)."""
-        return NoiseModel({a: copy.deepcopy(self.terms.get(a, {})) for a in axes}, self.rate_hz)
+        return NoiseModel({a: copy.deepcopy(self.terms.get(a, {})) for a in axes}, self.rate_hz,
+                          {a: dict(self.turn_on_bias[a]) for a in axes
+                           if a in self.turn_on_bias})
 
     def to_dict(self):
         """Plain dictionary in the model-file layout (per-axis form)."""
         out = {'axes': {}}
         if self.rate_hz:
             out['rate_hz'] = float(self.rate_hz)
-        for axis in self.axes:
+        for axis in [a for a in AXES if a in self.terms or a in self.turn_on_bias]:
             out['axes'][axis] = {
                 t: (p['value'] if tuple(p) == ('value',) else dict(p))
-                for t, p in self.terms[axis].items()}
+                for t, p in self.terms.get(axis, {}).items()}
+            if axis in self.turn_on_bias:
+                out['axes'][axis][TURN_ON_BIAS.name] = dict(self.turn_on_bias[axis])
         return out
 
     @classmethod
@@ -260,9 +293,11 @@ class NoiseModel:
         rate = data.get('rate_hz')
         if rate is not None:
             rate = as_number(rate, where, 'rate_hz', 0.0, MAX_RATE_HZ, low_open=True)
+        turn_on = {axis: _check_turn_on(axis, merged.pop(TURN_ON_BIAS.name), where)
+                   for axis, merged in entries.items() if TURN_ON_BIAS.name in merged}
         terms = {axis: {t: _check_params(axis, t, p, where, rate) for t, p in merged.items()}
-                 for axis, merged in entries.items()}
-        return cls(terms, rate)
+                 for axis, merged in entries.items() if merged}
+        return cls(terms, rate, turn_on)
 
     @classmethod
     def from_yaml(cls, path):

@@ -326,6 +326,28 @@ TERMS = {spec.name: spec for spec in (
              _conv('rad/s', 'm/s^2'), _conv(('deg/s', 1.0 / DEG), ('mg', 1e3 / STANDARD_GRAVITY)),
              peak_ratio=0.371010, position_units={'frequency_hz': 'Hz'}),
 )}
+
+
+@dataclass(frozen=True)
+class RunTermSpec:
+    """
+    A run-to-run term: drawn once per run, constant within it, so no Allan variance of its own.
+
+    ``params`` its parameter names, ``si_units`` / ``conventional`` as for :class:`TermSpec`.
+    """
+
+    name: str
+    params: tuple
+    si_units: dict
+    conventional: dict
+
+
+#: The turn-on bias of a model file: a constant bias per axis drawn at each start from a normal
+#: distribution with ``mean`` and ``sigma`` (rad/s, m/s^2).  One run cannot show it; several
+#: runs can (the discrepancy workflow's run_to_run evidence).
+TURN_ON_BIAS = RunTermSpec('turn_on_bias', ('mean', 'sigma'), _conv('rad/s', 'm/s^2'),
+                           _conv(('deg/h', HOUR / DEG), ('mg', 1e3 / STANDARD_GRAVITY)))
+
 #: Exponent used for noise identification where a term dominates (ramp: random-walk FM).
 ID_ALPHA = {'quantization': 2, 'white_noise': 0, 'bias_instability': -1,
             'rate_random_walk': -2, 'rate_ramp': -2}

@@ -74,6 +74,40 @@ PX4_DEFAULTS = {'gyroscopeNoiseDensity': 0.0008726646, 'gyroscopeRandomWalk': 0.
 #: Averaging-time band (s) for the Gauss-Markov approximation when the model carries none.
 DEFAULT_TAU_MAX_S = 3600.0
 
+#: Each key as documented (the noise the user means: :meth:`SimImu.intended_model`) and as the
+#: simulator's code produces it (:meth:`SimImu.noise_model`).  The discrepancy findings
+#: compare recordings with the first; the single-recording workflow starts from the second.
+CONVENTIONS = {
+    'gazebo': {
+        'stddev': ('the white noise in rad/s (m/s^2) with no rate in it: a density N, the '
+                   'same sensor at any rate (gazebo-classic#2670; PX4-gazebo-models copied '
+                   'NoiseDensity into it)',
+                   'a per-sample std, not scaled by dt: N = stddev / sqrt(f)'),
+        'dynamic_bias_stddev': ('the std of the slowly varying bias (gz-sensors#616)',
+                                'the driving density of its Gauss-Markov: std = value '
+                                'sqrt(tau / 2)'),
+        'dynamic_bias_correlation_time': ('tau_c of that bias, s', 'the same'),
+        'bias_mean': ('the mean of the turn-on bias', 'its sign drawn at random at each start '
+                      '(gz-sensors#360); with a dynamic bias it starts that process and '
+                      'decays with tau_c'),
+        'bias_stddev': ('the std of the turn-on bias', 'the same, with the random sign'),
+        'mean': ('a constant offset (added to the turn-on mean)', 'the same'),
+        'precision': ('rounding of each sample: white noise of precision^2 / 12 per sample',
+                      'the same (ignored below 1e-6)'),
+    },
+    'px4': {
+        'NoiseDensity': ('the white noise density N', 'the same (x 1 / sqrt(dt) per sample)'),
+        'RandomWalk': ('the driving density of the Gauss-Markov bias (std = value '
+                       'sqrt(tau / 2))', 'the same'),
+        'BiasCorrelationTime': ('tau_c of that bias, s', 'the same'),
+        'TurnOnBiasSigma': ('the std of the turn-on bias (mean 0)', 'the same'),
+    },
+}
+#: Finding classes whose factor says how to change a simulator value: (term, Gazebo key,
+#: PX4 key index in PX4_KEYS); the value is divided by the factor at the simulator's rate.
+SCALE_KEYS = {('white_scale', 'white_noise'): ('stddev', 0),
+              ('bias_scale', 'gauss_markov'): ('dynamic_bias_stddev', 1)}
+
 
 def _version():
     from .. import __version__
@@ -269,6 +303,87 @@ class SimImu:
         if not terms:
             raise InputError(self.source, f'{self.label} simulates no noise')
         return NoiseModel(terms, rate), notes
+
+    def intended_model(self, data_rate_hz):
+        """
+        Return the :class:`NoiseModel` the file's keys are documented to mean, and a note.
+
+        :data:`CONVENTIONS`, first column: Gazebo white N = stddev (a density; precision
+        rounding adds precision^2 / 12 per sample at ``data_rate_hz``), Gauss-Markov sigma =
+        dynamic_bias_stddev, turn-on bias N(bias_mean + mean, bias_stddev); PX4 as coded
+        (its keys are densities), turn-on bias N(0, TurnOnBiasSigma).  The recordings are
+        compared with this (:func:`imu_allan.core.discrepancy.find_discrepancies`).
+        """
+        terms, turn_on = {}, {}
+        if self.kind == 'gazebo':
+            note = (f'{self.source}: {self.label} read as documented: stddev is the white '
+                    f'noise density, dynamic_bias_stddev the bias std, bias_mean / '
+                    f'bias_stddev the turn-on bias')
+            for axis, p in self.params.items():
+                if p['type'] == 'none':
+                    continue
+                white = p['stddev'] ** 2
+                if p['precision'] > GZ_MIN_PRECISION:
+                    white += p['precision'] ** 2 / 12.0 / data_rate_hz
+                axis_terms = {}
+                if white > 0:
+                    axis_terms['white_noise'] = math.sqrt(white)
+                std, tau = p['dynamic_bias_stddev'], p['dynamic_bias_correlation_time']
+                if std > 0 and tau > 0:
+                    axis_terms['gauss_markov'] = {'sigma': std, 'tau_c': tau}
+                if axis_terms:
+                    terms[axis] = axis_terms
+                turn_on[axis] = {'mean': p['bias_mean'] + p['mean'], 'sigma': p['bias_stddev']}
+        else:
+            note = (f'{self.source}: {self.label} read as documented: NoiseDensity the white '
+                    f'noise density, RandomWalk the driving density of the Gauss-Markov bias')
+            model, _ = self.noise_model(data_rate_hz)
+            terms = model.terms
+            for sensor, keys in PX4_KEYS.items():
+                for axis in AXES:
+                    if is_gyro(axis) == (sensor == 'gyro'):
+                        turn_on[axis] = {'mean': 0.0, 'sigma': self.params[keys[3]]}
+        if not terms:
+            raise InputError(self.source, f'{self.label} simulates no noise')
+        return NoiseModel(terms, None, turn_on), note
+
+    def key_of(self, axis, term):
+        """Return the key that sets ``term`` on ``axis`` (Gazebo: its path), and its value."""
+        for (_, t), (gz_key, px4_index) in SCALE_KEYS.items():
+            if t != term:
+                continue
+            if self.kind == 'gazebo':
+                if axis not in self.params:
+                    return None, None
+                group, letter = GZ_AXES[axis]
+                return f'{group}/{letter}/noise/{gz_key}', self.params[axis][gz_key]
+            key = PX4_KEYS['gyro' if is_gyro(axis) else 'accel'][px4_index]
+            return key, self.params[key]
+        return None, None
+
+    def suggest(self, findings, data_rates_hz):
+        """
+        Set ``parameter`` and ``suggested`` on the findings a simulator value can correct.
+
+        A white or bias scale found as ``factor`` (at 1 Hz, with ``rate_exponent``, when it
+        scales with the rate) means the value gives factor(f) x the intended noise at rate f:
+        the suggested value is the file's divided by factor(f), at the sensor's
+        ``<update_rate>`` (Gazebo) or else the median rate of the recordings, noted in the
+        finding's evidence as ``suggested_at_hz``.
+        """
+        rate = self.rate_hz or float(np.median(data_rates_hz))
+        for f in findings:
+            if (f.cls, f.term) not in SCALE_KEYS or f.factor is None or f.factor <= 0:
+                continue
+            key, value = self.key_of(f.axis, f.term)
+            if key is None:
+                continue
+            at_rate = f.factor * (rate ** f.rate_exponent if f.rate_exponent is not None
+                                  else 1.0)
+            f.parameter, f.suggested = key, value / at_rate
+            f.evidence['suggested_at_hz'] = rate
+            f.evidence['configured'] = value
+        return findings
 
     def corrected(self, result, data_source=None):
         """

@@ -3,12 +3,23 @@ Reports of the discrepancy workflow: the JSON report, the console summary and th
 
 The plots (matplotlib, Agg): ``step<k>_<axis>.png`` per accepted step (measured curve with its
 68 % band, the model band before and after), ``gap_per_step.png`` and ``overview.png``.
+Findings (:mod:`imu_allan.core.discrepancy.findings`) are said in one sentence each
+(:func:`finding_sentence`), the same in the JSON (``sentence``), the console and the page.
+``--out DIR`` is written into a staging folder beside DIR and moved in when every file is
+there (:func:`write_out_dir`).
 """
 
+import json
 import math
 import os
+from pathlib import Path
+import shutil
+import tempfile
 
 import numpy as np
+
+from ..core.terms import TERMS
+from ..core.units import conventional
 
 
 def _clean(value):
@@ -26,11 +37,210 @@ def _clean(value):
     return value
 
 
-def report_dict(result, source):
-    """Return the JSON report (contract fields plus source and method)."""
+def report_dict(result, source, findings=None):
+    """
+    Return the JSON report of one recording (contract fields plus source and method).
+
+    ``findings``: a :class:`~imu_allan.core.discrepancy.FindingsResult` (with a model) adds
+    ``findings``, ``consistent``, ``recordings`` and ``decision``; without one the steps are
+    the findings (``missing_term``, a recalibration is no finding of a fitted start).
+    """
     out = result.to_dict()
     out['source'] = source
+    if findings is not None:
+        out.update(findings.to_dict())
+        out['notes'] = list(result.notes) + [n for n in findings.notes
+                                             if n not in result.notes]
+    else:
+        out['findings'] = [_step_finding(step) for step in result.steps
+                           if step.effect != 'recalibration']
+        out['consistent'] = not out['findings']
+    for f in out['findings']:
+        f['sentence'] = finding_sentence(f)
     return _clean(out)
+
+
+def runs_report_dict(findings, model, sources):
+    """Return the JSON report of several recordings: findings, recordings, the stated model."""
+    out = {'sources': list(sources), 'model': model.to_dict()['axes']}
+    out.update(findings.to_dict())
+    for f in out['findings']:
+        f['sentence'] = finding_sentence(f)
+    return _clean(out)
+
+
+def _step_finding(step):
+    """Return a ``missing_term`` finding from a single-recording step (today's workflow)."""
+    params = {k: v['value'] for k, v in step.parameters.items() if isinstance(v, dict)
+              and 'value' in v}
+    units = {k: v['unit'] for k, v in step.parameters.items() if isinstance(v, dict)
+             and 'unit' in v}
+    return {'class': 'missing_term', 'axis': step.axis, 'term': step.effect, 'factor': None,
+            'factor_ci': None, 'factor_ci95': None, 'rate_exponent': None,
+            'rate_exponent_ci': None,
+            'evidence': {'parameters': params, 'units': units, 'gap_before': step.gap_before,
+                         'gap_after': step.gap_after, 'p_value': step.p_value,
+                         'tau_range_s': list(step.tau_range) if step.tau_range else None}}
+
+
+def _num(x, digits=3):
+    return '-' if x is None or not math.isfinite(x) else f'{x:.{digits}g}'
+
+
+def _ci(ci, digits=3):
+    return '' if not ci else f' [{_num(ci[0], digits)}, {_num(ci[1], digits)}]'
+
+
+def _with_units(axis, term, value):
+    """SI value with its unit and the conventional one beside it (continuous-time terms)."""
+    unit = TERMS[term].param_unit(axis, TERMS[term].params[0])
+    conv, conv_unit = conventional(axis, term, value)
+    return f'{_num(value)} {unit} ({_num(conv)} {conv_unit})'
+
+
+def _scaling(f):
+    exp = f.get('rate_exponent')
+    if exp is None:
+        return ''
+    ci = f.get('rate_exponent_ci')
+    half = (ci[1] - ci[0]) / 2.0 if ci else None
+    text = f', and scales with the sample rate as (f / 1 Hz)^{exp:.3f}' + \
+        (f' +- {half:.3f}' if half else '') + ' (the factor is at 1 Hz)'
+    if abs(exp + 0.5) < 0.1:
+        text += ': a per-sample value read as a density'
+    elif abs(exp - 0.5) < 0.1:
+        text += ': a density read as a per-sample value'
+    return text
+
+
+def _suggestion(f):
+    if f.get('parameter') is None:
+        return ''
+    ev = f.get('evidence', {})
+    rate = ev.get('suggested_at_hz')
+    key = f['parameter']
+    if key.endswith('/stddev') and f.get('rate_exponent') is not None and \
+            abs(f['rate_exponent'] + 0.5) < 0.1:
+        return (f'; gz <stddev> is per sample: set it to N x sqrt({rate:g}) = '
+                f'{f["suggested"]:#.2g} for the density you meant')
+    if key.endswith('dynamic_bias_stddev'):
+        return (f'; gz dynamic_bias_stddev drives the Gauss-Markov (its std is value x '
+                f'sqrt(tau / 2)): set it to {f["suggested"]:.3g} for the std you meant')
+    return f'; set {key} to {f["suggested"]:.3g}' + (f' (at {rate:g} Hz)' if rate else '')
+
+
+def finding_sentence(f):
+    """One sentence for a finding (its report dict), with the corrected value when known."""
+    cls, axis, term = f['class'], f['axis'], f.get('term')
+    ev = f.get('evidence') or {}
+    factor = f'{_num(f.get("factor"))}{_ci(f.get("factor_ci"))}'
+    words = (term or '').replace('_', ' ')
+    if cls in ('white_scale', 'bias_scale'):
+        what = 'white noise' if term == 'white_noise' else words
+        stated = ev.get('stated')
+        measured = ev.get('measured', ev.get('measured_at_1hz'))
+        values = ''
+        if stated is not None and measured is not None and 'measured' in ev:
+            values = (f' ({_with_units(axis, term, stated)} stated, '
+                      f'{_with_units(axis, term, measured)} measured, continuous-time)')
+        return (f'{axis}: the {what} is {factor} x the stated{values}{_scaling(f)}'
+                f'{_suggestion(f)}.')
+    if cls == 'time_constant':
+        return (f'{axis}: the Gauss-Markov correlation time is {_num(ev.get("measured_s"))} s, '
+                f'not the stated {_num(ev.get("stated_s"))} s (factor {factor}){_scaling(f)}.')
+    if cls == 'term_absent':
+        return (f'{axis}: the stated {words} has no effect in the data: at most '
+                f'{_num((f.get("factor_ci") or [0, math.nan])[1])} x its stated size (68.3 %), '
+                f'in {ev.get("recordings_without_it")} of {ev.get("recordings")} recordings; '
+                f'the simulator does not apply it.')
+    if cls == 'wrong_process':
+        if ev.get('kind') == 'walk':
+            return (f'{axis}: the bias keeps walking where the stated Gauss-Markov would level '
+                    f'off: an unbounded random walk, driven at {factor} x the stated driving '
+                    f'density.')
+        tau_c = float(np.median(ev.get('tau_c_fitted_s') or [math.nan]))
+        return (f'{axis}: the bias levels off (tau_c about {_num(tau_c)} s) where an unbounded '
+                f'random walk is stated: a Gauss-Markov driven at {factor} x the stated K.')
+    if cls == 'biased_drive':
+        return (f'{axis}: the bias drifts the same way in every run '
+                f'({ev.get("positive_runs")} of {ev.get("runs")} slopes positive): its drive has '
+                f'a mean of {factor} x its stated per-step standard deviation.')
+    if cls == 'run_to_run':
+        return _run_sentence(axis, ev, factor)
+    if cls == 'metadata':
+        return (f'{axis}: the messages state a covariance {factor} x the measured per-sample '
+                f'variance{_scaling(f)}' +
+                ('; a density squared where the per-sample variance N^2 f belongs'
+                 if f.get('rate_exponent') is not None and abs(f['rate_exponent'] + 1) < 0.2
+                 else '') + '.')
+    if cls == 'missing_term':
+        params = ', '.join(f'{k} {_num(v)} {ev.get("units", {}).get(k, "")}'.strip()
+                           for k, v in (ev.get('parameters') or {}).items())
+        return f'{axis}: the data show a {words} the model lacks ({params}).'
+    return f'{axis}: {cls} {words} {factor}.'
+
+
+def _run_sentence(axis, ev, factor):
+    kind = ev.get('kind')
+    stated = ev.get('stated') or {}
+    if kind == 'decay':
+        return (f'{axis}: the turn-on bias decays within a run (its last tenth is {factor} x '
+                f'its first tenth) instead of staying constant.')
+    if kind == 'bimodal':
+        return (f'{axis}: the turn-on bias takes a random sign: {ev.get("opposite_sign_runs")} '
+                f'of {ev.get("runs")} runs start opposite to the stated mean '
+                f'{_num(stated.get("mean"))} (sign agreement {factor}, 1 as stated).')
+    if kind == 'spread':
+        return (f'{axis}: the turn-on bias varies between runs by '
+                f'{_num(ev.get("observed_sigma"))} where {_num(stated.get("sigma"))} is stated '
+                f'(factor {factor}).')
+    return (f'{axis}: the turn-on bias averages {_num(ev.get("observed_mean"))} over the runs '
+            f'where {_num(stated.get("mean"))} is stated (factor {factor}).')
+
+
+def findings_text(report):
+    """Console lines of the findings (each one sentence) and the verdict."""
+    if report.get('consistent'):
+        return ['findings: none: the data match the model']
+    return ['findings:'] + [f'  - {f["sentence"]}' for f in report['findings']]
+
+
+def runs_summary_text(report):
+    """Console summary of several recordings: each recording, then the findings."""
+    lines = [f'{len(report["recordings"])} recordings against the stated model:']
+    for r in report['recordings']:
+        gaps = ', '.join(f'{a} {_num(g["gap_stated"], 3)}' for a, g in r['axes'].items())
+        lines.append(f'  {r["source"]}: {r["n_samples"]} samples at {r["sample_rate_hz"]:.6g} '
+                     f'Hz ({r["duration_s"] / 60.0:.1f} min); gap to the stated model: '
+                     f'{gaps or "-"}')
+    lines += findings_text(report)
+    for note in report.get('notes', []):
+        lines.append(f'note: {note}')
+    return '\n'.join(lines)
+
+
+def write_out_dir(out_dir, report, write_files):
+    """
+    Write ``report.json``, the other files (``write_files(staging)``) and ``report.html``.
+
+    Everything goes into a staging folder beside ``out_dir`` first and is moved in when all
+    of it is written, so a failed run leaves no half-written report.  Returns the file names.
+    """
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f'.{out_dir.name}.', dir=out_dir.parent))
+    try:
+        (staging / 'report.json').write_text(json.dumps(report, indent=2), encoding='utf-8')
+        write_files(staging)
+        from .html import write_discrepancy_page  # last: it shows the files above
+        write_discrepancy_page(staging, report)
+        out_dir.mkdir(exist_ok=True)
+        names = sorted(os.listdir(staging))
+        for name in names:
+            os.replace(staging / name, out_dir / name)
+        return names
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def _fmt_params(parameters, prefix=''):
@@ -68,6 +278,11 @@ def summary_text(result, source):
     for note in result.notes:
         lines.append(f'note: {note}')
     return '\n'.join(lines)
+
+
+def single_summary_text(result, source, report):
+    """Return the console summary of one recording followed by its findings."""
+    return summary_text(result, source) + '\n' + '\n'.join(findings_text(report))
 
 
 def write_plots(result, out_dir):

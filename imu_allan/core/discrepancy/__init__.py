@@ -28,12 +28,25 @@ to the data), the workflow
    over the T_eff positions their hump could take);
 6. adds it, refits, re-simulates, re-measures, and repeats until nothing significant is left.
 
+A step that raises the gap is not kept (the next candidate gets its turn).
+
+Several recordings of one configuration (any rates, any runs) are compared with the model they
+state by :func:`find_discrepancies`: each term's factor (measured / stated) and how it scales
+with the sample rate, its correlation time, whether it is there at all and is the process
+stated, the turn-on bias across runs, the drift's sign, and the messages' covariance; each
+disagreement is a :class:`Finding` of one class.
+
 Everything is SI (rad/s, m/s^2, s, Hz) and ROS-free.  Modules: :mod:`.band` (steps 2-4),
-:mod:`.logfit` (the fit of step 5), :mod:`.workflow` (steps 1, 5, 6 and the online summary).
-``docs/discrepancy.md`` explains the method and the validation results.
+:mod:`.logfit` (the fit of step 5), :mod:`.workflow` (steps 1, 5, 6 and the online summary);
+:mod:`.evidence` (one recording against a stated model), :mod:`.pooling` (factors over
+recordings and rates), :mod:`.runs` (turn-on bias and drift across runs), :mod:`.findings`
+(the classes and the decision).  ``docs/discrepancy.md`` explains the method and the
+validation results.
 """
 
 from .band import ALPHA, Band, excursion_band, Gap, measure_gap, model_band, pool_simulations
+from .evidence import Recording
+from .findings import find_discrepancies, Finding, FindingsResult
 from .logfit import AxisFit, fit_terms, FitProblem, improvement_test, position_range
 from .workflow import (
     Candidate,
@@ -49,7 +62,8 @@ from .workflow import (
 )
 
 __all__ = ['ALPHA', 'AxisFit', 'Band', 'Candidate', 'DEFAULT_START', 'DiscrepancyResult',
-           'evaluate_candidates', 'excursion_band', 'fit_terms', 'FitProblem', 'Gap',
-           'gap_summary', 'improvement_test', 'measure_gap', 'model_band', 'pool_simulations',
-           'position_range', 'run_discrepancy', 'run_samples', 'sample_rate', 'start_model',
-           'Step']
+           'evaluate_candidates', 'excursion_band', 'find_discrepancies', 'Finding',
+           'FindingsResult', 'fit_terms', 'FitProblem', 'Gap', 'gap_summary',
+           'improvement_test', 'measure_gap', 'model_band', 'pool_simulations',
+           'position_range', 'Recording', 'run_discrepancy', 'run_samples', 'sample_rate',
+           'start_model', 'Step']

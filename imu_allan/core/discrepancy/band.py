@@ -116,6 +116,20 @@ def model_band(axis_terms, tau, ms, n_samples, rate_hz):
     return Band(tau, total, nu, alpha, center, sd)
 
 
+def measured_band(measured, j):
+    """
+    Band of column ``j`` of a measured curve from its own EDF (only to start a fit).
+
+    Centred on the measured ln(adev) less the chi-square log bias, with the spread its EDF
+    implies: the first pass of a fit, before a model gives its own band.
+    """
+    nu = np.maximum(measured.edf[:, j], 1.0)
+    half = nu / 2.0
+    center = np.log(measured.adev[:, j]) + 0.5 * (digamma(half) - np.log(half))
+    return Band(measured.tau, measured.avar[:, j], nu, measured.alpha[:, j], center,
+                0.5 * np.sqrt(polygamma(1, half)))
+
+
 def pool_simulations(band, sims):
     """Pool the analytic spread with simulated ln(adev) runs (K, T) about the analytic centre."""
     sims = np.atleast_2d(sims)

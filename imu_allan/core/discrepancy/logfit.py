@@ -7,6 +7,7 @@ correlation between averaging times, and the Satterthwaite test of an added term
 (:func:`improvement_test`).
 """
 
+import copy
 from dataclasses import dataclass, field
 import math
 
@@ -55,7 +56,23 @@ class FitProblem:
         self.t_eff = band.effective_count()
         # the AVAR level each point asks for, used to scale amplitudes and start the fit
         self.target = np.exp(2.0 * (y - self.bias))
+        self.offset = 0.0
         self._shapes = {}
+
+    def with_offset(self, avar):
+        """
+        Return a copy whose model AVAR gets ``avar`` added (a term held at a fixed size).
+
+        The fit then adjusts the other terms around it; the level they are asked for (the
+        start and the amplitude bounds) is the measured one minus the held term's, floored at
+        a tenth of the measured where the held term alone overshoots: a lower floor made the
+        other terms' bounds (30 x the smallest level asked for) too tight to fit them.
+        """
+        other = copy.copy(self)
+        other.offset = self.offset + np.asarray(avar, dtype=float)
+        other.target = np.maximum(self.target - avar, 0.1 * self.target)
+        other._shapes = self._shapes
+        return other
 
     def shape(self, term, position=None):
         """AVAR per unit squared amplitude at this problem's tau (cached for fixed shapes)."""
@@ -66,7 +83,9 @@ class FitProblem:
         return self._shapes[term]
 
     def residual(self, avar):
-        return (self.y - 0.5 * np.log(np.maximum(avar, 1e-300)) - self.bias) / self.sd
+        """Return z per averaging time of a model AVAR (plus a held term, :meth:`with_offset`)."""
+        return (self.y - 0.5 * np.log(np.maximum(avar + self.offset, 1e-300)) - self.bias) \
+            / self.sd
 
     def amplitude_bounds(self, shape):
         ok = shape > 0
@@ -86,20 +105,28 @@ def _nnls_start(prob, names, positions):
     return np.sqrt(coef), float(z @ z)
 
 
-def fit_terms(prob, names, init=None, hints=None):
+def fit_terms(prob, names, init=None, hints=None, fixed_positions=None, ranges=None):
     """
     Fit ``names`` (all amplitudes and positions free) to a :class:`FitProblem`.
 
     ``init`` ({term: params}) and ``hints`` ({term: position}) seed the search; hump terms are
     started from a grid of positions over the measured span plus the hints.
+    ``fixed_positions`` ({term: position}) holds those hump terms' positions (tau_c, s;
+    frequency_hz, Hz) at the given values, so only their amplitudes are fitted; ``ranges``
+    ({term: (lo, hi)}) replaces a free position's default range (peak inside the span).
     """
     names = [t for t in ALL_TERMS if t in names]
     init = init or {}
     hints = hints or {}
-    nl = [t for t in names if TERMS[t].position]
+    fixed = dict(fixed_positions or {})
+    ranges = ranges or {}
+
+    def span_of(t):
+        return ranges[t] if t in ranges else position_range(t, prob.tau)
+    nl = [t for t in names if TERMS[t].position and t not in fixed]
     grids = []
     for t in nl:
-        lo, hi = position_range(t, prob.tau)
+        lo, hi = span_of(t)
         grid = list(np.geomspace(lo, hi, 14))
         for extra in (hints.get(t), TERMS[t].unpack(init[t])[1] if t in init else None):
             if extra is not None and lo <= extra <= hi:
@@ -107,22 +134,24 @@ def fit_terms(prob, names, init=None, hints=None):
         grids.append(grid)
     starts = []
     for combo in (np.array(np.meshgrid(*grids)).reshape(len(nl), -1).T if nl else [()]):
-        positions = dict(zip(nl, combo))
+        positions = {**fixed, **dict(zip(nl, combo))}
         amps, q = _nnls_start(prob, names, positions)
         starts.append((q, positions, amps))
     starts.sort(key=lambda s: s[0])
     starts = starts[:2]
     if init and all(t in init for t in names):
-        positions = {t: TERMS[t].unpack(init[t])[1] for t in nl}
+        positions = {**fixed, **{t: TERMS[t].unpack(init[t])[1] for t in nl}}
         amps = np.array([TERMS[t].unpack(init[t])[0] for t in names])
         starts.append((math.inf, positions, amps))
 
-    # parameter vector: ln amplitude per term, then ln position per hump term
+    # parameter vector: ln amplitude per term, then ln position per free hump term
     bounds_lo, bounds_hi = [], []
     for t in names:
-        shape = prob.shape(t, math.sqrt(np.prod(position_range(t, prob.tau)))
-                           if t in nl else None)
-        if t in nl:  # amplitude bound from the hump's peak level, position-independent
+        if t in fixed:
+            shape = prob.shape(t, fixed[t])
+        else:
+            shape = prob.shape(t, math.sqrt(np.prod(span_of(t))) if t in nl else None)
+        if TERMS[t].position:  # amplitude bound from the hump's peak level, position-independent
             peak = float(np.max(shape))
             top = math.sqrt(float(np.max(prob.target)) / peak)
             lo, hi = top * 1e-5, top * 30.0
@@ -131,14 +160,14 @@ def fit_terms(prob, names, init=None, hints=None):
         bounds_lo.append(math.log(lo))
         bounds_hi.append(math.log(hi))
     for t in nl:
-        lo, hi = position_range(t, prob.tau)
+        lo, hi = span_of(t)
         bounds_lo.append(math.log(lo))
         bounds_hi.append(math.log(hi))
     bounds_lo, bounds_hi = np.array(bounds_lo), np.array(bounds_hi)
 
     def model(theta):
         amps = np.exp(theta[:len(names)])
-        pos = dict(zip(nl, np.exp(theta[len(names):])))
+        pos = {**fixed, **dict(zip(nl, np.exp(theta[len(names):])))}
         avar = np.zeros(prob.tau.shape)
         for t, a in zip(names, amps):
             avar = avar + a * a * prob.shape(t, pos.get(t))
@@ -164,7 +193,7 @@ def fit_terms(prob, names, init=None, hints=None):
     jac = sol.jac
     params = {}
     amps = np.exp(theta[:len(names)])
-    pos = dict(zip(nl, np.exp(theta[len(names):])))
+    pos = {**fixed, **dict(zip(nl, np.exp(theta[len(names):])))}
     for t, a in zip(names, amps):
         params[t] = TERMS[t].pack(float(a), float(pos[t]) if t in pos else None)
     cov = _sandwich(jac, prob.corr)

@@ -4,9 +4,8 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
-from scipy.special import digamma, polygamma
 
-from .band import ALPHA, Band, measure_gap, model_band, pool_simulations
+from .band import ALPHA, measure_gap, measured_band, model_band, pool_simulations
 from .logfit import AxisFit, fit_terms, FitProblem, improvement_test
 from ..allan import allan_deviation, avar_fast
 from ..model import ModelError, NoiseModel
@@ -49,6 +48,7 @@ class Step:
     index: int = 0
     excursion: tuple = None
     snapshot: int = 0  # index of the snapshot before the step (the one after is snapshot + 1)
+    was_fixed: bool = False  # the axis's terms came from a model file when the step was tried
 
     def to_dict(self):
         """Contract fields plus the evidence behind the choice."""
@@ -176,6 +176,7 @@ class DiscrepancyResult:
     n_sims: int
     start: str
     notes: list = field(default_factory=list)
+    rejected: list = field(default_factory=list)  # steps that raised the gap: not kept
 
     @property
     def y(self):
@@ -207,6 +208,8 @@ class DiscrepancyResult:
             'initial_model': self.initial_model.to_dict()['axes'],
             'final_model': self.final_model.to_dict()['axes'],
             'steps': [s.to_dict() for s in self.steps],
+            'rejected_steps': [{'axis': s.axis, 'effect': s.effect, 'gap_before': s.gap_before,
+                                'gap_after': s.gap_after} for s in self.rejected],
             'gap': gaps,
             'method': {'gap': 'sqrt(mean_i z_i^2), z_i = (ln adev_meas - E ln adev_model) / '
                               'sd(ln adev_model)',
@@ -214,15 +217,6 @@ class DiscrepancyResult:
                        'n_sims': self.n_sims, 'alpha': ALPHA},
             'notes': list(self.notes),
         }
-
-
-def _measured_band(measured, j):
-    """Band from the measured curve itself (used only to start a --terms fit)."""
-    nu = np.maximum(measured.edf[:, j], 1.0)
-    half = nu / 2.0
-    center = np.log(measured.adev[:, j]) + 0.5 * (digamma(half) - np.log(half))
-    return Band(measured.tau, measured.avar[:, j], nu, measured.alpha[:, j], center,
-                0.5 * np.sqrt(polygamma(1, half)))
 
 
 def _simulate_axis(axis_terms, axis, measured, n_sims, rng):
@@ -264,7 +258,7 @@ def start_model(measured, axes, terms, alpha=ALPHA):
     for axis in axes:
         j = list(measured.axes).index(axis)
         y = np.log(measured.adev[:, j])
-        band = _measured_band(measured, j)
+        band = measured_band(measured, j)
         fit = fit_terms(FitProblem(y, measured.tau, measured.rate_hz, band), list(terms))
         # second pass with the spread the fitted model itself implies
         band = model_band(fit.terms, measured.tau, measured.m, measured.n_samples,
@@ -364,6 +358,8 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
     initial_gaps = dict(gaps)
     snapshots = [Snapshot({a: dict(current[a]) for a in work_axes}, bands, gaps)]
     steps = []
+    rejected = []
+    refused = {a: set() for a in work_axes}  # effects whose step raised the axis's gap
     open_axes = set(work_axes)
     pending = []
     for _ in range(max_steps):
@@ -373,9 +369,11 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
                 continue
             cands, _ = evaluate_candidates(ys[axis], tau, measured.rate_hz, bands[axis],
                                            current[axis], alpha, axis in fixed, gaps[axis])
+            was_fixed = axis in fixed
             fixed.discard(axis)
             # largest AIC gain per added parameter among the significant new effects; a pure
             # recalibration of a model file's own terms only when no new effect is needed
+            cands = [c for c in cands if c.effect not in refused[axis]]
             winner = next((c for c in cands if c.significant and c.effect != 'recalibration'),
                           None)
             if winner is None:
@@ -398,19 +396,37 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
                          for c in cands],
                         index=len([s for s in steps if s.axis == axis]) + 1,
                         excursion=g.tau_range, snapshot=len(snapshots) - 1)
+            step.was_fixed = was_fixed
             current[axis] = {t: dict(p) for t, p in winner.fit.terms.items()}
             pending.append(step)
         if not pending:
             break
         previous = {a: (snapshots[-1].terms[a], bands[a]) for a in work_axes}
+        old_gaps = gaps
         bands = _bands(current, work_axes, measured, n_sims, rng, previous)
         gaps = {a: measure_gap(ys[a], bands[a], alpha) for a in work_axes}
+        kept = []
         for step in pending:
             step.gap_after = gaps[step.axis].value
-        steps.extend(pending)
+            if step.gap_after > step.gap_before:
+                # the refit lowered the fit's Q with the old spread, but against the band of
+                # the new model the data sit further out: the step is not kept, the axis goes
+                # back to its previous model and the next candidate gets its turn
+                axis = step.axis
+                current[axis] = {t: dict(p) for t, p in previous[axis][0].items()}
+                bands[axis], gaps[axis] = previous[axis][1], old_gaps[axis]
+                refused[axis].add(step.effect)
+                if step.was_fixed:
+                    fixed.add(axis)
+                rejected.append(step)
+                notes.append(f'{axis}: adding {step.effect} raised the gap from '
+                             f'{step.gap_before:.2f} to {step.gap_after:.2f}: not kept')
+            else:
+                kept.append(step)
+        steps.extend(kept)
         snapshots.append(Snapshot({a: dict(current[a]) for a in work_axes}, bands, gaps))
     return DiscrepancyResult(measured, work_axes, initial, NoiseModel(current, measured.rate_hz),
-                             steps, initial_gaps, gaps, snapshots, n_sims, start, notes)
+                             steps, initial_gaps, gaps, snapshots, n_sims, start, notes, rejected)
 
 
 def sample_rate(t):

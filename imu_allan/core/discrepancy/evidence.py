@@ -1,0 +1,510 @@
+"""
+What one recording says about each term of a stated (intended) noise model.
+
+For every axis the stated terms are refitted to the measured Allan deviation with their
+amplitudes free and their positions (Gauss-Markov tau_c, sinusoid frequency) held as stated, in
+the gap's own metric (:mod:`.logfit`); each amplitude's ratio to the stated one is a *factor*
+with a standard error in log space from the sandwich covariance.  Around that:
+
+* a stated term the data do not need (dropping it costs no significant Q) while its stated
+  size is rejected is *absent*, with an upper limit on its factor (profile of Q);
+* a stated Gauss-Markov's correlation time is freed (over a range wider than the span: the
+  data may show no bend at all) and its factor measured; a fitted tau_c beyond the longest
+  averaging time where the stated one bends inside the span is an unbounded walk; a stated
+  random walk is tried as a bounded Gauss-Markov;
+* when the refitted model still leaves the band, the effects the model lacks compete as in the
+  single-recording workflow (:func:`.workflow.evaluate_candidates`), up to two per axis;
+* the raw numbers the run-to-run, drive and metadata evidence need: the means of the first and
+  last tenth of the record and of all of it, the least-squares slope, and the per-sample white
+  variance (the Allan variance at the shortest averaging time).
+
+SI units throughout; factors are measured / stated.  ROS-free.
+"""
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from .band import ALPHA, measure_gap, measured_band, model_band
+from .logfit import fit_terms, FitProblem, improvement_test
+from .workflow import evaluate_candidates
+from ..allan import allan_deviation
+from ..terms import TERMS
+
+#: Share of the record whose mean stands for the turn-on bias (first tenth) and for the end.
+SEGMENT = 0.1
+#: Most effects added per axis to the refitted model of one recording.
+MAX_MISSING = 2
+#: A stated term is 'not needed' when dropping it raises Q with a p-value above this: the data
+#: then say nothing about its size but an upper limit, and no factor is measured.
+NOT_NEEDED_P = 0.05
+#: A stated term's factor is measured only where the data need it clearly (dropping it has a
+#: p-value below this): a barely visible amplitude has a skewed, ill-determined log, and
+#: keeping the recordings where it happened to show would bias the pooled factor upwards.
+NEEDED_P = 1e-3
+#: Upper limits of an unneeded term are computed when its stated size has a p-value below this.
+REJECTED_P = 0.01
+#: A freed correlation time is held at its fitted value, before effects the model lacks are
+#: looked for, when freeing it improves the fit with a p-value below this.
+ADOPT_P = 0.01
+#: The sandwich error of a fitted amplitude's log is a little small: over 80 records of white
+#: noise alone (40 of 75 000 samples at 250 Hz, 40 of 360 000 at 100 Hz) the factor's z had
+#: an rms of 1.10 (sd 1.04-1.09, mean -0.15 to -0.36).  Widened by this factor.
+AMPLITUDE_SE_INFLATION = 1.1
+#: The sandwich error of a freed correlation time (and of the amplitude fitted with it) is too
+#: small: over 12 simulated 3 h records of PX4's gyro bias (tau_c 300 s, hump near the end of
+#: the span) ln tau_c scattered by 0.34 where the sandwich said 0.24.  Widened by this factor.
+POSITION_SE_INFLATION = 1.5
+#: A freed correlation time counts as measured when its log has a standard error below this
+#: (the bend is resolved within +-65 %).
+MAX_POSITION_SE = 0.5
+#: The freed correlation time of a stated Gauss-Markov ranges over
+#: [tau_0 / peak ratio, WIDE_FACTOR * tau_max]: a hump anywhere in the span, or no bend at all.
+WIDE_FACTOR = 100.0
+
+
+@dataclass
+class Recording:
+    """
+    One recording of the simulator (or sensor) configuration under test.
+
+    ``data`` (n, A) SI samples, ``rate_hz`` their rate, ``axes`` the column names, ``source``
+    a name for the report, ``stated_variance`` the per-sample variance per axis that the
+    recording's message metadata state (Imu covariance diagonals; None when unknown).
+    """
+
+    data: np.ndarray
+    rate_hz: float
+    axes: tuple
+    source: str = ''
+    stated_variance: dict = None
+
+    @property
+    def duration_s(self):
+        """Length of the record, s."""
+        return self.data.shape[0] / self.rate_hz
+
+
+@dataclass
+class LogEstimate:
+    """ln(measured / stated) of one quantity in one recording, with its standard error."""
+
+    log: float
+    se: float
+    rate_hz: float
+
+    @property
+    def usable(self):
+        """Return True when the estimate carries information (finite, positive error)."""
+        return math.isfinite(self.log) and math.isfinite(self.se) and self.se > 0
+
+
+@dataclass
+class AxisEvidence:
+    """
+    One axis of one recording against its stated terms (see the module docstring).
+
+    ``scales[term]`` and ``positions[term]`` are :class:`LogEstimate` (amplitude and position
+    factors), ``free_scales`` the amplitude factors with the positions free, ``absent[term]``
+    the factor's upper limits ``{'upper68', 'upper_crit', 'p_stated'}``, ``process`` the
+    wrong-process evidence or None, ``missing`` the effects added (``{'term', 'params',
+    'p_value'}``), ``gap_stated`` / ``gap_fitted`` the gap against the stated and the
+    refitted model, ``means`` / ``slope_per_s`` the raw statistics, ``white_variance`` the
+    per-sample white variance with its EDF.
+    """
+
+    axis: str
+    rate_hz: float
+    duration_s: float
+    stated: dict
+    fitted: dict
+    scales: dict = field(default_factory=dict)
+    free_scales: dict = field(default_factory=dict)
+    positions: dict = field(default_factory=dict)
+    position_p: dict = field(default_factory=dict)
+    absent: dict = field(default_factory=dict)
+    process: dict = None
+    missing: list = field(default_factory=list)
+    gap_stated: float = math.nan
+    gap_fitted: float = math.nan
+    consistent_fitted: bool = True
+    means: dict = field(default_factory=dict)
+    mean_noise_var: dict = field(default_factory=dict)
+    slope_per_s: float = math.nan
+    white_variance: tuple = (math.nan, math.nan)
+    stated_variance: float = None
+
+
+def _log_sd(fit, term, kind):
+    """Return the standard error of a fitted log parameter (``kind`` 'amp', 'pos'), or inf."""
+    i = fit.names.index((term, kind))
+    v = fit.cov[i, i]
+    return math.sqrt(v) if np.isfinite(v) and v > 0 else math.inf
+
+
+def _amp(params, term):
+    return TERMS[term].unpack(params)[0]
+
+
+def _positions(terms):
+    return {t: TERMS[t].unpack(p)[1] for t, p in terms.items() if TERMS[t].position}
+
+
+def _refit(y, measured, j, names, init, fixed, ranges=None):
+    """Fit ``names`` twice: against the measured curve's own band, then the fitted model's."""
+    tau, rate = measured.tau, measured.rate_hz
+    first = fit_terms(FitProblem(y, tau, rate, measured_band(measured, j)), names, init=init,
+                      fixed_positions=fixed, ranges=ranges)
+    band = model_band(first.terms, tau, measured.m, measured.n_samples, rate)
+    prob = FitProblem(y, tau, rate, band)
+    return prob, fit_terms(prob, names, init=first.terms, fixed_positions=fixed, ranges=ranges)
+
+
+def _drop_test(prob, fit, names, term, fixed):
+    """p-value of dropping ``term`` (the others refitted): large when the data do not need it."""
+    rest = [t for t in names if t != term]
+    if not rest:
+        return 0.0
+    without = fit_terms(prob, rest, init={t: fit.terms[t] for t in rest},
+                        fixed_positions={t: p for t, p in fixed.items() if t != term})
+    cols = [i for i, (t, _) in enumerate(fit.names) if t == term]
+    others = [i for i, (t, _) in enumerate(fit.names) if t != term]
+    p, _ = improvement_test(without.q - fit.q, fit.jac[:, others], fit.jac[:, cols], prob.corr)
+    return p
+
+
+def _q_with_fixed(prob, names, term, amplitude, fit, fixed):
+    """Q of the fit with ``term``'s amplitude held at ``amplitude`` (the others refitted)."""
+    spec = TERMS[term]
+    held = spec.pack(amplitude, fixed.get(term))
+    offset = np.maximum(spec.avar(held, prob.tau, prob.rate_hz), 0.0)
+    rest = [t for t in names if t != term]
+    if not rest:
+        z = prob.residual(offset)
+        return float(z @ z)
+    sub = prob.with_offset(offset)
+    refit = fit_terms(sub, rest, init={t: fit.terms[t] for t in rest},
+                      fixed_positions={t: p for t, p in fixed.items() if t != term})
+    return refit.q
+
+
+def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_target):
+    """Largest amplitude factor (of the stated one) whose Q stays below ``q_target``."""
+    lo = math.log(max(_amp(fit.terms[term], term), stated_amp * 1e-6))
+    hi = math.log(stated_amp)
+    if _q_with_fixed(prob, names, term, stated_amp, fit, fixed) <= q_target:
+        return 1.0
+    for _ in range(18):  # bisection in log amplitude: 18 halvings of a <= 14-e-fold span
+        mid = 0.5 * (lo + hi)
+        if _q_with_fixed(prob, names, term, math.exp(mid), fit, fixed) <= q_target:
+            lo = mid
+        else:
+            hi = mid
+    return math.exp(lo) / stated_amp
+
+
+def _absent(prob, fit, names, term, fixed, stated_amp, z_crit):
+    """
+    Return the p-value of an unneeded term's stated size and, if rejected, upper limits.
+
+    A change of Q by c z^2 (c: :func:`_q_scale`) is a z-sigma move of the term's amplitude:
+    the 68.3 % and ``z_crit`` upper limits of its factor are where Q has grown by c and
+    c z_crit^2 (the other terms refitted each time).
+    """
+    from scipy.stats import norm
+    scale = _q_scale(prob, fit, term)
+    q_stated = _q_with_fixed(prob, names, term, stated_amp, fit, fixed)
+    p_stated = float(2.0 * norm.sf(math.sqrt(max(q_stated - fit.q, 0.0) / scale)))
+    out = {'p_stated': p_stated, 'upper68': 1.0, 'upper_crit': 1.0}
+    if p_stated < REJECTED_P:  # the stated size does not fit: how large could it be?
+        out['upper68'] = _upper_limit(prob, names, term, fit, fixed, stated_amp,
+                                      fit.q + scale)
+        out['upper_crit'] = _upper_limit(prob, names, term, fit, fixed, stated_amp,
+                                         fit.q + scale * z_crit ** 2)
+    return out
+
+
+def _q_scale(prob, fit, term):
+    """
+    Satterthwaite scale c of a one-parameter drop in Q under the correlated null.
+
+    A change of Q by c z^2 is a z-sigma change of that parameter (c = tr(PRPR) / tr(PR) for
+    the projection P on its Jacobian column; 1 for independent averaging times).
+    """
+    i = fit.names.index((term, 'amp'))
+    x = fit.jac[:, [i]]
+    others = [k for k in range(fit.jac.shape[1]) if k != i]
+    if others:
+        nuis = fit.jac[:, others]
+        x = x - nuis @ (np.linalg.pinv(nuis) @ x)
+    if not np.any(np.abs(x) > 0):
+        return 1.0
+    proj = x @ np.linalg.pinv(x)
+    pr = proj @ prob.corr
+    e = float(np.trace(pr))
+    return float(np.sum(pr * pr.T)) / e if e > 0 else 1.0
+
+
+def _position_p(delta_q, fit, rest, cols, prob):
+    """
+    p-value of freeing a hump's position, with the look-elsewhere factor T_eff.
+
+    The freed position was searched over the whole span, where about T_eff distinguishable
+    places exist: as for a hump candidate (:func:`.workflow.evaluate_candidates`) the
+    Satterthwaite p-value is multiplied by T_eff.
+    """
+    p, _ = improvement_test(delta_q, fit.jac[:, rest], fit.jac[:, cols], prob.corr)
+    return min(1.0, p * max(prob.t_eff, 1.0))
+
+
+def _log_drive(fit):
+    """
+    Return ln(driving density) of the fit's Gauss-Markov (tau_c free) and its standard error.
+
+    The driving density sigma sqrt(2 / tau_c) is what a walk and a Gauss-Markov share below
+    tau_c: ln sigma - ln tau_c / 2 + const, its variance from the two logs' covariance.
+    """
+    sigma, tau_c = TERMS['gauss_markov'].unpack(fit.terms['gauss_markov'])
+    i, k = fit.names.index(('gauss_markov', 'amp')), fit.names.index(('gauss_markov', 'pos'))
+    c = fit.cov
+    var = c[i, i] + 0.25 * c[k, k] - c[i, k]
+    se = math.sqrt(var) if np.isfinite(var) and var > 0 else math.inf
+    return math.log(sigma * math.sqrt(2.0 / tau_c)), se
+
+
+def _wide(measured):
+    """Range of a freed Gauss-Markov tau_c: a peak anywhere in the span, or no bend at all."""
+    return {'gauss_markov': (float(measured.tau[0]) / TERMS['gauss_markov'].peak_ratio,
+                             WIDE_FACTOR * float(measured.tau[-1]))}
+
+
+def _free_position(y, measured, j, names, fit, fixed):
+    """Fit the stated Gauss-Markov with its tau_c free; return the fit and the p-value."""
+    others = {t: p for t, p in fixed.items() if t != 'gauss_markov'}
+    prob, free = _refit(y, measured, j, names, fit.terms, others, _wide(measured))
+    pos = [free.names.index(('gauss_markov', 'pos'))]
+    rest = [i for i in range(free.jac.shape[1]) if i not in pos]
+    q_fixed = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
+    return free, _position_p(q_fixed - free.q, free, rest, pos, prob)
+
+
+def _bounded_walk(y, measured, j, names, fit, fixed, rate):
+    """
+    Try a stated random walk as a Gauss-Markov with its tau_c free.
+
+    Returns ``(process evidence, the fit with the Gauss-Markov in its place)`` when that fit
+    bends inside the span (its hump's peak before the longest averaging time), else
+    ``(None, None)``.  The evidence's p-value is that of the position (a walk is the
+    Gauss-Markov's tau_c -> inf limit), with the look-elsewhere factor.
+    """
+    t_max = float(measured.tau[-1])
+    alt = [t for t in names if t != 'rate_random_walk'] + ['gauss_markov']
+    k_stated = fit.terms['rate_random_walk']['value']
+    init = {t: fit.terms[t] for t in alt if t in fit.terms}
+    init['gauss_markov'] = {'sigma': k_stated * math.sqrt(t_max / 2.0), 'tau_c': t_max}
+    prob, bounded = _refit(y, measured, j, alt, init, fixed, _wide(measured))
+    pos = [bounded.names.index(('gauss_markov', 'pos'))]
+    rest = [i for i in range(bounded.jac.shape[1]) if i not in pos]
+    walk_q = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
+    p = _position_p(walk_q - bounded.q, bounded, rest, pos, prob)
+    tau_fit = bounded.terms['gauss_markov']['tau_c']
+    if bounded.at_bound['gauss_markov']['tau_c'] or \
+            tau_fit * TERMS['gauss_markov'].peak_ratio >= t_max:
+        return None, None
+    log_k, se_k = _log_drive(bounded)
+    return {'term': 'rate_random_walk', 'kind': 'bounded', 'p_value': p,
+            'estimate': LogEstimate(log_k, se_k, rate), 'tau_c_fit': tau_fit}, bounded
+
+
+def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, freed=None):
+    """
+    Position factors of stated Gauss-Markov terms, and the wrong-process evidence.
+
+    Only terms the data need (``needed``) are tested; ``freed`` is the (free fit, p-value)
+    of :func:`_free_position` when already made with these terms.  Returns ``(positions,
+    position_p, free_scales, process)``; see :class:`AxisEvidence`.
+    """
+    tau = measured.tau
+    t_max = float(tau[-1])
+    spec = TERMS['gauss_markov']
+    positions, position_p, free_scales, process = {}, {}, {}, None
+    if 'gauss_markov' in needed:
+        free, p = freed or _free_position(y, measured, j, names, fit, fixed)
+        tau_fit = free.terms['gauss_markov']['tau_c']
+        tau_stated = stated['gauss_markov']['tau_c']
+        at_top = free.at_bound['gauss_markov']['tau_c'] and tau_fit > t_max
+        se = _log_sd(free, 'gauss_markov', 'pos') * POSITION_SE_INFLATION
+        position_p['gauss_markov'] = p
+        # only a resolved bend is a measurement: an unresolved tau_c wanders along the
+        # sigma-tau_c ridge of a hump seen from one side, and such estimates are biased (the
+        # decision itself is the position test's p-value, combined over the recordings)
+        if not free.at_bound['gauss_markov']['tau_c'] and se < MAX_POSITION_SE:
+            positions['gauss_markov'] = LogEstimate(math.log(tau_fit / tau_stated), se, rate)
+            free_scales['gauss_markov'] = LogEstimate(
+                math.log(_amp(free.terms['gauss_markov'], 'gauss_markov')
+                         / _amp(stated['gauss_markov'], 'gauss_markov')),
+                _log_sd(free, 'gauss_markov', 'amp') * POSITION_SE_INFLATION, rate)
+        # the data keep rising where the stated Gauss-Markov would have levelled off
+        if (tau_fit > t_max or at_top) and spec.peak_ratio * tau_stated < 0.5 * t_max:
+            log_k, se_k = _log_drive(free)
+            s0 = stated['gauss_markov']['sigma']
+            process = {'term': 'gauss_markov', 'kind': 'walk', 'p_value': p,
+                       'estimate': LogEstimate(log_k - math.log(s0 * math.sqrt(
+                           2.0 / tau_stated)), se_k, rate), 'tau_c_fit': tau_fit}
+    return positions, position_p, free_scales, process
+
+
+def _raw_statistics(x, rate_hz):
+    """Means of the first and last tenth and of all of the record, and the LS slope (per s)."""
+    n = x.size
+    k = max(1, int(round(SEGMENT * n)))
+    t = np.arange(n) / rate_hz
+    tc = t - t.mean()
+    slope = float(np.dot(tc, x - x.mean()) / np.dot(tc, tc)) if n > 1 else math.nan
+    return {'first': float(np.mean(x[:k])), 'last': float(np.mean(x[-k:])),
+            'all': float(np.mean(x))}, slope
+
+
+def _mean_noise(terms, rate_hz, duration_s):
+    """
+    Variance of the record's mean (and of a tenth's mean) from the noise within the run.
+
+    The Allan variance at averaging time T is the variance of the mean over T for white noise
+    and, for a walk started at zero, K^2 T / 3, the variance of its mean: it stands for both.
+    """
+    from ..terms import model_avar
+    tau = np.array([duration_s * SEGMENT, duration_s])
+    avar = model_avar(terms, tau, rate_hz)
+    return {'first': float(avar[0]), 'last': float(avar[0]), 'all': float(avar[1])}
+
+
+def measure_recording(recording, model, z_crit=3.0, alpha=ALPHA, points_per_decade=10,
+                      min_clusters=10):
+    """
+    Evidence of one :class:`Recording` against ``model`` (a NoiseModel, SI, continuous time).
+
+    Returns ``{axis: AxisEvidence}`` for the axes both have (the model's terms on that axis;
+    an axis with a turn-on bias but no terms gets the raw statistics only).  ``z_crit`` is the
+    decision level (sigmas) of the absent-term upper limit.
+    """
+    data = np.asarray(recording.data, dtype=float)
+    if data.ndim == 1:
+        data = data[:, None]
+    rate = float(recording.rate_hz)
+    measured = allan_deviation(data, rate, points_per_decade=points_per_decade,
+                               min_clusters=min_clusters, axes=tuple(recording.axes))
+    if measured.tau.size < 6:
+        raise ValueError(f'only {measured.tau.size} averaging times: the record is too short '
+                         'for a discrepancy analysis')
+    out = {}
+    for j, axis in enumerate(recording.axes):
+        stated = model.terms.get(axis, {})
+        if not stated and axis not in model.turn_on_bias:
+            continue
+        x = data[:, j]
+        ev = AxisEvidence(axis, rate, recording.duration_s, stated, {})
+        ev.means, ev.slope_per_s = _raw_statistics(x, rate)
+        if recording.stated_variance and axis in recording.stated_variance:
+            ev.stated_variance = recording.stated_variance[axis]
+        ev.white_variance = (float(measured.avar[0, j]), float(measured.edf[0, j]))
+        adev = measured.adev[:, j]
+        if stated and np.all(np.isfinite(adev) & (adev > 0)):
+            _fit_axis(ev, np.log(adev), measured, j, stated, rate, z_crit, alpha)
+        out[axis] = ev
+    return out
+
+
+def _free_gauss_markov(y, measured, j, names, fit, fixed):
+    """
+    Free a stated Gauss-Markov's tau_c and keep it when that fits significantly better.
+
+    Returns ``(positions to hold, fit, (free fit, p-value) or None)``: the freed tau_c when its
+    improvement has p below :data:`ADOPT_P`, else the ones given.  A wrong correlation time is
+    then not taken for a missing effect (a ramp standing in for a hump that keeps rising).
+    """
+    if 'gauss_markov' not in fixed:
+        return fixed, fit, None
+    free, p = _free_position(y, measured, j, names, fit, fixed)
+    if p >= ADOPT_P:
+        return fixed, fit, (free, p)
+    adopted = dict(fixed, gauss_markov=free.terms['gauss_markov']['tau_c'])
+    return adopted, _refit(y, measured, j, names, free.terms, adopted)[1], (free, p)
+
+
+def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
+    """Fill the Allan-variance evidence of one axis (see the module docstring)."""
+    tau = measured.tau
+    names = list(stated)
+    fixed = _positions(stated)
+    ev.gap_stated = measure_gap(y, model_band(stated, tau, measured.m, measured.n_samples,
+                                              rate), alpha).value
+    first = _refit(y, measured, j, names, stated, fixed)
+    held, fit, freed = _free_gauss_markov(y, measured, j, names, first[1], fixed)
+    replaced = None
+    if 'rate_random_walk' in stated and 'gauss_markov' not in stated:
+        ev.process, bounded = _bounded_walk(y, measured, j, names, fit, fixed, rate)
+        if ev.process is not None:
+            # the stated walk stands in for the data's bounded bias; the process is kept in
+            # the walk's place (with its fitted tau_c) for what follows, so that a missing
+            # effect is not invented to bend the walk, and its stated K is not scaled
+            ev.process['estimate'].log -= math.log(stated['rate_random_walk']['value'])
+            if ev.process['p_value'] < ADOPT_P:
+                replaced = 'rate_random_walk'
+                names = [t for t in names if t != replaced] + ['gauss_markov']
+                fixed = dict(fixed, gauss_markov=bounded.terms['gauss_markov']['tau_c'])
+                held = dict(fixed)
+                fit = bounded
+                first = _refit(y, measured, j, names, bounded.terms, fixed)
+    # effects the stated terms lack: only when the refitted stated terms leave the band
+    for _ in range(MAX_MISSING):
+        band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
+        gap = measure_gap(y, band, alpha)
+        if gap.consistent:
+            break
+        cands, _ = evaluate_candidates(y, tau, rate, band, fit.terms, alpha, gap=gap)
+        winner = next((c for c in cands if c.significant and c.effect in c.fit.terms), None)
+        if winner is None:
+            break
+        added = winner.effect
+        ev.missing.append({'term': added, 'params': dict(winner.fit.terms[added]),
+                           'p_value': winner.p_value,
+                           'ci': {k: list(v) for k, v in winner.fit.intervals68[added].items()}})
+        names.append(added)
+        if TERMS[added].position:
+            position = TERMS[added].unpack(winner.fit.terms[added])[1]
+            fixed[added] = held[added] = position
+        init = dict(fit.terms)
+        init[added] = winner.fit.terms[added]
+        fit = _refit(y, measured, j, names, init, held)[1]
+    band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
+    gap = measure_gap(y, band, alpha)
+    ev.gap_fitted, ev.consistent_fitted = gap.value, gap.consistent
+    ev.fitted = fit.terms
+    ev.mean_noise_var = _mean_noise(fit.terms, rate, ev.duration_s)
+    # the factors: amplitudes with the stated positions (and any added effect's)
+    if ev.missing:
+        prob, fit = _refit(y, measured, j, names, fit.terms, fixed)
+        freed = None  # the freed tau_c is tried again beside the added effects
+    else:
+        prob, fit = first
+    needed = set()
+    for term, params in stated.items():
+        if term == replaced:
+            continue
+        a0 = _amp(params, term)
+        p_drop = _drop_test(prob, fit, names, term, fixed) if len(names) > 1 else 0.0
+        if p_drop > NOT_NEEDED_P:
+            # the data do not need the term: its fitted size is no measurement
+            ev.absent[term] = _absent(prob, fit, names, term, fixed, a0, z_crit)
+            continue
+        if p_drop > NEEDED_P:
+            continue  # seen, but not clearly enough to be measured
+        needed.add(term)
+        ev.scales[term] = LogEstimate(math.log(_amp(fit.terms[term], term) / a0),
+                                      _log_sd(fit, term, 'amp') * AMPLITUDE_SE_INFLATION,
+                                      rate)
+    positions, position_p, free_scales, process = _process_tests(
+        y, measured, j, names, fit, fixed, stated, rate, needed, freed)
+    ev.positions, ev.position_p, ev.free_scales = positions, position_p, free_scales
+    ev.process = ev.process or process

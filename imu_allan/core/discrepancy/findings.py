@@ -1,0 +1,361 @@
+"""
+Findings: where recordings of one configuration and the model it states disagree, by kind.
+
+:func:`find_discrepancies` measures every recording against its stated model
+(:mod:`.evidence`), pools each quantity over the recordings (:mod:`.pooling`: one factor, or a
+factor at 1 Hz and a rate exponent), runs the tests that need several runs (:mod:`.runs`) and
+compares message metadata with the measured per-sample variance.  Each disagreement becomes a
+:class:`Finding` of one class:
+
+=================  ==========================================================================
+class              what the data show (``factor`` = measured / stated unless said)
+=================  ==========================================================================
+white_scale        the white noise (or quantization) is ``factor`` x the stated; with
+                   ``rate_exponent`` it scales as (f / 1 Hz)^exponent and ``factor`` is at 1 Hz
+bias_scale         a bias term's amplitude (Gauss-Markov sigma, K, B, R, sinusoid) likewise
+time_constant      a Gauss-Markov tau_c
+term_absent        a stated term has no effect in the data (factor 0, interval [0, upper])
+wrong_process      a walk where a bounded Gauss-Markov is stated or the reverse; factor =
+                   the measured driving density / the stated one
+biased_drive       a drift of the same sign on every axis and run; factor = the drive's mean
+                   per step / its stated standard deviation per step
+run_to_run         the turn-on bias: spread, mean, a sign drawn at random (factor = sign
+                   agreement), or a decay (factor = last-tenth / first-tenth level)
+metadata           the messages' covariance / the measured per-sample variance
+missing_term       an effect the model lacks (no factor: its fitted parameters are evidence)
+=================  ==========================================================================
+
+Every test of an analysis is counted and the decision level is Bonferroni over all of them at
+``alpha`` (1 % by default): on recordings that match their model the whole list stays empty
+in about 99 % of analyses.  Factors carry 68.3 % intervals (``factor_ci``) and 95 % ones
+(``factor_ci95``).  SI units; ROS-free.
+"""
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+from scipy.stats import chi2
+
+from .band import ALPHA
+from .evidence import LogEstimate, measure_recording
+from .pooling import pool, Z95, z_critical
+from .runs import drive_test, MIN_RUNS, turn_on_tests
+from ..terms import TERMS
+from ..units import sensor_of
+
+#: The order findings are listed in.
+CLASSES = ('white_scale', 'bias_scale', 'time_constant', 'term_absent', 'wrong_process',
+           'biased_drive', 'run_to_run', 'metadata', 'missing_term')
+#: Terms whose amplitude is a white-type (short averaging time) level.
+WHITE_TERMS = ('white_noise', 'quantization')
+#: Tests per axis besides two per stated term (factor and its rate exponent): position,
+#: process, four run-to-run tests, two for the metadata (factor and exponent), missing terms.
+_TESTS_PER_AXIS = 9
+
+
+@dataclass
+class Finding:
+    """One disagreement (see the module docstring); :meth:`to_dict` gives the report entry."""
+
+    cls: str
+    axis: str
+    term: str
+    factor: float = None
+    factor_ci: list = None
+    factor_ci95: list = None
+    rate_exponent: float = None
+    rate_exponent_ci: list = None
+    evidence: dict = field(default_factory=dict)
+    parameter: str = None
+    suggested: float = None
+
+    def to_dict(self):
+        """Report entry: the contract keys, then ``parameter`` / ``suggested`` when known."""
+        out = {'class': self.cls, 'axis': self.axis, 'term': self.term, 'factor': self.factor,
+               'factor_ci': self.factor_ci, 'factor_ci95': self.factor_ci95,
+               'rate_exponent': self.rate_exponent, 'rate_exponent_ci': self.rate_exponent_ci,
+               'evidence': self.evidence}
+        if self.parameter is not None:
+            out['parameter'] = self.parameter
+            out['suggested'] = self.suggested
+        return out
+
+
+@dataclass
+class FindingsResult:
+    """Findings of one analysis with the per-recording summaries and the decision level."""
+
+    findings: list
+    recordings: list
+    axes: list
+    n_tests: int
+    z_crit: float
+    alpha: float
+    notes: list = field(default_factory=list)
+    evidence: dict = field(default_factory=dict)  # {axis: [AxisEvidence per recording]}
+
+    @property
+    def consistent(self):
+        """Return True when the data match the model (no finding)."""
+        return not self.findings
+
+    def to_dict(self):
+        """Return ``findings``, ``consistent``, ``recordings`` and how the decisions were made."""
+        return {'consistent': self.consistent,
+                'findings': [f.to_dict() for f in self.findings],
+                'recordings': self.recordings,
+                'decision': {'alpha': self.alpha, 'tests': self.n_tests,
+                             'z_critical': self.z_crit,
+                             'rule': 'Bonferroni over every test of the analysis; factor '
+                                     'intervals 68.3 % (factor_ci) and 95 % (factor_ci95)'},
+                'notes': list(self.notes)}
+
+
+def _scale_class(term):
+    return 'white_scale' if term in WHITE_TERMS else 'bias_scale'
+
+
+def _pooled_finding(cls, axis, term, pooled, evidence):
+    """Make a :class:`Finding` from a :class:`.pooling.Pooled` factor."""
+    evidence = dict(evidence)
+    evidence['per_rate'] = [{'rate_hz': r['rate_hz'], 'factor': math.exp(r['log']),
+                             'factor_ci': [math.exp(r['log'] - r['se']),
+                                           math.exp(r['log'] + r['se'])],
+                             'runs': r['runs']} for r in pooled.per_rate]
+    if pooled.exponent is not None and not pooled.scaled:
+        evidence['rate_exponent_measured'] = pooled.exponent
+        evidence['rate_exponent_measured_ci'] = pooled.exponent_interval()
+    return Finding(cls, axis, term, pooled.factor(), pooled.interval(), pooled.interval(Z95),
+                   pooled.exponent if pooled.scaled else None,
+                   pooled.exponent_interval() if pooled.scaled else None, evidence)
+
+
+def _significant(pooled, z_crit):
+    return pooled is not None and (pooled.z > z_crit or
+                                   (pooled.scaled and pooled.z_exponent > z_crit))
+
+
+def _stated_value(params, term):
+    return TERMS[term].unpack(params)[0]
+
+
+def _axis_findings(axis, evs, z_crit, p_crit):
+    """Return the findings of the Allan-variance evidence of one axis over its recordings."""
+    out = []
+    stated = evs[0].stated
+    fitted = [e for e in evs if e.fitted]
+    if not fitted:
+        return out
+    unit = {t: TERMS[t].param_unit(axis, TERMS[t].params[0]) for t in stated}
+    # a walk where a bounded bias is stated (or the reverse), in most of the recordings
+    process = [e.process for e in fitted if e.process is not None]
+    wrong = None
+    if process and 2 * len(process) >= len(fitted):
+        pooled = pool([p['estimate'] for p in process], z_crit)
+        p_values = [p['p_value'] for p in process]
+        if pooled is not None and fisher(p_values) < p_crit:
+            wrong = process[0]['term']
+            out.append(_pooled_finding('wrong_process', axis, wrong, pooled, {
+                'kind': process[0]['kind'],
+                'tau_c_fitted_s': [p['tau_c_fit'] for p in process],
+                'stated': stated[wrong], 'p_values': p_values}))
+    # a stated Gauss-Markov whose correlation time is off: the position tests of the
+    # recordings combined (Fisher), the factor from the recordings that resolve the bend
+    tau_pooled = None
+    p_values = [e.position_p['gauss_markov'] for e in fitted if 'gauss_markov' in e.position_p]
+    if 'gauss_markov' in stated and wrong is None and p_values and \
+            fisher(p_values) < p_crit:
+        tau_pooled = pool([e.positions['gauss_markov'] for e in fitted
+                           if 'gauss_markov' in e.positions], z_crit)
+        if tau_pooled is not None:
+            out.append(_pooled_finding('time_constant', axis, 'gauss_markov', tau_pooled, {
+                'stated_s': stated['gauss_markov']['tau_c'],
+                'measured_s': stated['gauss_markov']['tau_c'] * tau_pooled.factor(),
+                'unit': 's', 'p_value': fisher(p_values)}))
+    for term, params in stated.items():
+        if term == wrong:
+            continue
+        source = 'scales'
+        if term == 'gauss_markov' and tau_pooled is not None:
+            source = 'free_scales'  # with the correlation time refitted
+        estimates = [getattr(e, source)[term] for e in fitted if term in getattr(e, source)]
+        pooled = pool(estimates, z_crit)
+        absent = [e.absent[term] for e in fitted if term in e.absent]
+        # absent: most recordings do without it and reject its stated size, unless the
+        # recordings that do show it tell how it scales with the rate
+        if absent and 2 * len(absent) > len(fitted) and \
+                fisher([a['p_stated'] for a in absent]) < p_crit and \
+                not (_significant(pooled, z_crit) and pooled.scaled):
+            # the tightest limits come from the recording that shows its absence best
+            best = min(absent, key=lambda a: a['p_stated'])
+            out.append(Finding('term_absent', axis, term, 0.0, [0.0, best['upper68']],
+                               [0.0, best['upper_crit']],
+                               evidence={'stated': params, 'unit': unit[term],
+                                         'recordings_without_it': len(absent),
+                                         'recordings': len(fitted)}))
+            continue
+        if _significant(pooled, z_crit):
+            value = _stated_value(params, term)
+            out.append(_pooled_finding(_scale_class(term), axis, term, pooled, {
+                'stated': value, 'unit': unit[term],
+                'measured_at_1hz' if pooled.scaled else 'measured': value * pooled.factor()}))
+    # effects the model lacks, in most of the recordings
+    missing = {}
+    for e in fitted:
+        for m in e.missing:
+            missing.setdefault(m['term'], []).append(m)
+    for term, found in missing.items():
+        if 2 * len(found) >= len(fitted):
+            params = {k: float(np.median([m['params'][k] for m in found]))
+                      for k in found[0]['params']}
+            out.append(Finding('missing_term', axis, term, evidence={
+                'parameters': params, 'units': {k: TERMS[term].param_unit(axis, k)
+                                                for k in params},
+                'per_recording': found, 'recordings_with_it': len(found),
+                'recordings': len(fitted)}))
+    return out
+
+
+def _run_findings(axis, evs, stated, p_crit):
+    """run_to_run findings of one axis: decay and sign first, spread and mean otherwise."""
+    tests = {t['kind']: t for t in turn_on_tests(axis, evs, stated)}
+    out = []
+    hit = {k for k, t in tests.items() if t['p_value'] < p_crit}
+    kinds = [k for k in ('decay', 'bimodal') if k in hit]
+    if not kinds:  # spread and mean describe the start level only when it stays and is one
+        kinds = [k for k in ('spread', 'mean') if k in hit]
+    for kind in kinds:
+        t = tests[kind]
+        ev = dict(t['evidence'])
+        ev.update({'kind': kind, 'p_value': t['p_value'], 'stated': dict(stated),
+                   'runs': len(evs)})
+        out.append(Finding('run_to_run', axis, 'turn_on_bias', t['factor'], t['factor_ci'],
+                           t['factor_ci95'], evidence=ev))
+    return out, 'decay' in hit
+
+
+def _metadata_finding(axis, evs, z_crit):
+    """Covariance stated in the messages against the measured per-sample white variance."""
+    estimates = []
+    for e in evs:
+        if e.stated_variance is None or not e.stated_variance > 0:
+            continue
+        var, edf = e.white_variance
+        if not (var > 0 and edf > 0):
+            continue
+        estimates.append(LogEstimate(math.log(e.stated_variance / var), math.sqrt(2.0 / edf),
+                                     e.rate_hz))
+    pooled = pool(estimates, z_crit)
+    if not _significant(pooled, z_crit):
+        return None
+    return _pooled_finding('metadata', axis, 'white_noise', pooled, {
+        'stated_variance': [e.stated_variance for e in evs if e.stated_variance],
+        'measured_variance': [e.white_variance[0] for e in evs if e.stated_variance],
+        'rates_hz': [e.rate_hz for e in evs if e.stated_variance],
+        'unit': 'rad^2/s^2' if axis.startswith('gyro') else 'm^2/s^4',
+        'measured_as': 'Allan variance at the shortest averaging time (per-sample white '
+                       'variance)'})
+
+
+def count_tests(models, recordings):
+    """Count the tests an analysis makes (the Bonferroni family) from the stated models."""
+    axes = set()
+    terms = 0
+    for model, rec in zip(models, recordings):
+        for axis in rec.axes:
+            if axis in axes or not (model.terms.get(axis) or axis in model.turn_on_bias):
+                continue
+            axes.add(axis)
+            terms += len(model.terms.get(axis, {}))
+    return _TESTS_PER_AXIS * len(axes) + 2 * terms + 2
+
+
+def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
+                       min_clusters=10):
+    """
+    Compare recordings of one configuration with the noise model it states: findings.
+
+    Parameters
+    ----------
+    recordings : list of Recording
+        Any sample rates, any number of runs (:class:`.evidence.Recording`).
+    model : NoiseModel or list of NoiseModel
+        The stated (intended) model, SI, continuous time; one per recording when it depends
+        on the rate (a per-sample quantity stated by a simulator file).
+    alpha : float
+        Family-wise level of the whole analysis (Bonferroni over :func:`count_tests`).
+    points_per_decade, min_clusters : int
+        Averaging-time grid of the estimator (as :func:`~imu_allan.core.allan.allan_deviation`).
+
+    Returns
+    -------
+    FindingsResult
+
+    """
+    models = list(model) if isinstance(model, (list, tuple)) else [model] * len(recordings)
+    if len(models) != len(recordings):
+        raise ValueError('one model per recording (or one for all)')
+    n_tests = count_tests(models, recordings)
+    z_crit = z_critical(alpha, n_tests)
+    p_crit = alpha / n_tests
+    per_axis = {}
+    summaries = []
+    notes = []
+    for rec, m in zip(recordings, models):
+        evidence = measure_recording(rec, m, z_crit, alpha, points_per_decade, min_clusters)
+        summaries.append({'source': rec.source, 'sample_rate_hz': float(rec.rate_hz),
+                          'n_samples': int(rec.data.shape[0]),
+                          'duration_s': float(rec.duration_s),
+                          'axes': {a: {'gap_stated': e.gap_stated, 'gap_fitted': e.gap_fitted,
+                                       'consistent_fitted': e.consistent_fitted}
+                                   for a, e in evidence.items() if e.fitted}})
+        for axis, ev in evidence.items():
+            per_axis.setdefault(axis, []).append(ev)
+    skipped = sorted({a for r in recordings for a in r.axes} - set(per_axis))
+    if skipped:
+        notes.append(f'the model states nothing for {", ".join(skipped)}: not compared')
+    findings = []
+    decaying = set()
+    stated_terms = {}
+    few_runs = []
+    for axis, evs in per_axis.items():
+        stated_terms[axis] = evs[0].stated
+        findings += _axis_findings(axis, evs, z_crit, p_crit)
+        turn_on = models[0].turn_on_bias.get(axis)
+        if turn_on is not None:
+            runs, decays = _run_findings(axis, evs, turn_on, p_crit)
+            findings += runs
+            if decays:
+                decaying.add(axis)
+            if len(evs) < MIN_RUNS:
+                few_runs.append(axis)
+        meta = _metadata_finding(axis, evs, z_crit)
+        if meta is not None:
+            findings.append(meta)
+    if few_runs:
+        notes.append(f'turn-on bias of {", ".join(few_runs)}: compared across runs from '
+                     f'{MIN_RUNS} recordings on ({len(recordings)} given)')
+    for sensor in ('gyro', 'accel'):
+        group = {a: evs for a, evs in per_axis.items()
+                 if sensor_of(a) == sensor and a not in decaying}
+        p, axes = drive_test(group, stated_terms)
+        if p < p_crit:
+            for axis, d in axes.items():
+                findings.append(Finding('biased_drive', axis, next(
+                    (t for t in ('rate_random_walk', 'gauss_markov')
+                     if t in stated_terms.get(axis, {})), None), d['factor'], d['factor_ci'],
+                    d['factor_ci95'], evidence={**d['evidence'], 'p_value': p}))
+            drifting = set(axes)
+            findings = [f for f in findings if not (f.cls == 'missing_term' and
+                                                    f.term == 'rate_ramp' and
+                                                    f.axis in drifting)]
+    findings.sort(key=lambda f: (CLASSES.index(f.cls), f.axis))
+    return FindingsResult(findings, summaries, sorted(per_axis), n_tests, z_crit, alpha,
+                          notes, per_axis)
+
+
+def fisher(p_values):
+    """Fisher's combination of independent p-values: -2 sum ln p ~ chi-square(2k)."""
+    stat = -2.0 * float(np.sum(np.log(np.maximum(p_values, 1e-300))))
+    return float(chi2.sf(stat, 2 * len(p_values)))
