@@ -149,6 +149,9 @@ class Advice:
     unresolved: list = field(default_factory=list)
     #: axes the motion verdict calls moving (set by the report): no noise measurement
     moving: list = field(default_factory=list)
+    #: axes whose model the adequacy test rejects (:mod:`.fit.adequacy`): their precision
+    #: figures are those of a model that does not describe the curve, never "precise"
+    inadequate: list = field(default_factory=list)
 
     @property
     def record_more_s(self):
@@ -555,6 +558,9 @@ class StagedAdvice:
         targets = dict(DEFAULT_TARGETS if targets is None else targets)
         grid = grid or analysis_grid()
         self.advice = Advice(targets, result.n_samples / result.rate_hz)
+        self.advice.inadequate = [a for a in fitted.axes
+                                  if getattr(fitted.fits[a], 'adequacy', None) is not None
+                                  and not fitted.fits[a].adequacy.adequate]
         self._axes = [_AxisAdvisor(result, fitted, axis, targets, grid, undetected)
                       for axis in fitted.axes if fitted.fits[axis].terms]
         self._gen = self._run()
@@ -627,6 +633,11 @@ def advice_health(advice, name='recording advice'):
         values[f'{u.axis}.{what}.more_s'] = more
         waits.append((more, f'{u.axis} {what.replace("_vs_", " vs ")}'))
     open_items = [(m, what) for m, what in waits if not m == 0.0]
+    if advice.inadequate:
+        values['inadequate'] = ','.join(advice.inadequate)
+        return Health(name, WARN, 'the noise model does not describe '
+                                  + ', '.join(advice.inadequate)
+                                  + ': their precision figures are not meaningful', values)
     if not open_items:
         return Health(name, OK, f'every precision target is met ({advice.duration_s:.0f} s '
                                 f'recorded)', values)

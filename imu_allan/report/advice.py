@@ -53,7 +53,8 @@ def advice_to_json(advice):
                                           {'alternative': list(u.alternative)}))
                            for u in advice.unresolved],
             'record_more_s': _num(advice.record_more_s),
-            'undetected': undetected}
+            'undetected': undetected,
+            'inadequate': list(getattr(advice, 'inadequate', []))}
 
 
 def format_duration(seconds):
@@ -100,7 +101,8 @@ def advice_sentence(advice):
     One sentence a person can act on: how much longer to record, and why.
 
     Never "no need to record longer" while an alternative term set remains open
-    (``advice.unresolved``) or the record was moving (``advice.moving``).
+    (``advice.unresolved``), the record was moving (``advice.moving``) or a model does not
+    describe its curve (``advice.inadequate``: its precision is not precision).
     """
     moving = getattr(advice, 'moving', None)
     if moving:
@@ -123,11 +125,16 @@ def advice_sentence(advice):
         clauses.append(f'record {format_duration(record)} more to tell the unresolved terms '
                        f'apart')
     clauses += [alternative_words(u) for u in advice.unresolved]
+    inadequate = list(getattr(advice, 'inadequate', []))
+    if inadequate:
+        clauses.append(f'the noise model does not describe {", ".join(inadequate)}: their '
+                       'precision figures are not meaningful (see the model check); a longer '
+                       'record does not mend a model')
     for axis, term, e in detected:
         if e.more_s is None:
             clauses.append(f'{axis} {_words(term)} will not reach '
                            f'{_percent(advice.targets[term])} ({e.reason})')
-    if not clauses and not advice.unresolved:
+    if not clauses and not advice.unresolved and not inadequate:
         met = sorted({t for _, t, _ in detected})
         targets = ', '.join(f'{_words(t)} {_percent(advice.targets[t])}' for t in met)
         return f'advice: every precision target is met ({targets}): no need to record longer.'

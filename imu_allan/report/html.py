@@ -242,6 +242,11 @@ def advice_words(advice, moving=(), alternatives=False):
                      + ' or '.join(_words(t) for t in u['terms'][1:])
                      + (f': record {format_duration(more)} more to tell them apart.'
                         if more else '.'))
+    inadequate = advice.get('inadequate') or []
+    if inadequate:
+        items.insert(0, f'The noise model does not describe {", ".join(inadequate)}: the '
+                        'precision of its numbers is not meaningful there (see "Does the model '
+                        'describe the data?"); a longer record does not mend a model.')
     more = advice.get('record_more_s')
     if more is None:
         headline = 'No prediction of a recording length is possible (see below).'
@@ -249,6 +254,9 @@ def advice_words(advice, moving=(), alternatives=False):
         goal = ('meet every precision target and tell the terms apart'
                 if advice.get('unresolved') else 'meet every precision target')
         headline = f'Record {format_duration(more)} more (same rate and conditions) to {goal}.'
+    elif inadequate:
+        headline = ('The noise model does not describe every axis: see below before trusting '
+                    'the precision of its numbers.')
     elif advice.get('unresolved') or alternatives:
         headline = ('Every precision target is met, but the data cannot yet tell some term '
                     'sets apart (below).')
