@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from . import hadamard_check
-from .adequacy import assess
+from .adequacy import assess, STATISTIC_SCALE
 from .axis import (
     ALTERNATIVE_MARGIN,
     coefficient_interval,
@@ -336,7 +336,7 @@ def _bounded_drift(fit, rate_hz, processing):
         new.problem, new.tau_range = problem, fit.tau_range
         _assess(new, rate_hz, processing)
         added = len(new.terms) + 1 - len(names)  # tau_c counts
-        gain = fit.adequacy.chi2 - new.adequacy.chi2
+        gain = (fit.adequacy.chi2 - new.adequacy.chi2) / STATISTIC_SCALE
         if added in DRIFT_GAIN and gain > DRIFT_GAIN[added] and gain > best_gain:
             best, best_gain = new, gain
     if best is not fit:
