@@ -59,6 +59,37 @@ def test_interval_coverage(outcome):
         assert c95 >= 0.95 - 3 * _se(0.95, n), (term, n, c95)
 
 
+#: Realistic records (issue 29): a 1-32-tap window at 1 kHz decimated to 100 Hz, an LSB of
+#: 0.2-3 noise sigmas, an aliased line on half of them; the sensor's processing measured.
+REALISTIC = [(s, 'realistic', 1.0, 100.0) for s in ('N B K', 'N B', 'N K', 'N B R')]
+
+
+@pytest.fixture(scope='module')
+def realistic():
+    return summary(run(REALISTIC, n_axes=10, seed=8))
+
+
+@pytest.mark.slow
+def test_realistic_records_meet_the_goals(realistic):
+    """
+    On realistic records: selection, alternatives and coverage as on clean ones (40 axes).
+
+    The full table (docs/method.md, 192 axes at 100 Hz and 192 at 200 Hz) meets the goals;
+    here the tolerances are those of :func:`test_selection_and_alternatives` and
+    :func:`test_interval_coverage` widened for 40 axes: selection >= 80 %, truth among the
+    alternatives >= 92 % (one axis short of 97 % is 2.5 points), pooled 68.3 % coverage within
+    8 points (its binomial SE over ~110 cases is 4.4), per term within 3 SE.
+    """
+    assert realistic['exact'] >= 0.80, realistic
+    assert realistic['among'] >= 0.92, realistic
+    n_all = sum(n for n, _, _ in realistic['cover'].values())
+    pooled68 = sum(n * c for n, c, _ in realistic['cover'].values()) / n_all
+    assert abs(pooled68 - CI_LEVEL) <= 0.08, realistic
+    for term, (n, c68, c95) in realistic['cover'].items():
+        assert abs(c68 - CI_LEVEL) <= 3 * _se(CI_LEVEL, n), (term, n, c68)
+        assert c95 >= 0.95 - 3 * _se(0.95, n), (term, n, c95)
+
+
 @pytest.fixture(scope='module')
 def fitted():
     model = NoiseModel.from_dict({'gyro': {'white_noise': 2e-4, 'bias_instability': 5e-5,
