@@ -112,10 +112,14 @@ def span_line(fitted):
         return ''
     parts = []
     if filtered:
-        parts.append("white noise takes the shape the sensor's filter gives it on "
-                     + ', '.join(filtered))
+        which = 'every axis' if len(filtered) == len(spans) else ', '.join(filtered)
+        parts.append(f"the sensor's filter correlates the samples on {which} (its deficit "
+                     'fitted)')
+    by_reason = {}
     for axis, span in late.items():
-        parts.append(f'{axis} fitted from {span.lo:.3g} s ({_WHY[span.limited_by]} below)')
+        by_reason.setdefault(span.limited_by, []).append(f'{axis} from {span.lo:.2g} s')
+    for reason, axes in by_reason.items():
+        parts.append(f'fitted {", ".join(axes)} ({_WHY[reason]} below)')
     return 'fit: ' + '; '.join(parts)
 
 
@@ -159,15 +163,21 @@ def sensor_sentence(report):
             coarse = [ax.axis for ax in axes if ax.quantization == 'coarse']
             if coarse:
                 bits.append('coarse quantization on ' + ', '.join(coarse))
-        repeats = [ax.repeated_fraction for ax in axes if ax.repeated_fraction is not None]
+        repeats = [100 * ax.repeated_fraction for ax in axes if ax.repeated_fraction is not None]
         if repeats:
-            bits.append(f'{100 * min(repeats):.0f}-{100 * max(repeats):.0f} % repeated samples')
+            bits.append(f'{_range(repeats, "{:.0f}")} % repeated samples')
         rho = [ax.lag_correlation[0] for ax in axes if ax.lag_correlation]
         if rho:
-            bits.append(f'lag-1 correlation {min(rho):.2f}-{max(rho):.2f}')
+            bits.append(f'lag-1 correlation {_range(rho, "{:.2f}")}')
         if bits:
             parts.append(f'{sensor} ' + ', '.join(bits))
     return 'sensor: ' + '; '.join(parts) if parts else ''
+
+
+def _range(values, form):
+    """'lo-hi' of ``values`` in ``form``, or one number where both read alike."""
+    lo, hi = form.format(min(values)), form.format(max(values))
+    return lo if lo == hi else f'{lo}-{hi}'
 
 
 def _lsb(axis, value):
