@@ -1,8 +1,9 @@
 """The one Imu message -> numpy adapter, with rclpy and rosbags messages, and the bulk codecs."""
 
+from imu_allan.formats.collector import Collector
 from imu_allan.formats.imu_adapter import imu_to_row, imus_to_arrays
-from imu_allan.formats.imu_cdr import Collector, deserialize, encode_imu, frame_id_of
 from imu_allan.formats.imu_cdr import decode_rows as _decode_rows
+from imu_allan.formats.imu_cdr import deserialize, encode_imu, frame_id_of
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
