@@ -18,7 +18,7 @@ from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..core.change_test import (  # noqa: E402
+from ..core.change_detection import (  # noqa: E402
     ChangeTest,
     detect_changes,
     MEASURED_AXIS_DAYS,

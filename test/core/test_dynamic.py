@@ -2,7 +2,7 @@
 
 import math
 
-from imu_allan.core.change_test import ChangeTest, detect_changes
+from imu_allan.core.change_detection import ChangeTest, detect_changes
 from imu_allan.core.dynamic import (
     _level_of,
     BlockAllan,
