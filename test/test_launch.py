@@ -10,7 +10,6 @@ its own ROS_DOMAIN_ID and ROS_LOG_DIR; waits end on conditions, with generous ti
 
 import importlib.util
 import math
-import os
 from pathlib import Path
 import re
 import signal
@@ -18,9 +17,11 @@ import subprocess
 import sys
 import time
 
-from conftest import executable, ros_env, spin_until
+from conftest import domain, executable, ros_env, spin_until
 import numpy as np
 import pytest
+
+pytestmark = pytest.mark.ros
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
@@ -112,7 +113,7 @@ def decode_coeffs(msg):
     return np.asarray(msg.data).reshape(6, 5, 3)
 
 
-@pytest.mark.parametrize('ros_node', [(os.getpid() + 53) % 100 + 100], indirect=True)
+@pytest.mark.parametrize('ros_node', [domain(2)], ids=['own_domain'], indirect=True)
 def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
     """gx3_sim -> gx3_25.launch.py (driver + allan + denoise) -> imu/allan_coeffs; SIGINT."""
     from std_msgs.msg import Float64MultiArray
@@ -140,7 +141,7 @@ def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
     check_clean_shutdown(status, out, ['driver', 'allan', 'denoise'])
 
 
-@pytest.mark.parametrize('ros_node', [(os.getpid() + 71) % 100 + 100], indirect=True)
+@pytest.mark.parametrize('ros_node', [domain(3)], ids=['own_domain'], indirect=True)
 def test_monitor_launch_on_any_imu_topic(launch_stack, ros_node, tmp_path):
     """
     Run monitor.launch.py imu_topic:=/test_imu/data namespace:=mon.

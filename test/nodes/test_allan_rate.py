@@ -8,9 +8,8 @@ record) on exactly the same samples.  RELIABLE QoS so that no sample is lost on 
 """
 
 import math
-import os
 
-from conftest import executable
+from conftest import domain, executable
 from imu_allan.core.analysis import AnalysisOptions, analyze_samples
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulate import simulate
@@ -21,9 +20,11 @@ from nodes.allan_feed import AllanClient
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
-DOMAIN = (os.getpid() + 37) % 100 + 100
+DOMAIN = domain(1)  # not conftest's DOMAIN: a module of its own
 RATE = 400.0
 N = 12000  # 30 s
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.0e-4, 'bias_instability': 8.0e-4},

@@ -13,10 +13,13 @@ import signal
 import subprocess
 import time
 
+from conftest import DOMAIN
 import numpy as np
 import pytest
 
-os.environ['ROS_DOMAIN_ID'] = str(os.getpid() % 100 + 100)
+pytestmark = pytest.mark.ros
+
+os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
 rclpy = pytest.importorskip('rclpy')
 
 G = 9.80665
