@@ -20,6 +20,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 def run(cmd, cwd, timeout=300):
     """Run a shell line the way the README gives it; fail with its output."""

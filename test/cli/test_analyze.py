@@ -10,6 +10,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 @pytest.fixture(scope='module')
 def sim_csv(tmp_path_factory):

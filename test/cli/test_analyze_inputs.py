@@ -16,6 +16,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 # Static 6-axis model, 40 min at 100 Hz: long enough for white noise and bias instability.
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.8e-4, 'bias_instability': 1.5e-4},
                               'accel': {'white_noise': 8.3e-4, 'bias_instability': 7e-4}})

@@ -10,6 +10,9 @@ it, the Kalibr values come back.
 import json
 
 from conftest import run_command
+import pytest
+
+pytestmark = pytest.mark.ros
 
 
 def _bag(shared_data):

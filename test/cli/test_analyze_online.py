@@ -17,6 +17,9 @@ from imu_allan.formats.samples import Samples
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
 from imu_allan.report.coeffs_layout import coefficient_table
 import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
 
 
 def test_analyze_online_equals_the_node_pipeline(tmp_path):

@@ -27,6 +27,8 @@ from imu_allan.history.rows import measurement_rows
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.8e-4, 'bias_instability': 1.5e-4},
                               'accel': {'white_noise': 8.3e-4, 'bias_instability': 7e-4}})
 RATE, N = 50.0, 3000  # one minute at 50 Hz

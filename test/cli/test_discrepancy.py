@@ -13,6 +13,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 RATE = 100.0
 MINUTES = 20.0
 BASE = {'white_noise': {'value': 1e-3}, 'bias_instability': {'value': 3e-4}}

@@ -16,6 +16,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 RATE = 100.0
 N = 15 * 60 * 100
 AXES = ('gyro_x', 'gyro_y')

@@ -21,6 +21,8 @@ from imu_allan.report.json_report import analysis_to_json
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 GYRO_N, ACCEL_N = 5.8e-4, 8.3e-4
 RATE, N = 50.0, 3000  # one minute at 50 Hz: N to about +-1.3 % (68.3 %)
 IMUS, WEEKS, WORSE, RISE = 5, 12, 3, 1.3  # robot3's white noise +30 % in the last 3 weeks

@@ -37,6 +37,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 
+@pytest.mark.ros
 def test_once_json_equals_a_direct_subscriber(ros_context):
     """The snapshot's SI values and intervals are the node's numbers, bit for bit."""
     from std_msgs.msg import Float64MultiArray
@@ -105,6 +106,7 @@ def _threads(pid):
     return out
 
 
+@pytest.mark.ros
 def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_path):
     """Two estimates in turn: redrawn in place on a pty; plain lines on a pipe; Ctrl-C exits 0."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -179,6 +181,7 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_pa
     assert '\x1b' not in plain and texts[0] in plain and texts[1] in plain
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('args, topic', [
     ((), '/imu/allan_coeffs'),
     (('--namespace', 'robot1'), '/robot1/imu/allan_coeffs'),
@@ -195,6 +198,7 @@ def test_once_times_out_with_one_line(args, topic):
     assert len(lines) == 1 and f' {topic} ' in lines[0], proc.stderr
 
 
+@pytest.mark.ros
 def test_bad_argument_one_line_exit_2():
     proc = run_command('monitor', '--once', '--timeout', '0', timeout=60)
     assert proc.returncode == 2

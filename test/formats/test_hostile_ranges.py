@@ -118,6 +118,7 @@ def test_collector_receive_times_from_sql_rows_checked():
     assert coll.warnings() == [collector.bad_time_warning(3)]
 
 
+@pytest.mark.ros
 def test_analyze_of_a_bag_with_an_out_of_range_log_time(tmp_path, bag):
     """The issue's case end to end: exit 0, the warning in the JSON, no traceback."""
     import json

@@ -22,6 +22,8 @@ from nodes.allan_feed import AllanClient, imu_messages
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 RATE = 100.0

@@ -15,6 +15,8 @@ from nodes.allan_feed import AllanFeed, imu_messages, MODEL, RATE, status_values
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 N = 24000

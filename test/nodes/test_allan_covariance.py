@@ -17,6 +17,8 @@ from imu_allan.core.units import IEEE_TERMS
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 RATE = 100.0

@@ -25,6 +25,8 @@ from nodes.allan_feed import AllanFeed, RATE
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 N = 6000

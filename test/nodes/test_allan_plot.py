@@ -17,6 +17,8 @@ from nodes.allan_feed import AllanFeed, status_values
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 

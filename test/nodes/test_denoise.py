@@ -13,6 +13,8 @@ from imu_allan.nodes.denoise import _DEFAULTS, make_denoiser
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 RATE = 100.0

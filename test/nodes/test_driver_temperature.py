@@ -20,6 +20,8 @@ from nodes.test_driver import (  # noqa: F401 - node and procs are fixtures
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 def test_temperature_polled_between_records(node, procs, tmp_path):  # noqa: F811
     """200 Hz records, 0xD1 every 0.2 s on a 20 -> 40 deg C ramp: nothing lost, exact temps."""

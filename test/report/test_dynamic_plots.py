@@ -9,6 +9,9 @@ from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
 import matplotlib.image
 import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
 
 RATE = 100.0
 

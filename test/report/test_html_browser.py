@@ -34,6 +34,8 @@ import pytest
 
 from .chromium import Chromium, find_chromium
 
+pytestmark = [pytest.mark.browser, pytest.mark.ros]
+
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.0e-4, 'bias_instability': 1.0e-4},
                               'accel': {'white_noise': 8.0e-4, 'bias_instability': 5.0e-4}})
 RATE = 100.0
