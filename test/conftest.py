@@ -49,6 +49,8 @@ def domain(k):
     if not 0 <= k < DOMAINS_PER_PROCESS:
         raise ValueError(f'domain {k}: a test process has {DOMAINS_PER_PROCESS}')
     return DOMAIN + k
+
+
 EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim', 'monitor',
                'fleet')
 
