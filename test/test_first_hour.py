@@ -31,6 +31,7 @@ def run(cmd, cwd, timeout=300):
     return proc.stdout
 
 
+@pytest.mark.slow
 def test_clone_build_source_run(tmp_path):
     """Clone, colcon build, source, then ``ros2 run imu_allan analyze`` on a bag."""
     if not (REPO / '.git').exists() or shutil.which('git') is None:

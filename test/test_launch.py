@@ -113,6 +113,7 @@ def decode_coeffs(msg):
     return np.asarray(msg.data).reshape(6, 5, 3)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('ros_node', [domain(2)], ids=['own_domain'], indirect=True)
 def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
     """gx3_sim -> gx3_25.launch.py (driver + allan + denoise) -> imu/allan_coeffs; SIGINT."""
@@ -141,6 +142,7 @@ def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
     check_clean_shutdown(status, out, ['driver', 'allan', 'denoise'])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('ros_node', [domain(3)], ids=['own_domain'], indirect=True)
 def test_monitor_launch_on_any_imu_topic(launch_stack, ros_node, tmp_path):
     """

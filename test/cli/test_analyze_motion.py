@@ -19,6 +19,7 @@ def _bag(shared_data):
     return shared_data / 'bags' / 'test2.bag'
 
 
+@pytest.mark.slow
 def test_moving_record_is_not_a_noise_measurement(shared_data, tmp_path):
     proc = run_command('analyze', _bag(shared_data), '--out', tmp_path / 'out')
     assert proc.returncode == 0, proc.stderr

@@ -22,6 +22,7 @@ import pytest
 pytestmark = pytest.mark.ros
 
 
+@pytest.mark.slow
 def test_analyze_online_equals_the_node_pipeline(tmp_path):
     n = 100 * 1200
     data = simulate(thesis_gx3_25_model(), n, 100.0, seed=31)

@@ -37,6 +37,7 @@ def files(tmp_path_factory):
     return csv, sdf, folder
 
 
+@pytest.mark.slow
 def test_sdf_model_names_the_effect_and_corrected_sdf_closes_the_gap(files):
     """
     The random walk is named on gyro_x; corrected.sdf, run again, starts with a smaller gap.

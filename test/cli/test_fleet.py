@@ -72,6 +72,7 @@ def test_history_has_every_record_once(fleet_db):
     assert first == datetime(2026, 1, 5)
 
 
+@pytest.mark.slow
 def test_exactly_the_degrading_imu_is_flagged(fleet_db, tmp_path):
     """
     robot3's N rose 30 % (about 20 of its interval half-widths): flagged; nobody else.
@@ -108,6 +109,7 @@ def test_exactly_the_degrading_imu_is_flagged(fleet_db, tmp_path):
                for ln in lines)
 
 
+@pytest.mark.slow
 def test_since_and_bad_input(fleet_db, tmp_path):
     proc = run_command('fleet', fleet_db, '--out', tmp_path, '--json', '--since', '2026-02-02')
     assert proc.returncode == 0, proc.stderr

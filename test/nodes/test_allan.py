@@ -49,6 +49,7 @@ def _decode_coeffs(msg):
     return np.asarray(msg.data, dtype=float).reshape(6, 5, 3)
 
 
+@pytest.mark.slow
 def test_allan_node_end_to_end(ros_context, tmp_path):
     """True coefficients inside the published intervals; node == offline; budget levels."""
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue

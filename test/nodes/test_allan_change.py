@@ -40,6 +40,7 @@ def _change_status(array, axis):
     return None
 
 
+@pytest.mark.slow
 def test_allan_node_reports_a_change_and_resets(ros_context):
     """WARN on gyro_x with the stamp, OK elsewhere; a change_reset set clears it."""
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue

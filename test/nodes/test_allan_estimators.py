@@ -33,6 +33,7 @@ N = 6000
 PARAMS = ('estimators:=oadev,mdev,ohdev', 'gate:=false', 'stride_base:=1000')
 
 
+@pytest.mark.slow
 def test_allan_node_publishes_mdev_and_ohdev(ros_context):
     """imu/allan_deviation/<kind>: the node == offline pipeline == allantools on the record."""
     allantools = pytest.importorskip('allantools')

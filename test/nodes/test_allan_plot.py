@@ -22,6 +22,7 @@ pytestmark = pytest.mark.ros
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 
+@pytest.mark.slow
 def test_figure_published_only_while_subscribed(ros_context, tmp_path):
     """No render without a subscriber; then a non-blank PNG of the LiveFigure's size."""
     from imu_allan.report.plots import LiveFigure

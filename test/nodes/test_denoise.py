@@ -21,6 +21,7 @@ RATE = 100.0
 N = 6000
 
 
+@pytest.mark.slow
 def test_denoise_node_stream(ros_context):
     """
     60 s of thesis-model data through the node equal the offline BlockDenoiser.

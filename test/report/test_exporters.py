@@ -410,6 +410,7 @@ def test_parse_names_and_inflate():
             parse_inflate(bad)
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_cli_writes_every_export_and_rejects_bad_names(tmp_path):
     data = imu_allan.simulate({'gyro': {'white_noise': GYRO_N, 'rate_random_walk': GYRO_K},
@@ -553,6 +554,7 @@ def test_gtsam_snippet_runs(files, tmp_path):
     assert proc.returncode == 0 and 'gyroscopeCovariance' in proc.stdout, proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_cli_overbound(tmp_path):
     data = imu_allan.simulate({'gyro': {'white_noise': GYRO_N, 'bias_instability': 3 * GYRO_N,

@@ -115,6 +115,7 @@ def _numbers(entry):
     return [fmt(x) for x in out]
 
 
+@pytest.mark.slow
 def test_analysis_page(browser, analysis_dir):
     """report.html: loads clean, draws, and shows every coefficient of report.json."""
     report = json.loads((analysis_dir / 'report.json').read_text())
@@ -130,6 +131,7 @@ def test_analysis_page(browser, analysis_dir):
     assert fmt(report['n_samples']) in text or str(report['n_samples']) in text
 
 
+@pytest.mark.slow
 def test_several_inputs_index(browser, tmp_path):
     """Two inputs: one page each, and index.html linking both (checked in the browser)."""
     a = _csv(tmp_path / 'first.csv', 12_000, 5)
@@ -210,6 +212,7 @@ def test_fleet_page(browser, fleet_out):
     assert {s.rsplit('/', 1)[1] for s in sources} == expected
 
 
+@pytest.mark.slow
 def test_discrepancy_page(browser, tmp_path):
     """report.html of discrepancy: gaps before and after, the effect found, the model."""
     from imu_allan.formats.samples import Samples as S
