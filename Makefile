@@ -13,8 +13,18 @@ RUN_ENV := PATH="$(CURDIR)/$(VENV)/bin:$$PATH" \
 	MPLBACKEND=Agg
 TESTS ?= test
 PYTEST_ARGS ?=
+# Test processes (pytest-xdist; auto: one per core).  Each test file runs whole on one worker
+# (--dist loadfile): its module fixtures are made once, and tests that share a fixed path
+# (test_package_deps.py's build/rosdep-*) or a module's DDS domain never run side by side.
+# Every worker has its own ROS_DOMAIN_IDs (test/conftest.py).  TEST_JOBS=0: one process.
+TEST_JOBS ?= auto
+XDIST = $(if $(filter 0,$(TEST_JOBS)),,-n $(TEST_JOBS) --dist loadfile)
+# `make quick`: the core, formats and report tests that need no build and no ROS, imported
+# from the source tree (no colcon build; numba caches its kernels beside the sources).
+QUICK_TESTS ?= test/core test/formats test/report test/test_import_direction.py
+QUICK_MARKS := not slow and not ros and not browser
 
-.PHONY: all venv build launch-stack browser test lint demo bench clean
+.PHONY: all venv build launch-stack browser test quick lint demo bench clean
 
 all: build
 
@@ -59,7 +69,11 @@ browser:
 		else echo 'no chromium (and no apt as root to install it): the browser tests skip'; fi; }
 
 test: build launch-stack browser
-	$(RUN_ENV) $(VPY) -m pytest -q $(TESTS) $(PYTEST_ARGS)
+	$(RUN_ENV) $(VPY) -m pytest -q $(XDIST) $(TESTS) $(PYTEST_ARGS)
+
+quick: $(STAMP)
+	PYTHONPATH="$(CURDIR)$${PYTHONPATH:+:$$PYTHONPATH}" MPLBACKEND=Agg \
+		$(VPY) -m pytest -q $(XDIST) -m '$(QUICK_MARKS)' $(QUICK_TESTS) $(PYTEST_ARGS)
 
 demo: build
 	$(RUN_ENV) $(VPY) scripts/demo.py

@@ -17,10 +17,76 @@ REPO = Path(__file__).resolve().parents[1]
 #: checkout elsewhere names it with IMU_ALLAN_SHARED.
 SHARED = Path(os.environ.get('IMU_ALLAN_SHARED', REPO.parent / 'shared'))
 SHARED_DATA = SHARED / 'data'
-#: This test process's own ROS_DOMAIN_ID: DDS tests in parallel processes see each other.
-DOMAIN = os.getpid() % 100 + 100
+#: ROS_DOMAIN_IDs 100-199 in blocks of this many, one block per test process.
+DOMAINS_PER_PROCESS = 4
+
+
+def _domain_block():
+    """
+    Return the first ROS_DOMAIN_ID of this test process's block (one block per process).
+
+    DDS tests in parallel processes would see each other's nodes on a shared domain.  Under
+    pytest-xdist each worker is a process of its own: the workers of one run take consecutive
+    blocks by their number (``PYTEST_XDIST_WORKER`` gw0, gw1, ...) from a place drawn from the
+    run's id, so two workers of a run never share a domain (a pid-based id did, for pids equal
+    modulo 100).  Without xdist the pid draws the place; another run on the same machine
+    shares a block by chance only (1 in 25 per pair of processes).
+    """
+    blocks = 100 // DOMAINS_PER_PROCESS
+    worker = os.environ.get('PYTEST_XDIST_WORKER', '')
+    run = os.environ.get('PYTEST_XDIST_TESTRUNUID')
+    base = int(run, 16) if run else os.getpid()
+    index = int(worker[2:]) if worker.startswith('gw') and worker[2:].isdigit() else 0
+    return 100 + (base + index) % blocks * DOMAINS_PER_PROCESS
+
+
+#: This test process's own ROS_DOMAIN_ID (the first of its block; :func:`domain` gives the rest).
+DOMAIN = _domain_block()
+
+
+def domain(k):
+    """Return this process's ``k``-th ROS_DOMAIN_ID (0 = :data:`DOMAIN`), for a module's own."""
+    if not 0 <= k < DOMAINS_PER_PROCESS:
+        raise ValueError(f'domain {k}: a test process has {DOMAINS_PER_PROCESS}')
+    return DOMAIN + k
+
+
 EXECUTABLES = ('driver', 'allan', 'denoise', 'analyze', 'discrepancy', 'gx3_sim', 'monitor',
                'fleet')
+
+
+def pytest_configure(config):
+    """
+    Under pytest-xdist, in the controller: compile the numba kernels once while workers collect.
+
+    Without it two workers asking for the same uncached kernel (a fresh install, or a kernel's
+    file changed) both compile it.  numba's cache writes are atomic (temporary file, then
+    rename), so that is safe but wasted; and two processes saving two new type signatures of
+    one function at the same moment can both take the same data file name (numba reads, adds
+    and rewrites the index without a lock).  ``warm_kernels.py`` compiles the package's usual
+    signatures first, in one process (with a warm cache it only loads them: about as long as
+    importing numba, well inside the workers' collection).
+    """
+    if getattr(config.option, 'numprocesses', None) and not hasattr(config, 'workerinput'):
+        config.imu_allan_warm = subprocess.Popen(
+            [sys.executable, str(Path(__file__).with_name('warm_kernels.py'))],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_node_collection_finished(node, ids):
+    """Hand out no test before the kernels are compiled (the controller waits here)."""
+    warm = getattr(node.config, 'imu_allan_warm', None)
+    if warm is not None:
+        warm.wait()
+
+
+def pytest_unconfigure(config):
+    """Never leave the warm-up running (a run stopped before collection ended)."""
+    warm = getattr(config, 'imu_allan_warm', None)
+    if warm is not None and warm.poll() is None:
+        warm.kill()
+        warm.wait()
 
 
 @pytest.fixture(scope='session')

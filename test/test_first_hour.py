@@ -20,6 +20,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 def run(cmd, cwd, timeout=300):
     """Run a shell line the way the README gives it; fail with its output."""
@@ -29,6 +31,7 @@ def run(cmd, cwd, timeout=300):
     return proc.stdout
 
 
+@pytest.mark.slow
 def test_clone_build_source_run(tmp_path):
     """Clone, colcon build, source, then ``ros2 run imu_allan analyze`` on a bag."""
     if not (REPO / '.git').exists() or shutil.which('git') is None:

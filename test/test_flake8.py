@@ -11,6 +11,7 @@ import pytest
 PATHS = ['imu_allan', 'launch', 'test', 'scripts', 'bench', 'setup.py']
 
 
+@pytest.mark.slow
 @pytest.mark.flake8
 @pytest.mark.linter
 def test_flake8():

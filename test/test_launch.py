@@ -20,9 +20,11 @@ import time
 from types import ModuleType, SimpleNamespace
 
 from ament_index_python.packages import get_package_share_directory
-from conftest import executable, ros_env, spin_until
+from conftest import domain, executable, ros_env, spin_until
 import numpy as np
 import pytest
+
+pytestmark = pytest.mark.ros
 
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
@@ -111,7 +113,9 @@ def decode_coeffs(msg):
     assert [(d.label, d.size, d.stride) for d in dims] == [('axis', 6, 90), ('term', 5, 15),
                                                            ('stat', 3, 3)]
     assert msg.layout.data_offset == 0
-    return np.asarray(msg.data).reshape(6, 5, 3)
+    # the 90 numbers the dims describe; each axis's adequacy p follows (6 more)
+    assert len(msg.data) == 96
+    return np.asarray(msg.data[:90]).reshape(6, 5, 3)
 
 
 class Recorded:
@@ -192,7 +196,8 @@ def test_gx3_25_launch_gives_allan_the_drivers_filter_window(monkeypatch):
                  'filter_window_s') == 0.02
 
 
-@pytest.mark.parametrize('ros_node', [(os.getpid() + 53) % 100 + 100], indirect=True)
+@pytest.mark.slow
+@pytest.mark.parametrize('ros_node', [domain(2)], ids=['own_domain'], indirect=True)
 def test_gx3_25_launch_against_the_simulator(launch_stack, ros_node, tmp_path):
     """gx3_sim -> gx3_25.launch.py (driver + allan + denoise) -> imu/allan_coeffs; SIGINT."""
     from std_msgs.msg import Float64MultiArray
@@ -239,7 +244,8 @@ def get_parameters(node, executor, target, names):
         node.destroy_client(client)
 
 
-@pytest.mark.parametrize('ros_node', [(os.getpid() + 71) % 100 + 100], indirect=True)
+@pytest.mark.slow
+@pytest.mark.parametrize('ros_node', [domain(3)], ids=['own_domain'], indirect=True)
 def test_monitor_launch_on_any_imu_topic(launch_stack, ros_node, tmp_path):
     """
     Run monitor.launch.py imu_topic:=/test_imu/data namespace:=mon.

@@ -6,6 +6,8 @@ from pathlib import Path
 from conftest import executable, EXECUTABLES, REPO, run_command
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 def test_package_xml_is_a_valid_ros_manifest():
     # An invalid maintainer email makes colcon silently build a plain Python package without

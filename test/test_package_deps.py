@@ -124,6 +124,7 @@ def rosdep(shared_data):
     return run
 
 
+@pytest.mark.slow
 def test_rosdep_resolves_every_key(rosdep):
     """
     ``rosdep install --simulate`` finds a rule for every key (exit 0, no unknown key).

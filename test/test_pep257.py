@@ -6,6 +6,7 @@ import pytest
 from test_flake8 import PATHS
 
 
+@pytest.mark.slow
 @pytest.mark.linter
 @pytest.mark.pep257
 def test_pep257():

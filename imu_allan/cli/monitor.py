@@ -8,7 +8,9 @@ in conventional units, the health of the IMU stream and the recording advice, wh
 publishes one.  On a terminal the table is redrawn in place; otherwise each new estimate is
 printed as plain lines.  ``--once`` prints one snapshot and exits (status 1, one line on
 stderr, if no coefficients arrive within ``--timeout``); ``--json`` prints the decoded snapshot
-(one JSON object per line without ``--once``).
+(one JSON object per line without ``--once``).  The recording advice is said in words (as
+``analyze``'s summary says it); ``--verbose`` adds the raw ``key=value`` lists of the stream
+and advice statuses, which ``--json`` always carries.
 
 Diagnostic statuses are read generically: every status named ``<node>: ...`` (``--node``,
 default ``allan``) is shown; ``<node>: IMU stream`` and ``<node>: recording advice`` get their
@@ -21,14 +23,16 @@ import os
 import shutil
 import signal
 import sys
+import textwrap
 import threading
 import time
 
 from .common import ArgumentParser, guarded
 from ..core.fit.adequacy import ADEQUACY_LEVEL
 from ..core.health import LEVEL_NAMES
-from ..core.units import AXES, conventional, IEEE_TERMS
+from ..core.units import ALL_TERMS, AXES, conventional, IEEE_TERMS
 from ..errors import InputError
+from ..report.advice import format_duration
 from ..report.coeffs_layout import (
     coefficient_terms,
     decode_adequacy,
@@ -59,6 +63,8 @@ def build_parser():
     p.add_argument('--once', action='store_true',
                    help='print one snapshot once coefficients arrive, then exit')
     p.add_argument('--json', action='store_true', help='print the decoded snapshot as JSON')
+    p.add_argument('--verbose', '-v', action='store_true',
+                   help='also print the raw key=value lists of the stream and advice statuses')
     p.add_argument('--timeout', type=float, default=30.0, metavar='S',
                    help='with --once: exit 1 if no coefficients arrive within S seconds '
                         '(default 30)')
@@ -198,8 +204,106 @@ def _key_values(values, width, indent=15):
     return lines
 
 
-def render(state, topics, width=99):
-    """Return the table as a list of text lines; key-value lists wrapped at ``width`` columns."""
+def _seconds(text):
+    """Return a diagnostic value (text) as a finite float, or None ('nan': no prediction)."""
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        return None
+    return value if math.isfinite(value) else None
+
+
+def _term_words(term):
+    return 'Gauss-Markov' if term == 'gauss_markov' else term.replace('_', ' ')
+
+
+def _split_terms(text):
+    """Split ``'rate_random_walk_rate_ramp'`` into known term names; None if it is not that."""
+    terms = []
+    while text:
+        term = next((t for t in ALL_TERMS if text == t or text.startswith(t + '_')), None)
+        if term is None:
+            return None
+        terms.append(term)
+        text = text[len(term) + 1:]
+    return terms
+
+
+def _axes_text(axes):
+    return 'all axes' if len(axes) == len(AXES) else ', '.join(axes)
+
+
+def advice_words(values):
+    """
+    Return the recording advice's key-values (the allan node's status) as sentences.
+
+    The node sends, per detected term, ``<axis>.<term>.more_s`` (s more to reach the precision
+    target; 0: met; nan: not reachable) and ``.rel_halfwidth``, and per pair of terms the data
+    cannot tell apart yet ``<axis>.<a>_vs_<b>.more_s`` (``maybe_<term>``: the term or none).
+    Said here per term and per alternative, axes grouped, durations rounded for people as in
+    ``analyze``'s summary; keys of any other form are listed as ``key=value``.
+    """
+    terms, alternatives, others = {}, {}, {}
+    for key, text in values.items():
+        axis, _, rest = key.partition('.')
+        what, _, field = rest.rpartition('.')
+        if what.startswith('maybe_'):  # the term or none (several: which of them)
+            options = _split_terms(what[len('maybe_'):])
+            options = options and options + (['none'] if len(options) == 1 else [])
+        else:
+            options = _split_terms(what.replace('_vs_', '_')) if '_vs_' in what else None
+        if key in ('record_more_s', 'recorded_s'):
+            continue
+        if axis in AXES and what in ALL_TERMS and field in ('more_s', 'rel_halfwidth'):
+            terms.setdefault(what, {}).setdefault(axis, {})[field] = _seconds(text)
+        elif axis in AXES and options and field == 'more_s':
+            more = _seconds(text)
+            words = ' or '.join(map(_term_words, options))
+            alternatives.setdefault((more is None, words), []).append((axis, more))
+        else:
+            others[key] = text
+    out = []
+    recorded = _seconds(values.get('recorded_s'))
+    if recorded is not None:
+        out.append(f'Recorded {format_duration(recorded).removeprefix("about ")} so far.')
+    for term, axes in terms.items():
+        rels = [e['rel_halfwidth'] for e in axes.values() if e.get('rel_halfwidth') is not None]
+        spread = f'±{100 * min(rels):.2g} %' + (
+            f' to ±{100 * max(rels):.2g} %' if max(rels) > 1.05 * min(rels) else '')
+        met = [a for a, e in axes.items() if e.get('more_s') == 0]
+        late = [(a, e['more_s']) for a, e in axes.items() if e.get('more_s')]
+        never = [a for a, e in axes.items() if e.get('more_s') is None]
+        parts = [f'target met on {_axes_text(met)}'] if met else []
+        parts += [', '.join(f'{a} {format_duration(m)} more' for a, m in late)] if late else []
+        parts += [f'target out of reach on {_axes_text(never)}'] if never else []
+        out.append(f'{_term_words(term)}' + (f' (known to {spread})' if rels else '')
+                   + f': {"; ".join(parts)}.')
+    later = [f'{words}: ' + ', '.join(f'{a} {format_duration(m)} more' for a, m in entries)
+             for (unknown, words), entries in alternatives.items() if not unknown]
+    if later:
+        out.append('To tell apart: ' + '; '.join(later) + '.')
+    never = [f'{words} ({", ".join(a for a, _ in entries)})'
+             for (unknown, words), entries in alternatives.items() if unknown]
+    if never:
+        out.append('Cannot tell, and no record length within reach will: ' + '; '.join(never)
+                   + '.')
+    return out + [f'{k}={v}' for k, v in others.items()]
+
+
+def _wrapped(sentences, width, indent=9):
+    """Each sentence wrapped to ``width`` columns under the label column."""
+    pad = ' ' * indent
+    return [line for s in sentences
+            for line in textwrap.wrap(s, width, initial_indent=pad, subsequent_indent=pad + '  ')]
+
+
+def render(state, topics, width=99, verbose=False):
+    """
+    Return the table as a list of text lines wrapped at ``width`` columns.
+
+    The recording advice in words (:func:`advice_words`); ``verbose`` adds the raw key-value
+    lists of the stream and advice statuses.
+    """
     now = time.monotonic()
     ago = {k: f'{now - t:.0f} s ago' for k, t in state.arrived.items()}
     lines = [f'imu_allan monitor: node {state.prefix[:-2]} on {topics["coeffs"]}  '
@@ -226,11 +330,13 @@ def render(state, topics, width=99):
         v = stream['values']
         keep = ('rate_hz', 'expected_rate_hz', 'samples_total', 'samples_used', 'gaps_total',
                 'out_of_order_total', 'excluded_share', 'silence_s')
-        lines += _key_values({k: v[k] for k in keep if k in v}, width)
+        lines += _key_values(v if verbose else {k: v[k] for k in keep if k in v}, width)
     advice = state.status('recording advice')
     lines += _status_line('advice', advice)
     if advice is not None:
-        lines += _key_values(advice['values'], width)
+        lines += _wrapped(advice_words(advice['values']), width)
+        if verbose:
+            lines += _key_values(advice['values'], width)
     others = {name[len(state.prefix):]: s for name, s in state.statuses.items()
               if not name.endswith(('IMU stream', 'recording advice'))}
     if others:
@@ -262,10 +368,10 @@ def _emit(out, state, topics, args, tty):
         out.write(json.dumps(state.snapshot(topics), allow_nan=False) + '\n')
     elif tty:  # lines cut at the terminal's width, so a redraw never scrolls
         width = shutil.get_terminal_size((99, 24)).columns
-        lines = [line[:width] for line in render(state, topics, min(width, 99))]
+        lines = [line[:width] for line in render(state, topics, min(width, 99), args.verbose)]
         out.write(REDRAW + '\n'.join(lines) + '\n')
     else:
-        out.write('\n'.join(render(state, topics)) + '\n\n')
+        out.write('\n'.join(render(state, topics, verbose=args.verbose)) + '\n\n')
     out.flush()
 
 

@@ -3,7 +3,7 @@ The change test on a live stream: what the allan node runs (ROS-free).
 
 :class:`ChangeMonitor` feeds header-stamped batches to a
 :class:`~imu_allan.core.dynamic.BlockAllan` (fixed memory: per-block sums, never samples) and
-its completed blocks to a :class:`~imu_allan.core.change_test.ChangeTest`, the same test
+its completed blocks to a :class:`~imu_allan.core.change_detection.ChangeTest`, the same test
 ``analyze --dynamic`` runs on a whole record.  Times are header stamps (s): a change's
 ``t_s`` is the stamp of the first sample of the block where it happened.
 
@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from .change_test import ChangeTest
+from .change_detection import ChangeTest
 from .dynamic import BlockAllan, BLOCKS_PER_WINDOW, layout
 from .health import Health, OK, WARN
 from .units import physical_limits

@@ -31,7 +31,7 @@ user cache folder where ``__pycache__`` is read-only).
 
 import numpy as np
 
-from .sqlite_pages import DIGEST_ROWID, DIGEST_TS  # fixed constants: no stale cache
+from .sqlite_digest import DIGEST_ROWID, DIGEST_TS  # fixed constants: no stale cache
 from ..core.jit import jit, UNCACHED
 
 #: Bytes of the 37 float64 at the end of an Imu, and the first byte of a CDR Imu after its
@@ -132,7 +132,7 @@ def _be_int(u8, pos, st):  # pragma: no cover - compiled
 
 @jit(nogil=True, inline='always')
 def row_digest(stamp, rowid):  # pragma: no cover - compiled
-    # One row's share of a table's digest (as sqlite_pages.row_digests): summed (wrapping)
+    # One row's share of a table's digest (as sqlite_digest.row_digests): summed (wrapping)
     # over its rows in any order, and compared with the same sum over its timestamp index.
     return (np.uint64(stamp) * DIGEST_TS) ^ (np.uint64(rowid) * DIGEST_ROWID)
 
@@ -412,6 +412,6 @@ def mcap_walk(u8, u2, u4, u64, f8, pos, end, role, counts, log_time, off, length
 
 
 #: False where numba found no writable cache folder: compiling the walks (about 5 s) in every
-#: process would cost more than they save, so :func:`.imu_cdr.compiled_walks` declines.
+#: process would cost more than they save, so :func:`.scan_common.compiled_walks` declines.
 CACHED = not ({sqlite_walk.__name__, mcap_walk.__name__, sqlite_index_level.__name__}
               & set(UNCACHED))

@@ -36,20 +36,13 @@ import struct
 
 import numpy as np
 
+from .collector import Collector, damaged_warning
 from .imu_adapter import imu_to_row
-from .imu_cdr import (
-    choose_topic,
-    Collector,
-    damaged_warning,
-    deserialize,
-    IMU_TYPES,
-    MIN_IMU_BYTES,
-    one_line,
-    valid_stamp,
-)
+from .imu_cdr import deserialize, IMU_TYPES, MIN_IMU_BYTES, valid_stamp
 from .mcap_scan import MCAP_MAGIC, McapScan
 from .ros1_scan import read_ros1_scan, ROS1_MAGIC, Ros1Scan
 from .samples import Samples
+from .scan_common import choose_topic, one_line
 from .sqlite_pages import SQLITE_MAGIC, SqlitePages, Unsupported
 from ..core.units import AXES
 from ..errors import InputError

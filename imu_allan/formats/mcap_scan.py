@@ -23,16 +23,9 @@ except ImportError:
 
 import numpy as np
 
-from .imu_cdr import (
-    Collector,
-    compiled_walks,
-    deserialize,
-    IMU_TYPES,
-    map_file,
-    MIN_IMU_BYTES,
-    one_line,
-    Passed,
-)
+from .collector import Collector
+from .imu_cdr import deserialize, IMU_TYPES, MIN_IMU_BYTES
+from .scan_common import compiled_walks, map_file, one_line, Passed
 from ..errors import InputError
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
@@ -334,7 +327,7 @@ class McapScan:
 
     def _load_kernel(self):
         """
-        Load the compiled walk (:func:`.imu_cdr.compiled_walks`), if it is used for this file.
+        Load the compiled walk (:func:`.scan_common.compiled_walks`), if it is used for this file.
 
         Importing numba holds the GIL for 0.3-0.5 s and leaves the other core idle; when the
         summary names the one topic to read, its arrays are written to meanwhile on a thread

@@ -13,17 +13,10 @@ import struct
 
 import numpy as np
 
-from .imu_cdr import (
-    choose_topic,
-    Collector,
-    deserialize,
-    IMU_TYPES,
-    map_file,
-    MIN_IMU_BYTES,
-    one_line,
-    Passed,
-)
+from .collector import Collector
+from .imu_cdr import deserialize, IMU_TYPES, MIN_IMU_BYTES
 from .mcap_scan import lz4_decompress
+from .scan_common import choose_topic, map_file, one_line, Passed
 from ..errors import InputError
 
 ROS1_MAGIC = b'#ROSBAG V2.0\n'

@@ -22,7 +22,9 @@ import threading
 
 import numpy as np
 
-from .imu_cdr import compiled_walks, decode_at, map_file, release
+from .imu_cdr import decode_at
+from .scan_common import compiled_walks, map_file, release
+from .sqlite_digest import row_digests
 from ..errors import InputError
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
@@ -38,27 +40,6 @@ _INTEGER_SERIAL = np.isin(np.arange(256), [1, 2, 3, 4, 5, 6, 8, 9])
 SMALL_TABLE_PAGES = 256
 _PAGE_BATCH = 512  # leaf pages decoded per numpy batch (bounds the index arrays' memory)
 _INDEX_CHUNK = 1024  # index pages copied (:meth:`SqlitePages._pages_copy`) and walked at a time
-
-
-#: Multipliers of the row digest (:func:`row_digests`): odd 64-bit constants (the golden
-#: ratio's and a MurmurHash3 finaliser's) that spread the bits of timestamp and rowid.  Also
-#: used by the compiled walk (:mod:`.bag_kernels`): never change them (its disk cache would
-#: keep the old ones).
-DIGEST_TS = np.uint64(0x9E3779B97F4A7C15)
-DIGEST_ROWID = np.uint64(0xC2B2AE3D27D4EB4F)
-
-
-def row_digests(stamp, rowid):
-    """
-    Return the digest of rows (timestamp, rowid): the wrapping sum of their mixed bits.
-
-    Independent of the order of the rows, so the table's rows (walked in rowid order) and the
-    entries of its ``(timestamp)`` index (walked level by level) give the same digest exactly
-    when they hold the same pairs (up to a collision, about 2^-64 per damaged pair).
-    """
-    ts = np.asarray(stamp, dtype=np.int64).view(np.uint64)
-    rid = np.asarray(rowid, dtype=np.int64).view(np.uint64)
-    return np.bitwise_xor(ts * DIGEST_TS, rid * DIGEST_ROWID).sum(dtype=np.uint64)
 
 
 #: Leaf pages (about 12 Imu messages each at 4 KiB) from which the compiled walk reads a file

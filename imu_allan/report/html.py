@@ -35,7 +35,8 @@ from ..core.units import conventional, si_unit
 
 TEMPLATES = Path(__file__).with_name('templates')
 STYLE = 'style.css'
-#: Sections of the analysis page, in the order shown (id, title) for the navigation bar.
+#: The symbol of each noise term beside its name in the coefficient tables (IEEE Std 952 letters
+#: where they exist), in the order the discrepancy page lists the terms.
 TERM_LETTERS = {'quantization': 'Q', 'white_noise': 'N', 'bias_instability': 'B',
                 'rate_random_walk': 'K', 'rate_ramp': 'R', 'gauss_markov': 'GM',
                 'sinusoid': 'sin'}

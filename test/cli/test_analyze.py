@@ -10,6 +10,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 @pytest.fixture(scope='module')
 def sim_csv(tmp_path_factory):
@@ -21,6 +23,7 @@ def sim_csv(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_json_report_follows_the_contract(sim_csv):
     proc = run_command('analyze', sim_csv, '--json', '--target', 'bias_instability=0.05')
     assert proc.returncode == 0, proc.stderr
@@ -139,6 +142,7 @@ def test_tau_max_longer_than_record_is_refused(sim_csv):
     assert 'too short for averaging times up to 5000' in proc.stderr
 
 
+@pytest.mark.slow
 def test_out_dir_has_every_report_file_and_nothing_half_written(sim_csv, tmp_path):
     out = tmp_path / 'report'
     proc = run_command('analyze', sim_csv, '--out', out, '--quiet')
@@ -202,6 +206,7 @@ def _stderr_on_a_terminal(*args):
     return seen.decode(errors='replace')
 
 
+@pytest.mark.slow
 def test_progress_bar_only_on_a_terminal(sim_csv):
     bar = _stderr_on_a_terminal(sim_csv)
     assert '[' in bar and '#' in bar and 'reading' in bar

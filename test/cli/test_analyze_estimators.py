@@ -9,6 +9,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 @pytest.fixture(scope='module')
 def short_csv(tmp_path_factory):
@@ -20,6 +22,7 @@ def short_csv(tmp_path_factory):
     return path, data
 
 
+@pytest.mark.slow
 def test_estimators_in_report_and_plots(short_csv, tmp_path):
     path, data = short_csv
     out = tmp_path / 'out'
@@ -54,6 +57,7 @@ def test_unknown_estimator_is_one_line_exit_2(short_csv):
     assert len(lines) == 1 and 'foodev' in lines[0] and '--estimators' in lines[0]
 
 
+@pytest.mark.slow
 def test_ohdev_decides_a_walk_against_a_ramp(tmp_path):
     """
     ``--estimators ohdev``: the Hadamard curve rejects a rate random walk the Allan fit left open.

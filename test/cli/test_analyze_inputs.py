@@ -16,6 +16,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 # Static 6-axis model, 40 min at 100 Hz: long enough for white noise and bias instability.
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.8e-4, 'bias_instability': 1.5e-4},
                               'accel': {'white_noise': 8.3e-4, 'bias_instability': 7e-4}})
@@ -42,6 +44,7 @@ def recordings(tmp_path_factory):
     return paths
 
 
+@pytest.mark.slow
 def test_same_report_from_mcap_sqlite3_ros1_and_csv(recordings):
     reports = {k: _json(p) for k, p in recordings.items()}
     ref = reports['csv']
@@ -61,6 +64,7 @@ def test_same_report_from_mcap_sqlite3_ros1_and_csv(recordings):
         assert abs(b['value'] - MODEL.value(axis, 'bias_instability')) < 3 * half, axis
 
 
+@pytest.mark.slow
 def test_real_bags_three_forms_agree_and_robot_was_moving(shared_data):
     bags = shared_data / 'bags'
     reports = [_json(bags / 'test2.bag'), _json(bags / 'jackal_test2_sqlite3'),
@@ -76,6 +80,7 @@ def test_real_bags_three_forms_agree_and_robot_was_moving(shared_data):
     assert husky['n_samples'] == 11865 and husky['verdict']['static'] is False
 
 
+@pytest.mark.slow
 def test_several_inputs_in_parallel_with_one_summary(recordings, tmp_path):
     bad = tmp_path / 'broken.mcap'
     bad.write_bytes(b'\x89MCAP0\r\n' + b'\x00' * 50)
@@ -89,6 +94,7 @@ def test_several_inputs_in_parallel_with_one_summary(recordings, tmp_path):
     assert proc.returncode == 0 and len(out['reports']) == 2 and out['errors'] == []
 
 
+@pytest.mark.slow
 def test_export_samples_round_trip(recordings, tmp_path):
     exported = tmp_path / 'samples.csv'
     first = _json(recordings['ros1'], '--export-samples', exported)
@@ -99,6 +105,7 @@ def test_export_samples_round_trip(recordings, tmp_path):
                                first['axes']['accel_z']['adev']['adev'], rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_denoise_writes_a_bag_with_the_denoised_topic(recordings, tmp_path):
     from rosbags.highlevel import AnyReader
     out = tmp_path / 'den'

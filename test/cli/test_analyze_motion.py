@@ -10,12 +10,16 @@ it, the Kalibr values come back.
 import json
 
 from conftest import run_command
+import pytest
+
+pytestmark = pytest.mark.ros
 
 
 def _bag(shared_data):
     return shared_data / 'bags' / 'test2.bag'
 
 
+@pytest.mark.slow
 def test_moving_record_is_not_a_noise_measurement(shared_data, tmp_path):
     proc = run_command('analyze', _bag(shared_data), '--out', tmp_path / 'out')
     assert proc.returncode == 0, proc.stderr

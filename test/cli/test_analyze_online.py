@@ -17,8 +17,12 @@ from imu_allan.formats.samples import Samples
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
 from imu_allan.report.coeffs_layout import coefficient_table
 import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
 
 
+@pytest.mark.slow
 def test_analyze_online_equals_the_node_pipeline(tmp_path):
     n = 100 * 1200
     data = simulate(thesis_gx3_25_model(), n, 100.0, seed=31)

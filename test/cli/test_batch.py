@@ -27,6 +27,8 @@ from imu_allan.history.rows import measurement_rows
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.8e-4, 'bias_instability': 1.5e-4},
                               'accel': {'white_noise': 8.3e-4, 'bias_instability': 7e-4}})
 RATE, N = 50.0, 3000  # one minute at 50 Hz
@@ -124,6 +126,7 @@ def test_scan_finds_every_bag_and_no_csv(bag_folder):
     assert not any(p.endswith('.csv') for p in inputs)
 
 
+@pytest.mark.slow
 def test_cluster_run_equals_serial_then_skips_then_survives_a_dead_worker(
         bag_folder, cluster, tmp_path):
     address, workers = cluster
@@ -195,6 +198,7 @@ def test_cluster_run_equals_serial_then_skips_then_survives_a_dead_worker(
                                    rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_without_dask_and_duckdb_one_input_works_and_the_options_say_what_to_install(
         bag_folder, tmp_path):
     """dask, distributed and duckdb shadowed by packages that fail to import (as if absent)."""

@@ -13,6 +13,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 RATE = 100.0
 MINUTES = 20.0
 BASE = {'white_noise': {'value': 1e-3}, 'bias_instability': {'value': 3e-4}}
@@ -45,6 +47,7 @@ def test_help_exits_zero():
     assert '--model' in proc.stdout and '--terms' in proc.stdout and '--json' in proc.stdout
 
 
+@pytest.mark.slow
 def test_json_follows_the_contract(json_run):
     assert json_run.returncode == 0, json_run.stderr
     report = json.loads(json_run.stdout)  # --json: the report and nothing else on stdout
@@ -70,6 +73,7 @@ def test_json_follows_the_contract(json_run):
     assert report['gap']['gyro_y']['final'] < report['gap']['gyro_y']['threshold']
 
 
+@pytest.mark.slow
 def test_out_dir_has_report_model_and_plots(recording, json_run, tmp_path):
     path, _ = recording
     out = tmp_path / 'out'
@@ -88,6 +92,7 @@ def test_out_dir_has_report_model_and_plots(recording, json_run, tmp_path):
         assert head == b'\x89PNG\r\n\x1a\n', name
 
 
+@pytest.mark.slow
 def test_model_file_start(recording, tmp_path):
     """Starting from the (exact) two-term model file, the missing RRW is still found."""
     path, _ = recording
@@ -140,6 +145,7 @@ def test_gap_summary_for_the_online_hook(recording):
     assert 0.3 < summary['gyro_y']['gap'] < 1.6
 
 
+@pytest.mark.slow
 def test_real_moving_robot_bag(shared_data, tmp_path):
     """A real (moving, so not static) Jackal bag: the command runs and reports every axis."""
     bag = shared_data / 'bags' / 'jackal_test2_mcap'

@@ -16,6 +16,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 RATE = 100.0
 N = 15 * 60 * 100
 AXES = ('gyro_x', 'gyro_y')
@@ -35,6 +37,7 @@ def files(tmp_path_factory):
     return csv, sdf, folder
 
 
+@pytest.mark.slow
 def test_sdf_model_names_the_effect_and_corrected_sdf_closes_the_gap(files):
     """
     The random walk is named on gyro_x; corrected.sdf, run again, starts with a smaller gap.

@@ -21,6 +21,8 @@ from imu_allan.report.json_report import analysis_to_json
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 GYRO_N, ACCEL_N = 5.8e-4, 8.3e-4
 RATE, N = 50.0, 3000  # one minute at 50 Hz: N to about +-1.3 % (68.3 %)
 IMUS, WEEKS, WORSE, RISE = 5, 12, 3, 1.3  # robot3's white noise +30 % in the last 3 weeks
@@ -70,6 +72,7 @@ def test_history_has_every_record_once(fleet_db):
     assert first == datetime(2026, 1, 5)
 
 
+@pytest.mark.slow
 def test_exactly_the_degrading_imu_is_flagged(fleet_db, tmp_path):
     """
     robot3's N rose 30 % (about 20 of its interval half-widths): flagged; nobody else.
@@ -106,6 +109,7 @@ def test_exactly_the_degrading_imu_is_flagged(fleet_db, tmp_path):
                for ln in lines)
 
 
+@pytest.mark.slow
 def test_since_and_bad_input(fleet_db, tmp_path):
     proc = run_command('fleet', fleet_db, '--out', tmp_path, '--json', '--since', '2026-02-02')
     assert proc.returncode == 0, proc.stderr

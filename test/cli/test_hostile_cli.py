@@ -17,6 +17,8 @@ from imu_allan.formats.samples import Samples
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 
 def _one_clean_line(proc, *needles):
     assert proc.returncode == 2, (proc.stdout, proc.stderr)

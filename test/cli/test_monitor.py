@@ -7,7 +7,9 @@ The built ``monitor`` command over real DDS: JSON snapshot, terminal redraw, tim
   two different estimates that this process publishes in turn; with stdout a pipe the same run
   prints plain lines (no escape sequences);
 * ``--once --timeout 1`` with nothing running exits 1 with one line on stderr naming the topic
-  as resolved with ``--namespace`` or a ``--ros-args`` remapping; a bad argument exits 2.
+  as resolved with ``--namespace`` or a ``--ros-args`` remapping; a bad argument exits 2;
+* without ROS: the recording advice the node sends as key-values is said in words, and the
+  key-values come back with ``--verbose``.
 
 About 60 s in all on the 2-core test machine (node and monitor start-up dominate).
 """
@@ -20,9 +22,11 @@ import signal
 import subprocess
 import threading
 import time
+from types import SimpleNamespace
 
 from conftest import DOMAIN, executable, ros_env, run_command
-from imu_allan.cli.monitor import format_interval, REDRAW
+from imu_allan.cli.monitor import advice_words, format_interval, MonitorState, REDRAW, render
+from imu_allan.core.advisor import Advice, advice_health, TermAdvice, Unresolved
 from imu_allan.core.units import AXES, conventional, IEEE_TERMS
 from imu_allan.nodes.allan import multiarray
 from imu_allan.report.coeffs_layout import COEFF_LABELS, decode_coefficients
@@ -33,6 +37,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 
+@pytest.mark.ros
 def test_once_json_equals_a_direct_subscriber(ros_context):
     """The snapshot's SI values and intervals are the node's numbers, bit for bit."""
     from std_msgs.msg import Float64MultiArray
@@ -101,6 +106,7 @@ def _threads(pid):
     return out
 
 
+@pytest.mark.ros
 def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_path):
     """Two estimates in turn: redrawn in place on a pty; plain lines on a pipe; Ctrl-C exits 0."""
     from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -175,6 +181,7 @@ def test_terminal_redraws_in_place_and_pipe_gets_plain_lines(ros_context, tmp_pa
     assert '\x1b' not in plain and texts[0] in plain and texts[1] in plain
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('args, topic', [
     ((), '/imu/allan_coeffs'),
     (('--namespace', 'robot1'), '/robot1/imu/allan_coeffs'),
@@ -191,7 +198,63 @@ def test_once_times_out_with_one_line(args, topic):
     assert len(lines) == 1 and f' {topic} ' in lines[0], proc.stderr
 
 
+@pytest.mark.ros
 def test_bad_argument_one_line_exit_2():
     proc = run_command('monitor', '--once', '--timeout', '0', timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.count('\n') == 1 and '--timeout' in proc.stderr
+
+
+def _advice_values():
+    """
+    Return the key-values of an allan node's advice status as nodes/common.py sends them.
+
+    Written here term by term: white noise met on gyro_x; bias instability 700 s short on
+    gyro_x and out of reach on gyro_y; a pair that 3158 s more would tell apart, a single term
+    and a set of three that no record length within reach tells.
+    """
+    advice = Advice(targets={'white_noise': 0.02, 'bias_instability': 0.05}, duration_s=600.0)
+    advice.axes = {
+        'gyro_x': {'white_noise': TermAdvice(0.003, 0.0),
+                   'bias_instability': TermAdvice(0.15, 700.0)},
+        'gyro_y': {'bias_instability': TermAdvice(0.4, None, 'beyond the longest tau')}}
+    advice.unresolved = [
+        Unresolved('gyro_y', ('gauss_markov', 'bias_instability'), 3158.0),
+        Unresolved('gyro_z', ('quantization',), None, 'too short'),
+        Unresolved('accel_x', ('rate_random_walk', 'rate_ramp', 'gauss_markov'), None)]
+    values = advice_health(advice).values
+    return {k: f'{v:.6g}' if isinstance(v, float) else str(v) for k, v in values.items()}
+
+
+def test_advice_in_words():
+    """Every key the node sends is said in words: no raw key, no 'nan', durations for people."""
+    values = _advice_values()
+    assert 'gyro_z.maybe_quantization.more_s' in values  # the form the issue saw raw
+    words = advice_words(values)
+    assert words == [
+        'Recorded 10 min so far.',
+        'white noise (known to ±0.3 %): target met on gyro_x.',
+        'bias instability (known to ±15 % to ±40 %): gyro_x about 12 min more; target out of '
+        'reach on gyro_y.',
+        'To tell apart: Gauss-Markov or bias instability: gyro_y about 53 min more.',
+        'Cannot tell, and no record length within reach will: quantization or none (gyro_z); '
+        'rate random walk or rate ramp or Gauss-Markov (accel_x).']
+
+
+def test_render_says_advice_in_words_and_verbose_keeps_key_values():
+    """The table's advice block is words; ``--verbose`` adds the node's key=value list."""
+    state = MonitorState()
+    values = [SimpleNamespace(key=k, value=v) for k, v in _advice_values().items()]
+    values.append(SimpleNamespace(key='gyro_x.bias_instability_more_s', value='5400'))
+    state.on_diagnostics(SimpleNamespace(status=[SimpleNamespace(
+        name='allan: recording advice', level=b'\x01', message='record about 1 h more',
+        values=values)]))
+    topics = {'coeffs': '/imu/allan_coeffs'}
+    plain = '\n'.join(render(state, topics))
+    assert 'advice   WARN  record about 1 h more' in plain
+    assert 'gyro_x about 12 min more' in plain
+    assert '.more_s=' not in plain and 'nan' not in plain
+    assert 'gyro_x.bias_instability_more_s=5400' in plain  # a key of no known form: kept raw
+    verbose = render(state, topics, verbose=True)
+    assert 'gyro_z.maybe_quantization.more_s=nan' in '\n'.join(verbose)
+    assert all(len(line) <= 99 for line in verbose)

@@ -115,6 +115,7 @@ def _module_copy(tmp_path):
     return folder
 
 
+@pytest.mark.slow
 def test_second_process_compiles_nothing(tmp_path):
     """
     A second process compiles nothing.
@@ -137,6 +138,7 @@ def test_second_process_compiles_nothing(tmp_path):
     assert 'Allan kernel' not in first.stderr     # the user chose the folder: nothing to say
 
 
+@pytest.mark.slow
 def test_read_only_install_caches_in_user_folder_and_says_so(tmp_path):
     """
     A read-only install caches the kernel in the user cache folder.
@@ -167,6 +169,7 @@ print(r.n, float(r.data.sum()))
 """
 
 
+@pytest.mark.slow
 def test_sqlite_walk_second_process_compiles_nothing(tmp_path):
     """
     The compiled sqlite3 page walk (imu_allan.formats.bag_kernels) is compiled once too.
@@ -222,6 +225,7 @@ print(report.counts, preprocess.quartiles(data).tolist())
 """
 
 
+@pytest.mark.slow
 def test_quantile_kernels_second_process_compile_nothing(tmp_path):
     """
     The compiled order statistics (imu_allan.core.quantile_kernel) are compiled once too.

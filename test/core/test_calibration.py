@@ -30,6 +30,7 @@ def _se(p, n):
     return math.sqrt(p * (1.0 - p) / n)
 
 
+@pytest.mark.slow
 def test_selection_and_alternatives(outcome):
     """
     Selected = truth on >= 85 % of axes, truth selected or an alternative on >= 97 %.

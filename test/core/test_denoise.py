@@ -92,6 +92,7 @@ def test_sure_threshold_and_options():
         denoise(x, wavelet='sym99')
 
 
+@pytest.mark.slow
 def test_sym8_12_levels_drop_white_noise_tenfold_keep_long_tau():
     """
     Thesis settings on simulated 3DM-GX3-25 data: white-noise ADEV down >= 10x, long tau kept.

@@ -33,6 +33,7 @@ def null_runs():
     return model, curves
 
 
+@pytest.mark.slow
 def test_gap_is_about_one_for_the_true_model(null_runs):
     """
     Under the true model E[gap^2] = 1 by construction; check it on 120 curves.

@@ -47,6 +47,7 @@ def null_records():
     return null_suite()
 
 
+@pytest.mark.slow
 def test_names_the_hidden_effect(effect_records):
     stats = summarize(effect_records)
     assert stats['n_effect'] == 140
@@ -79,6 +80,7 @@ def test_gap_goes_from_inconsistent_to_consistent(effect_records):
     assert ratios[len(ratios) // 2] >= 2.0
 
 
+@pytest.mark.slow
 def test_no_effect_adds_nothing(effect_records, null_records):
     nulls = [r for r in effect_records if not r['truth']] + null_records
     stats = summarize(nulls)

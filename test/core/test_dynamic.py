@@ -2,7 +2,7 @@
 
 import math
 
-from imu_allan.core.change_test import ChangeTest, detect_changes
+from imu_allan.core.change_detection import ChangeTest, detect_changes
 from imu_allan.core.dynamic import (
     _level_of,
     BlockAllan,
@@ -95,6 +95,7 @@ def _two_axes(kind, seed, hours=1.5, freq=10.0):
     return y, tc / RATE
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('kind,ratio,freq', [
     ('white_noise', (1.35, 1.65), None),
     ('bias_instability', (1.4, 3.5), None),
@@ -133,6 +134,7 @@ def test_level_step_is_named_level():
     assert abs(found[0].extra['step'] - 0.01) < 0.003
 
 
+@pytest.mark.slow
 def test_static_records_give_no_change_at_the_target_rate():
     """
     Static thesis model with a rate random walk: 6 axes x 24 h at 10 Hz = 6 axis-days.
@@ -165,6 +167,7 @@ def test_stream_test_equals_record_test():
         assert a.ratio == pytest.approx(b.ratio, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_short_default_window_gives_no_false_alarm():
     """
     The thesis model (flicker-dominated), six 1-h records at 100 Hz, default window (150 s).

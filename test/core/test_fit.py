@@ -31,6 +31,7 @@ def _round_trip(model, seed):
     return fit_noise_model(allan_deviation(data, 100.0))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('name,model,seed', [('thesis', thesis_gx3_25_model(), 21),
                                              ('adis16448', ADIS, 22)])
 def test_round_trip_six_axes_two_hours(name, model, seed):
@@ -65,6 +66,7 @@ def test_round_trip_six_axes_two_hours(name, model, seed):
     assert inside >= total / 3, f'{name}: only {inside} of {total} inside their 68.3 % intervals'
 
 
+@pytest.mark.slow
 def test_interval_coverage_over_50_seeds():
     """
     Share of 68.3 % intervals that contain the truth: 55-80 % for N, B and K.

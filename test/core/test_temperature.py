@@ -49,6 +49,7 @@ def test_refusals():
     assert bias_slopes(t, data, 100.0, ('gyro_x',), [5], [25], replicas=5)[0] == {}
 
 
+@pytest.mark.slow
 def test_slope_intervals_cover_the_truth():
     """
     Simulated 3DM-GX3-25 noise (white + flicker) plus known slopes on a temperature ramp.

@@ -187,6 +187,7 @@ def same_message(expected, got):
             and expected[:pad.start] + got[pad] + expected[pad.stop:] == got)
 
 
+@pytest.mark.ros
 def test_cdr_packer_matches_rclpy_serializer():
     """Patched CDR bytes deserialize to the values; identical to rclpy's own bytes."""
     pytest.importorskip('rclpy')

@@ -56,6 +56,7 @@ def _container_saw_damage(storage, path, got):
     return False   # ROS 1: no checksums (the integrity note says so)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
 @PROPERTY
 @given(flips=st.lists(st.tuples(st.floats(0, 1, exclude_max=True), st.integers(0, 7)),

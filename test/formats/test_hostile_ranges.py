@@ -12,7 +12,7 @@ never an exception.  Both the numpy and the compiled (numba) walk are run.
 import struct
 
 from conftest import run_command
-from imu_allan.formats import imu_cdr, mcap_scan
+from imu_allan.formats import collector, imu_cdr, mcap_scan, scan_common
 from imu_allan.formats.bag_reader import read_bag
 from imu_allan.formats.bag_writer import fix_mcap_chunk_crcs, write_imu_bag
 from imu_allan.formats.samples import Samples
@@ -80,7 +80,7 @@ def test_mcap_log_time_beyond_int64_is_a_counted_damaged_record(tmp_path, bag, w
     """Seeded positions (a lone record, a run, the first and last): skipped and counted."""
     raw, ref, offsets = bag
     if walk == 'compiled':
-        if imu_cdr.compiled_walks(True) is None:
+        if scan_common.compiled_walks(True) is None:
             pytest.skip('numba walk not available')
         monkeypatch.setattr(mcap_scan, 'COMPILED_MIN_BYTES', 0)
     rng = np.random.default_rng(26)
@@ -93,31 +93,32 @@ def test_mcap_log_time_beyond_int64_is_a_counted_damaged_record(tmp_path, bag, w
         got = read_bag(_damage(tmp_path, raw, offsets[idx], values))
         keep = np.setdiff1d(np.arange(N), idx)
         assert np.array_equal(got.t, ref.t[keep]) and np.array_equal(got.data, ref.data[keep])
-        assert imu_cdr.bad_time_warning(idx.size) in got.warnings, (k, got.warnings)
+        assert collector.bad_time_warning(idx.size) in got.warnings, (k, got.warnings)
 
 
 def test_mcap_log_time_at_the_int64_edge_is_kept(tmp_path, bag):
     """2^63 - 1 is still a time (the record sorts last); 2^63 is not."""
     raw, ref, offsets = bag
-    got = read_bag(_damage(tmp_path, raw, offsets[[5]], [imu_cdr.INT64_MAX]))
+    got = read_bag(_damage(tmp_path, raw, offsets[[5]], [collector.INT64_MAX]))
     assert got.n == N and not any('out of range' in w for w in got.warnings)
     assert got.t[-1] == ref.t[5]
-    got = read_bag(_damage(tmp_path, raw, offsets[[5]], [imu_cdr.INT64_MAX + 1]))
-    assert got.n == N - 1 and imu_cdr.bad_time_warning(1) in got.warnings
+    got = read_bag(_damage(tmp_path, raw, offsets[[5]], [collector.INT64_MAX + 1]))
+    assert got.n == N - 1 and collector.bad_time_warning(1) in got.warnings
 
 
 def test_collector_receive_times_from_sql_rows_checked():
     """The SQL fallback's rows: a None, a float or a 2^63 receive time is a damaged record."""
     rows, stamps = imu_cdr.encode_imu(np.arange(6) / 100.0, np.zeros((6, 6)))
-    coll = imu_cdr.Collector(False, imu_cdr.deserialize)
+    coll = collector.Collector(False, imu_cdr.deserialize)
     times = stamps.tolist()
     times[1], times[3], times[4] = None, 1 << 63, 2.5
     coll.add_blobs(times, [r.tobytes() for r in rows])
     t, _ = coll.result()
     assert np.array_equal(t, np.array([0, 2, 5]) / 100.0)
-    assert coll.warnings() == [imu_cdr.bad_time_warning(3)]
+    assert coll.warnings() == [collector.bad_time_warning(3)]
 
 
+@pytest.mark.ros
 def test_analyze_of_a_bag_with_an_out_of_range_log_time(tmp_path, bag):
     """The issue's case end to end: exit 0, the warning in the JSON, no traceback."""
     import json
@@ -125,4 +126,4 @@ def test_analyze_of_a_bag_with_an_out_of_range_log_time(tmp_path, bag):
     path = _damage(tmp_path, raw, offsets[[1234]], [(1 << 64) - 1])
     proc = run_command('analyze', path, '--json', timeout=300)
     assert proc.returncode == 0 and 'Traceback' not in proc.stderr, proc.stderr
-    assert imu_cdr.bad_time_warning(1) in json.loads(proc.stdout)['verdict']['warnings']
+    assert collector.bad_time_warning(1) in json.loads(proc.stdout)['verdict']['warnings']

@@ -26,9 +26,10 @@ warning (or, where the schema no longer leads to the rows, one clean line).
 import sqlite3
 
 from imu_allan.errors import InputError
-from imu_allan.formats import imu_cdr, sqlite_pages
+from imu_allan.formats import imu_cdr, scan_common, sqlite_pages
 from imu_allan.formats.bag_reader import read_bag
 from imu_allan.formats.bag_writer import write_imu_bag
+from imu_allan.formats.collector import Collector
 from imu_allan.formats.samples import Samples
 from imu_allan.formats.sqlite_pages import SqlitePages
 import numpy as np
@@ -83,7 +84,7 @@ def test_intact_bag_rows_match_the_index(bag, tmp_path):
     try:
         roots = pages.schema()
         assert pages.indexes.get('timestamp_idx', ('', 0))[0] == 'messages'
-        coll = imu_cdr.Collector(False, imu_cdr.deserialize)
+        coll = Collector(False, imu_cdr.deserialize)
         pages.read_messages(roots['messages'], [1], coll)
         assert int(pages.digest[1]) == N and pages.index_problem() == ''
     finally:
@@ -95,7 +96,7 @@ def test_damage_sqlite_can_see_is_reported(bag, tmp_path, walk, monkeypatch):
     """Seeded flips: integrity_check damage and changed samples always come with a warning."""
     raw, ref = bag
     if walk == 'compiled':
-        if imu_cdr.compiled_walks(True) is None:
+        if scan_common.compiled_walks(True) is None:
             pytest.skip('numba walk not available')
         monkeypatch.setattr(sqlite_pages, 'COMPILED_MIN_PAGES', 0)
     counts = {'same': 0, 'warned': 0, 'refused': 0, 'unseen': 0}
@@ -125,7 +126,7 @@ def test_damage_sqlite_can_see_is_reported(bag, tmp_path, walk, monkeypatch):
 
 def test_compiled_index_digest_equals_the_numpy_one(bag, tmp_path, monkeypatch):
     """The compiled level walk gives the numpy digest (or the same None) on intact and damaged."""
-    if imu_cdr.compiled_walks(True) is None:
+    if scan_common.compiled_walks(True) is None:
         pytest.skip('numba walk not available')
     raw, _ = bag
     for seed in range(-1, 30):
@@ -148,7 +149,7 @@ def test_compiled_index_digest_equals_the_numpy_one(bag, tmp_path, monkeypatch):
 
 def _walk(walk, monkeypatch):
     if walk == 'compiled':
-        if imu_cdr.compiled_walks(True) is None:
+        if scan_common.compiled_walks(True) is None:
             pytest.skip('numba walk not available')
         monkeypatch.setattr(sqlite_pages, 'COMPILED_MIN_PAGES', 0)
     else:

@@ -1,8 +1,9 @@
 """The one Imu message -> numpy adapter, with rclpy and rosbags messages, and the bulk codecs."""
 
+from imu_allan.formats.collector import Collector
 from imu_allan.formats.imu_adapter import imu_to_row, imus_to_arrays
-from imu_allan.formats.imu_cdr import Collector, deserialize, encode_imu, frame_id_of
 from imu_allan.formats.imu_cdr import decode_rows as _decode_rows
+from imu_allan.formats.imu_cdr import deserialize, encode_imu, frame_id_of
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
@@ -37,6 +38,7 @@ def test_rosbags_message_to_row():
     assert data[1].tolist() == row.tolist()
 
 
+@pytest.mark.ros
 def test_rclpy_message_same_numbers_as_rosbags():
     """An rclpy Imu and the same bytes decoded by rosbags and by the bulk decoder agree."""
     sensor_msgs = pytest.importorskip('sensor_msgs.msg', reason='rclpy Jazzy wheels missing')
@@ -85,6 +87,7 @@ def test_bulk_decoder_rejects_big_endian_cdr():
     assert not ok[0]
 
 
+@pytest.mark.ros
 def test_cdr_to_arrays_equals_the_message_adapter_on_rclpy_bytes():
     """Bulk decoding of raw bytes (the allan node's intake) equals the per-message adapter."""
     from imu_allan.formats.imu_adapter import imus_to_arrays
@@ -107,6 +110,7 @@ def test_cdr_to_arrays_equals_the_message_adapter_on_rclpy_bytes():
     np.testing.assert_array_equal(d, d_ref)
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('frame', ['imu_link', '', 'base_imu_frame_0'])
 def test_cdr_to_arrays_one_frame_batch_equals_the_adapter(frame):
     """
@@ -155,6 +159,7 @@ def test_cdr_to_arrays_one_frame_batch_equals_the_adapter(frame):
     np.testing.assert_array_equal(d, d_rows)
 
 
+@pytest.mark.ros
 def test_covariance_diagonals_patched_in_bytes_as_rclpy_reads_them():
     """
     set_covariance_diagonals: rclpy deserializes exactly the intended messages.

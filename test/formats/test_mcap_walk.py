@@ -222,11 +222,11 @@ def test_chunk_checks_run_ahead_and_find_the_same_damage(tmp_path, monkeypatch):
 
 _FRESH = """
 import json, sys
-from imu_allan.formats import imu_cdr, mcap_scan
+from imu_allan.formats import collector, mcap_scan
 from imu_allan.formats.bag_reader import read_bag
 calls = []
-prefault = imu_cdr.Collector.prefault
-imu_cdr.Collector.prefault = lambda self: calls.append(len(self._t)) or prefault(self)
+prefault = collector.Collector.prefault
+collector.Collector.prefault = lambda self: calls.append(len(self._t)) or prefault(self)
 mcap_scan.COMPILED_MIN_BYTES = 0
 assert 'numba' not in sys.modules
 r = read_bag(sys.argv[1])

@@ -15,6 +15,8 @@ from nodes.allan_feed import AllanFeed, imu_messages, MODEL, RATE, status_values
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 N = 24000
@@ -38,6 +40,7 @@ def _change_status(array, axis):
     return None
 
 
+@pytest.mark.slow
 def test_allan_node_reports_a_change_and_resets(ros_context):
     """WARN on gyro_x with the stamp, OK elsewhere; a change_reset set clears it."""
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue

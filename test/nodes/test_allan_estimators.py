@@ -25,12 +25,15 @@ from nodes.allan_feed import AllanFeed, RATE
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 N = 6000
 PARAMS = ('estimators:=oadev,mdev,ohdev', 'gate:=false', 'stride_base:=1000')
 
 
+@pytest.mark.slow
 def test_allan_node_publishes_mdev_and_ohdev(ros_context):
     """imu/allan_deviation/<kind>: the node == offline pipeline == allantools on the record."""
     allantools = pytest.importorskip('allantools')

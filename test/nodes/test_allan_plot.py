@@ -17,9 +17,12 @@ from nodes.allan_feed import AllanFeed, status_values
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 
+@pytest.mark.slow
 def test_figure_published_only_while_subscribed(ros_context, tmp_path):
     """No render without a subscriber; then a non-blank PNG of the LiveFigure's size."""
     from imu_allan.report.plots import LiveFigure

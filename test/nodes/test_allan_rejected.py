@@ -21,6 +21,8 @@ from nodes.allan_feed import AllanClient, imu_messages, MODEL, RATE, status_valu
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 N = 12000

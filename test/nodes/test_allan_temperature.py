@@ -6,6 +6,8 @@ from conftest import DOMAIN, executable
 from nodes.allan_feed import AllanFeed, status_values
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 

@@ -3,15 +3,16 @@
 import os
 import time
 
-from conftest import REPO
+from conftest import DOMAIN, REPO
 from imu_allan.errors import InputError
 from imu_allan.nodes import allan, denoise, driver
 from imu_allan.nodes.common import check_value, Param
 import pytest
 import yaml
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
-DOMAIN = os.getpid() % 100 + 100
 
 
 @pytest.mark.parametrize('module', [allan, denoise, driver], ids=['allan', 'denoise', 'driver'])

@@ -13,12 +13,15 @@ from imu_allan.nodes.denoise import _DEFAULTS, make_denoiser
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 RATE = 100.0
 N = 6000
 
 
+@pytest.mark.slow
 def test_denoise_node_stream(ros_context):
     """
     60 s of thesis-model data through the node equal the offline BlockDenoiser.

@@ -13,10 +13,13 @@ import signal
 import subprocess
 import time
 
+from conftest import DOMAIN
 import numpy as np
 import pytest
 
-os.environ['ROS_DOMAIN_ID'] = str(os.getpid() % 100 + 100)
+pytestmark = pytest.mark.ros
+
+os.environ['ROS_DOMAIN_ID'] = str(DOMAIN)
 rclpy = pytest.importorskip('rclpy')
 
 G = 9.80665
@@ -256,6 +259,7 @@ def set_parameters(run, values):
 
 # ------------------------------------------------------------------------------ no ROS needed
 
+@pytest.mark.slow
 def test_help_and_bad_arguments():
     """--help exits 0; bad arguments and refused rates: one line on stderr, exit 2."""
     for name in ('driver', 'gx3_sim'):
@@ -284,6 +288,7 @@ def test_help_and_bad_arguments():
 
 # ------------------------------------------------------------------------------- clean stream
 
+@pytest.mark.slow
 def test_clean_stream_values_units_stamps_rollover(node, procs, tmp_path):
     """200 Hz accel+rate across a u32 timer rollover: every record, exact, evenly stamped."""
     # The timer rolls over 6 s after power-up, well inside the streaming window.
@@ -353,6 +358,7 @@ def test_clean_stream_values_units_stamps_rollover(node, procs, tmp_path):
     assert sum(1 for r in rows[stop + 1:] if r['status'] == 'ok') <= 1
 
 
+@pytest.mark.slow
 def test_mag_and_orientation_mode(node, procs, tmp_path):
     """0xCC at 100 Hz: imu/data quaternion, imu/mag in tesla, both matching imu/data_raw."""
     run = Run(node, procs, tmp_path, ['--seed', '5'],
@@ -447,6 +453,7 @@ def test_corrupt_dropped_and_junk(node, procs, tmp_path):
     assert np.max(np.abs(rel)) <= 5e-4 + 1e-6
 
 
+@pytest.mark.slow
 def test_stall_then_resume(node, procs, tmp_path):
     """The device goes silent for 1.5 s: the node reports a stall and resumes, nothing lost."""
     run = Run(node, procs, tmp_path,
@@ -467,6 +474,7 @@ def test_stall_then_resume(node, procs, tmp_path):
     assert all(np.diff([stamp_ns(m) for m in run.raw]) > 0)
 
 
+@pytest.mark.slow
 def test_disconnect_and_reconnect(node, procs, tmp_path):
     """The port vanishes for 1 s and comes back (new pty behind the same link path)."""
     run = Run(node, procs, tmp_path,

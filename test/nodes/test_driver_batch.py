@@ -22,6 +22,8 @@ from imu_allan.device.serial_link import Gx3Session
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
+
 rclpy = pytest.importorskip('rclpy', reason='rclpy Jazzy wheels missing')
 
 DATA = SHARED_DATA / 'gx3_25_captures'

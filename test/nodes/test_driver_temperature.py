@@ -20,7 +20,10 @@ from nodes.test_driver import (  # noqa: F401 - node and procs are fixtures
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.ros
 
+
+@pytest.mark.slow
 def test_temperature_polled_between_records(node, procs, tmp_path):  # noqa: F811
     """200 Hz records, 0xD1 every 0.2 s on a 20 -> 40 deg C ramp: nothing lost, exact temps."""
     from rclpy.qos import qos_profile_sensor_data, QoSProfile
@@ -70,6 +73,7 @@ def test_temperature_polled_between_records(node, procs, tmp_path):  # noqa: F81
     assert set(steps.tolist()) <= {312, 313}
 
 
+@pytest.mark.slow
 def test_recorded_bag_gives_the_simulated_slope(node, procs, tmp_path):  # noqa: F811
     """
     gx3_sim (20 -> 40 deg C over 30 s, gyro slopes 5e-4, -3e-4, 0 rad/s/K) -> driver -> a bag.

@@ -9,10 +9,14 @@ from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
 import matplotlib.image
 import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
 
 RATE = 100.0
 
 
+@pytest.mark.slow
 def test_dynamic_block_plots_and_console(tmp_path):
     """A white-noise step x1.5 on gyro_y after 40 of 80 min: one change, on gyro_y, named."""
     n = int(80 * 60 * RATE)

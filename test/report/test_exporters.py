@@ -399,6 +399,8 @@ def test_white_only_gyro_marks_upper_limits_and_missing_sensor():
     assert out['gyr_w'] > 0 and out['acc_n'] is None
 
 
+@pytest.mark.slow
+@pytest.mark.ros
 def test_cli_writes_every_export_and_rejects_bad_names(tmp_path):
     data = imu_allan.simulate({'gyro': {'white_noise': GYRO_N, 'rate_random_walk': GYRO_K},
                                'accel': {'white_noise': ACCEL_N}}, 30_000, RATE, seed=5)
@@ -541,6 +543,8 @@ def test_gtsam_snippet_runs(files, tmp_path):
     assert proc.returncode == 0 and 'gyroscopeCovariance' in proc.stdout, proc.stderr
 
 
+@pytest.mark.slow
+@pytest.mark.ros
 def test_cli_overbound(tmp_path):
     data = imu_allan.simulate({'gyro': {'white_noise': GYRO_N, 'bias_instability': 3 * GYRO_N,
                                         'rate_random_walk': GYRO_K},

@@ -216,6 +216,7 @@ def _underestimated(p, horizon, sensor):
                           for i, c in enumerate('xyz')]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('accel_only', [False, True], ids=['imu', 'accelerometers'])
 def test_gtsam_preintegration_nees(snippets, accel_only):
     params = {kind: _load(path, accel_only) for kind, path in snippets.items()}

@@ -34,6 +34,8 @@ import pytest
 
 from .chromium import Chromium, find_chromium
 
+pytestmark = [pytest.mark.browser, pytest.mark.ros]
+
 MODEL = NoiseModel.from_dict({'gyro': {'white_noise': 5.0e-4, 'bias_instability': 1.0e-4},
                               'accel': {'white_noise': 8.0e-4, 'bias_instability': 5.0e-4}})
 RATE = 100.0
@@ -113,6 +115,7 @@ def _numbers(entry):
     return [fmt(x) for x in out]
 
 
+@pytest.mark.slow
 def test_analysis_page(browser, analysis_dir):
     """report.html: loads clean, draws, and shows every coefficient of report.json."""
     report = json.loads((analysis_dir / 'report.json').read_text())
@@ -128,6 +131,7 @@ def test_analysis_page(browser, analysis_dir):
     assert fmt(report['n_samples']) in text or str(report['n_samples']) in text
 
 
+@pytest.mark.slow
 def test_several_inputs_index(browser, tmp_path):
     """Two inputs: one page each, and index.html linking both (checked in the browser)."""
     a = _csv(tmp_path / 'first.csv', 12_000, 5)
@@ -208,6 +212,7 @@ def test_fleet_page(browser, fleet_out):
     assert {s.rsplit('/', 1)[1] for s in sources} == expected
 
 
+@pytest.mark.slow
 def test_discrepancy_page(browser, tmp_path):
     """report.html of discrepancy: gaps before and after, the effect found, the model."""
     from imu_allan.formats.samples import Samples as S

@@ -187,6 +187,7 @@ def test_topic_choice_and_coincidences():
         is None
 
 
+@pytest.mark.slow
 def test_slopes_use_the_warm_up_the_estimate_leaves_out(tmp_path):
     """
     A warm-up the Allan estimate leaves out (verdict.warmup_s > 0) still feeds the slopes.
