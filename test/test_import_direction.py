@@ -65,11 +65,7 @@ LAYERS = {
 }
 
 #: Cycles known today, to be removed (issue 30): the set of modules of each.
-KNOWN_CYCLES = {
-    frozenset({'imu_allan.core.fit', 'imu_allan.core.hadamard_check'}):
-        'core/fit.py imports core/hadamard_check.py inside a function, which imports core/fit.py '
-        '(issue 30: the lead removes it)',
-}
+KNOWN_CYCLES = {}
 
 
 def _modules(root):

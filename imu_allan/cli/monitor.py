@@ -350,7 +350,7 @@ def render(state, topics, width=99, verbose=False):
 
 
 def _verdict(adequacy, i):
-    """The adequacy of axis ``i`` in a word: fits, DOES NOT FIT, or - (unknown)."""
+    """Return the adequacy of axis ``i`` in a word: fits, DOES NOT FIT, or - (unknown)."""
     p = None if adequacy is None else float(adequacy[i])
     if p is None or not math.isfinite(p):
         return '-'

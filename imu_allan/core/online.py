@@ -175,7 +175,7 @@ class OnlineAllan:
             self.sensor.update(data if use is None else data[use])
 
     def sensor_report(self):
-        """The sensor's processing measured so far (:class:`~.sensor.SensorReport`) or None."""
+        """Return the sensor's processing measured so far (:class:`~.sensor.SensorReport`)."""
         return None if self.sensor is None else self.sensor.report()
 
     def _reject_nonphysical(self, data):
@@ -270,7 +270,7 @@ class OnlineAllan:
         return {kind: est.deviation(kind, window) for kind in est.kinds if kind != 'oadev'}
 
     def processing(self):
-        """``{axis: Processing}`` for the fit (:meth:`SensorReport.processing`) or None."""
+        """Return ``{axis: Processing}`` for the fit (:meth:`SensorReport.processing`) or None."""
         report = self.sensor_report()
         return None if report is None else report.processing(self.filter_window_s or None)
 

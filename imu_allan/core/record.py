@@ -161,9 +161,10 @@ class RecordAnalysis:
     dynamic: DynamicAnalysis = None
     temperature: TemperatureAnalysis = None
     overbound: OverboundValues = None
+
     @property
     def sensor(self):
-        """The sensor's processing measured from the samples (:class:`~.sensor.SensorReport`)."""
+        """Return the sensor's processing measured from the samples (``analysis.sensor``)."""
         return self.analysis.sensor
 
     @property

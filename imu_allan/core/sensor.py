@@ -166,7 +166,7 @@ class AxisSensor:
         return s / m - 1.5 * d / (m * m)
 
     def processing(self):
-        """This axis as the fit takes it (:class:`~.fit.tau_range.Processing`)."""
+        """Return this axis as the fit takes it (:class:`~.fit.tau_range.Processing`)."""
         return Processing(self.filter_length or 0, self.filter_moment or 0.0,
                           tuple((ln.frequency_hz, ln.amplitude) for ln in self.lines),
                           tuple((*h.frequency_range_hz, h.excess_variance) for h in self.humps))

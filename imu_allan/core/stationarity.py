@@ -27,11 +27,12 @@ is chunked).  A window is *raw-moving* when, on any axis,
   the reference jumps to the new level.
 
 Every window statistic leaves out the window's most extreme sample per axis: a single spike is
-not motion (motion moves every sample).  The noise floor of each axis is the ``floor_quantile`` quantile of the standard deviations of
-the last ``floor_windows`` windows (moving or not), so it follows a real change of the noise
-level within a minute and stays correct as long as the IMU is still for more than that share
-of the time.  A window is finally excluded when it, the next window (motion starting inside it)
-or any of the ``hold_s`` seconds of windows before it was raw-moving (settling after motion).
+not motion (motion moves every sample).  The noise floor of each axis is the
+``floor_quantile`` quantile of the standard deviations of the last ``floor_windows`` windows
+(moving or not), so it follows a real change of the noise level within a minute and stays
+correct as long as the IMU is still for more than that share of the time.  A window is
+finally excluded when it, the next window (motion starting inside it) or any of the ``hold_s``
+seconds of windows before it was raw-moving (settling after motion).
 Each decision therefore waits for the next window: the gate delays samples by one to two windows.
 """
 

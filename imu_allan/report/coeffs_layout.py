@@ -52,7 +52,7 @@ def coefficient_table(fitted, axes=AXES):
 
 
 def adequacy_values(fitted, axes=AXES):
-    """The trailing block of ``imu/allan_coeffs``: each axis's adequacy p (NaN: not fitted)."""
+    """Return the trailing block of ``imu/allan_coeffs``: each axis's adequacy p (NaN: none)."""
     out = np.full(len(axes), np.nan)
     for i, axis in enumerate(axes):
         adequacy = fitted.adequacy(axis) if fitted is not None and axis in fitted.fits else None
@@ -63,7 +63,7 @@ def adequacy_values(fitted, axes=AXES):
 
 def decode_adequacy(source, dims=None):
     """
-    Each axis's adequacy p from ``imu/allan_coeffs`` (6,), or None without the trailing block.
+    Return each axis's adequacy p from ``imu/allan_coeffs`` (6,); None without its block.
 
     The model of an axis describes its curve when p >= 0.001 (:data:`ADEQUACY_LEVEL` of
     :mod:`imu_allan.core.fit.adequacy`).

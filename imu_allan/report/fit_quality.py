@@ -14,7 +14,7 @@ from ..core.units import conventional, is_gyro
 
 
 def fit_json(fitted, axis):
-    """The quality entries of report.json's ``axes.<axis>.fit`` (adequacy, span, lines)."""
+    """Return the quality entries of report.json's ``axes.<axis>.fit`` (adequacy, span)."""
     fit = fitted.fits.get(axis)
     if fit is None:
         return {}
@@ -42,7 +42,7 @@ def inadequate(fitted, axis):
 
 def misfit_sentence(axis, adequacy):
     """
-    One sentence for people: where the model misses and by how much, and what bends it there.
+    Return one sentence for people: where the model misses, by how much, what bends it.
 
     ``adequacy``: report.json's ``fit.adequacy`` of ``axis`` (a rejected model).  "gyro_z: the
     model does not describe 0.01-0.05 s (measured 1.6x the model): a 19 Hz line".
@@ -103,7 +103,7 @@ _WHY = {'filter': "the sensor's filter correlates the samples",
 
 
 def span_line(fitted):
-    """The fitted averaging times in one line, and why an axis starts later ('' if none does)."""
+    """Return the fitted span in one line, and why an axis starts later ('' if none does)."""
     spans = {a: fitted.fits[a].tau_range for a in fitted.axes
              if fitted.fits[a].tau_range is not None}
     late = {a: s for a, s in spans.items() if s.limited_by not in (None, 'filter')}
@@ -124,7 +124,7 @@ def span_line(fitted):
 
 
 def line_sentence(fitted):
-    """The lines fitted beside the noise model, per axis ('' if none)."""
+    """Return the lines fitted beside the noise model, per axis ('' if none)."""
     parts = []
     for axis in fitted.axes:
         fit = fitted.fits[axis]
@@ -135,7 +135,7 @@ def line_sentence(fitted):
         if lines:
             parts.append(f'{axis} ' + ', '.join(
                 f'{f:.3g} Hz ({_amplitude(axis, a)})' for f, a in sorted(lines.items())))
-    return 'lines fitted (the sensor\'s, not noise): ' + '; '.join(parts) if parts else ''
+    return "lines fitted (the sensor's, not noise): " + '; '.join(parts) if parts else ''
 
 
 def _amplitude(axis, value):
@@ -149,7 +149,7 @@ def sensor_json(report):
 
 
 def sensor_sentence(report):
-    """The sensor's processing in one line: LSB, repeats, filter, per sensor."""
+    """Return the sensor's processing in one line: LSB, repeats, filter, per sensor."""
     parts = []
     for sensor in ('gyro', 'accel'):
         axes = [ax for name, ax in report.axes.items() if is_gyro(name) == (sensor == 'gyro')]
@@ -175,13 +175,13 @@ def sensor_sentence(report):
 
 
 def _range(values, form):
-    """'lo-hi' of ``values`` in ``form``, or one number where both read alike."""
+    """Return 'lo-hi' of ``values`` in ``form``, or one number where both read alike."""
     lo, hi = form.format(min(values)), form.format(max(values))
     return lo if lo == hi else f'{lo}-{hi}'
 
 
 def _lsb(axis, value):
-    """An LSB in the units people use for it (deg/s, mg)."""
+    """Return an LSB in the units people use for it (deg/s, mg)."""
     if is_gyro(axis):
         return math.degrees(value), 'deg/s'
     return value / 9.80665 * 1e3, 'mg'

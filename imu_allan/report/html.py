@@ -67,7 +67,7 @@ PNG_CAPTIONS = {
 }
 ADEV_CAPTION = ('Dots: measured overlapping Allan deviation per axis, shaded: its 68.3 % '
                 'interval; dashed: each fitted term alone; solid: the fitted model (their sum, '
-                'with the lines fitted beside it); a band in an axis\'s colour from the left: '
+                'with the lines fitted beside it); a band in the colour of an axis from the left: '
                 'averaging times its fit left out (a resonance of the sensor shapes them); '
                 'grey fan: the slopes -1 (quantization), -1/2 (white noise), 0 (bias '
                 'instability), +1/2 (rate random walk), +1 (rate ramp).')

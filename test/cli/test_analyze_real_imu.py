@@ -50,7 +50,7 @@ def conventional_white(tau, adev):
 
 
 def model_adev(terms, tau, rate_hz):
-    """The fitted model's Allan deviation from report.json's terms (package shapes)."""
+    """Return the fitted model's Allan deviation from report.json's terms (package shapes)."""
     from imu_allan.core.terms import model_avar, TERMS
     params = {}
     for name, entry in terms.items():
@@ -62,7 +62,7 @@ def model_adev(terms, tau, rate_hz):
 
 @pytest.fixture(scope='module', params=RUNS)
 def record_csv(request, shared_data, tmp_path_factory):
-    """The run as the package's CSV (t, six axes in SI), written once per module."""
+    """Write the run as the package's CSV (t, six axes in SI), once per module."""
     d = np.load(shared_data / 'adis16405' / request.param)
     rate = float(d['rate_hz'])
     data = np.column_stack([d['gyro_deg_s'] * math.pi / 180.0, d['accel_g'] * 9.80665])

@@ -131,7 +131,7 @@ LINE_INPUT_HZ = (20.0, 450.0)
 
 
 def draw_processing(rng, rate_hz):
-    """A realistic sensor's processing for one axis (see the constants above)."""
+    """Draw a realistic sensor's processing for one axis (see the constants above)."""
     line = None
     if rng.uniform() < LINE_CHANCE:
         line = (rng.uniform(*LINE_INPUT_HZ), _log_uniform(rng, *LINE_SIGMAS))
@@ -142,7 +142,7 @@ def draw_processing(rng, rate_hz):
 
 def realistic_truth(truth, processing, rate_hz, slow, rng, samples=2_000_000):
     """
-    The white-noise density a realistic record carries at low frequency (continuous time).
+    Return the white-noise density a realistic record carries at low frequency (continuous).
 
     Two parts.  The filtered noise, exactly: output means of M taps D input samples apart have
     autocovariance sigma_in^2 max(0, M - k D) / M^2, so decimation folds it to a density^2 of
@@ -183,9 +183,11 @@ def _output_sigma(truth, processing):
 
 def _processed(n_density, processing, n, rng, slow, line=None, with_noise=False):
     """
+    Return ``n`` output samples of a realistic sensor's processing.
+
     White noise of density ``n_density`` (and a line) at the internal rate, through the window,
-    decimated, plus ``slow``, rounded to the LSB: ``n`` output samples (and, ``with_noise``,
-    the filtered white noise alone, before the slow part and the rounding).
+    decimated, plus ``slow``, rounded to the LSB (and, ``with_noise``, the filtered white noise
+    alone, before the slow part and the rounding).
     """
     d, m = processing['decimation'], processing['taps']
     n_in = n * d + m
@@ -273,7 +275,7 @@ def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6, hadamard=F
 
 def _known_processing(truth, proc, rate_hz):
     """
-    The realistic generator's processing as the fit takes it: filter moment, aliased line.
+    Return the realistic generator's processing as the fit takes it: filter, aliased line.
 
     The output's autocovariance (in units of sigma_in^2 / M^2): M + d^2 / 12 at lag 0 (the
     rounding, d in those units), M - k D at lag k while positive.

@@ -53,7 +53,7 @@ def test_p_is_uniform_where_the_model_describes_the_record():
 @pytest.mark.slow
 def test_a_filter_the_fit_is_not_told_of_is_rejected():
     """
-    p < 0.001 on at least 95 % of 40 records whose samples a filter correlates.
+    P below 0.001 on at least 95 % of 40 records whose samples a filter correlates.
 
     White noise at 1 kHz through a 15-32-tap moving average, every tenth sample kept (the
     realistic generator's filter; window > decimation, so the samples correlate), plus flicker,
@@ -73,7 +73,7 @@ def test_a_filter_the_fit_is_not_told_of_is_rejected():
 @pytest.mark.slow
 def test_a_hump_the_model_lacks_is_rejected_and_named():
     """
-    p < 0.001 on at least 95 % of 20 records with a Gauss-Markov hump fitted as N + B only.
+    P below 0.001 on at least 95 % of 20 records with a Gauss-Markov hump fitted as N + B.
 
     The hump's Allan deviation peaks at about twice the floor (sigma from the floor, tau_c
     drawn over a decade in the middle of the curve); the misfit span holds the peak.

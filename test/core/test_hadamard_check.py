@@ -1,9 +1,8 @@
 """The Hadamard check of the term selection (core/hadamard_check.py): mechanics, not power."""
 
 from imu_allan import allan_deviation, fit_noise_model, NoiseModel, simulate
-from imu_allan.core.fit import hadamard_check
 from imu_allan.core.deviations import deviation
-from imu_allan.core.fit import Problem
+from imu_allan.core.fit import hadamard_check, Problem
 import numpy as np
 import pytest
 

@@ -117,6 +117,8 @@ def test_recent_returns_the_last_samples_fed():
 
 def test_a_still_noisy_imu_with_spikes_is_not_moving():
     """
+    A still noisy IMU with a line and spikes: at most 0.1 % excluded.
+
     Real static records: a noisy accelerometer (0.04 m/s^2 per sample, the ADIS16405's) with
     a 0.56 Hz line and isolated spikes, written here from textbook parts.  The gate excluded
     0.7 % of such a record before (the 0.2-s means' norm crossed the fixed 0.05 m/s^2

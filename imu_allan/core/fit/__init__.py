@@ -27,8 +27,8 @@ from .axis import (
     SELECTION_PENALTY,
     shape_columns,
     two_sided_z,
-    UPPER_LIMIT_DELTA_CHI2,
     upper_limit,
+    UPPER_LIMIT_DELTA_CHI2,
     widen,
 )
 from .fitted_model import fit_noise_model, FittedModel

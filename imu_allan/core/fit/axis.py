@@ -32,13 +32,12 @@ import math
 
 import numpy as np
 
-from .. import terms as _terms
 from ..bisection import guided, log_ratio, run
 from ..bounded_min import bounded_minimum
 from ..edf import _gammainccinv, CI_LEVEL
 from ..nnls import nnls_scaled
 from ..terms import sinusoid_shape, TERMS
-from ..units import ALL_TERMS, conventional, IEEE_TERMS, si_unit
+from ..units import ALL_TERMS, IEEE_TERMS
 
 #: Correlation width (decades) of AVAR estimates vs noise exponent alpha (measured, see doc).
 CORRELATION_WIDTH = {2: 0.41, 1: 0.41, 0: 0.41, -1: 0.58, -2: 1.08}

@@ -153,17 +153,17 @@ class FittedModel:
         return self._upper_limits[key]
 
     def adequacy(self, axis):
-        """The adequacy test of ``axis`` (:class:`.adequacy.Adequacy`), None if not fitted."""
+        """Return the adequacy test of ``axis`` (:class:`.adequacy.Adequacy`), None if unfitted."""
         fit = self.fits.get(axis)
         return None if fit is None else fit.adequacy
 
     def tau_range(self, axis):
-        """The averaging times fitted on ``axis`` (:class:`.tau_range.TauRange`) or None."""
+        """Return the averaging times fitted on ``axis`` (:class:`.tau_range.TauRange`) or None."""
         fit = self.fits.get(axis)
         return None if fit is None else fit.tau_range
 
     def model_avar(self, axis, tau):
-        """AVAR of the fitted curve of an axis at ``tau`` (s): the noise model and its lines."""
+        """Return the AVAR of an axis's fitted curve at ``tau`` (s): noise model and lines."""
         fit = self.fits.get(axis)
         return (_terms.model_avar(self.model.terms.get(axis, {}), tau, self.rate_hz)
                 + sum(_nuisance_avar(fit, tau) if fit is not None else [], 0.0))
@@ -247,7 +247,7 @@ def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=N
 
 
 def _span(tau, avar, edf, rate_hz, processing, tau_range):
-    """The :class:`TauRange` of one axis: the usable points, cut as asked or as chosen."""
+    """Return the :class:`TauRange` of one axis: its usable points, cut as asked or chosen."""
     ok = (avar > 0) & (edf >= 1.0)
     if not ok.any():
         return TauRange(math.nan, math.nan)
@@ -289,7 +289,7 @@ def _assess(fit, rate_hz, processing):
 
 def _nuisance_avar(fit, tau, deficit=False):
     """
-    AVAR (per tau) of each nuisance line the fit carries, a list of arrays.
+    Return the AVAR (per tau) of each nuisance line the fit carries, a list of arrays.
 
     ``deficit``: also the filter's deficit (for the fitted averaging times only: below the
     filter's reach its closed form does not hold, so the drawn model leaves it out).
@@ -345,9 +345,10 @@ def _bounded_drift(fit, rate_hz, processing):
 
 
 def _namer(processing, tau):
-    """Name what bends a misfit span ``(lo, hi, ratio)`` from what is known of the sensor."""
+    """Return a namer of what bends a misfit span (lo, hi, ratio), from the sensor's facts."""
     def name(lo, hi, ratio):
-        near = (lambda t: lo / 3.0 <= t <= hi * 3.0)
+        def near(t):  # a bump peaking within a factor 3 of the span
+            return lo / 3.0 <= t <= hi * 3.0
         if processing is not None:
             for f, _ in sorted(processing.lines, key=lambda ln: -ln[1]):
                 if near(_terms.TERMS['sinusoid'].peak_ratio / f):

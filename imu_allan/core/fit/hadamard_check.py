@@ -36,7 +36,6 @@ import math
 
 import numpy as np
 
-from ..deviations.greenhall import edf_greenhall
 from .axis import (
     ALTERNATIVE_MARGIN,
     coefficient_interval,
@@ -47,6 +46,7 @@ from .axis import (
     two_sided_z,
 )
 from .tau_range import TauRange
+from ..deviations.greenhall import edf_greenhall
 from ..terms import hadamard_shape, ID_ALPHA
 
 #: Criterion gain of K on the Hadamard curve that contradicts a term set without K.

@@ -64,7 +64,7 @@ class Processing:
     @classmethod
     def moving_average(cls, window_samples, lines=(), humps=()):
         """
-        The filter of a moving average ``window_samples`` output samples long (a device's).
+        Return the filter of a moving average ``window_samples`` output samples long.
 
         A window of M taps at an internal rate, decimated by D to the output, gives white
         noise the autocorrelation max(0, 1 - k / w) at output lag k, w = M / D (the
@@ -109,7 +109,7 @@ def _tail(amplitude_sq, f_hz, tau):
 
 def choose(processing, tau, avar, edf, rate_hz, kappa=KAPPA):
     """
-    The fit's span of averaging times for one axis (a :class:`TauRange`).
+    Return the fit's span of averaging times for one axis (a :class:`TauRange`).
 
     ``tau``, ``avar``, ``edf``: the measured curve (usable points, increasing tau);
     ``processing``: a :class:`Processing` or None (then the whole curve, plain shapes).
@@ -139,7 +139,7 @@ def choose(processing, tau, avar, edf, rate_hz, kappa=KAPPA):
 
 
 def _visible_lines(processing, tau, avar, sd, kappa):
-    """The lines visible in the curve (AVAR over the estimate's sd above kappa), most first."""
+    """Return the lines visible in the curve (AVAR / estimate sd above kappa), most first."""
     seen = []
     for f, a in processing.lines:
         visibility = float(np.max(a * a * sinusoid_shape(tau, f) / avar / sd))
