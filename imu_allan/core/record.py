@@ -77,7 +77,7 @@ class DynamicAnalysis:
 
     #: :class:`~.dynamic.DynamicResult`
     result: object
-    #: :class:`~.change_test.Change` list
+    #: :class:`~.change_detection.Change` list
     changes: list
     #: where the analysed samples start, s from the first sample (the warm-up)
     analysed_from_s: float = 0.0
@@ -235,7 +235,7 @@ def dynamic_analysis(analysis, window_s=None):
     ``window_s``: None or 0 for the default window.  InputError if the record is too short.
     Times are moved from the first analysed sample to the record's first sample.
     """
-    from .change_test import detect_changes
+    from .change_detection import detect_changes
     from .dynamic import dynamic_allan
     try:
         dyn = dynamic_allan(analysis.data, analysis.rate_hz, window_s or None,
