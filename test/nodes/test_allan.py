@@ -130,11 +130,15 @@ def test_allan_node_end_to_end(ros_context, tmp_path):
 
         # 3b. The recording advice (issue 12): after 300 s, bias instability to the asked 5 %
         #     needs more recording: WARN with the time, per-term times as key-values.
-        def advised():
-            return any(status(m, 'recording advice').level != b'\x03' for _, m in diags)
-        assert spin_until(executor, advised, 30), 'no recording advice published'
-        advice = next(status(m, 'recording advice') for _, m in reversed(diags)
-                      if status(m, 'recording advice').level != b'\x03')
+        #     The advice of the whole record (recorded_s = 300 s): one of an earlier estimate
+        #     may name a model the adequacy test rejected there (flicker-dominated short
+        #     records: about 1 % per axis, docs/method.md section 10).
+        def whole(m):
+            a = status(m, 'recording advice')
+            return a.level != b'\x03' and float(values(a).get('recorded_s', 0)) >= N / RATE - 1
+        assert spin_until(executor, lambda: any(whole(m) for _, m in diags), 30), \
+            'no recording advice of the whole record published'
+        advice = next(status(m, 'recording advice') for _, m in reversed(diags) if whole(m))
         assert advice.name == 'allan: recording advice'
         kv = values(advice)
         assert advice.level == b'\x01' and advice.message.startswith('record '), advice.message
