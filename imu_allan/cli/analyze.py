@@ -58,6 +58,12 @@ def build_parser():
                    help='fewest clusters at the longest averaging time (default 10: T/10)')
     p.add_argument('--tau-max', type=bounded_float(0.0, 1e9, low_open=True), metavar='S',
                    help='longest averaging time, s')
+    p.add_argument('--tau-range', metavar='LO,HI',
+                   help="fit only these averaging times, s (default: chosen from the data, "
+                        "where the sensor's own processing does not shape the curve)")
+    p.add_argument('--plain-fit', action='store_true',
+                   help="fit the IEEE terms over every averaging time, without measuring the "
+                        "sensor's processing (its filter, lines and resonances)")
     p.add_argument('--replace-outliers', action='store_true',
                    help='replace Tukey F=3 outliers by the axis mean (as the thesis did)')
     p.add_argument('--allow-jumps', action='store_true',
@@ -119,10 +125,24 @@ def _options(args):
                                replace_outliers=args.replace_outliers, tau_max=args.tau_max,
                                rate_hz=args.rate, allow_jumps=args.allow_jumps,
                                online=args.online, allow_motion=args.allow_motion,
-                               estimators=parse_kinds(args.estimators, '--estimators'))
+                               estimators=parse_kinds(args.estimators, '--estimators'),
+                               sensor=not args.plain_fit, tau_range=_tau_range(args.tau_range))
     return RecordOptions(analysis=analysis, targets=targets, dynamic_window_s=args.dynamic,
                          denoise=args.denoise,
                          overbound=export_options(args).overbound_request())
+
+
+def _tau_range(text):
+    """``(lo, hi)`` s from ``--tau-range LO,HI`` (None when not given); InputError if bad."""
+    if text is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in text.split(','))
+    except ValueError:
+        raise InputError('--tau-range', f'{text!r} is not LO,HI (two numbers, s)') from None
+    if not (0.0 < lo < hi and hi < float('inf')):
+        raise InputError('--tau-range', f'{text!r}: need 0 < LO < HI (s)')
+    return lo, hi
 
 
 @guarded

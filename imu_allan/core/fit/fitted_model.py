@@ -361,7 +361,8 @@ def _namer(processing, tau):
                     return f'a resonance at {f_lo:.3g}-{f_hi:.3g} Hz'
             if lo <= tau[0] and processing.filter_moment > 0 and ratio < 1.0:
                 return "the sensor's filter"
-        if hi >= tau[-1]:
+        # a span in the last third of the curve (log tau) that reaches its end: the drift
+        if hi >= tau[-1] and lo >= tau[0] * (tau[-1] / tau[0]) ** (2.0 / 3.0):
             return ('more drift than the model (random walk, ramp or temperature)' if ratio > 1
                     else 'a bounded drift the model lacks (Gauss-Markov or an oscillation)')
         return None
