@@ -213,3 +213,33 @@ def test_progress_bar_only_on_a_terminal(sim_csv):
     assert '2/2' in bar and '[########################]' in bar  # ends full
     assert _stderr_on_a_terminal(sim_csv, '--quiet') == ''
     assert run_command('analyze', sim_csv).stderr == ''  # not a terminal: no bar
+
+
+@pytest.mark.slow
+def test_fit_span_as_asked_and_the_plain_fit(sim_csv):
+    """
+    --tau-range fits only those averaging times; --plain-fit measures no sensor processing.
+
+    The simulated record has none to find (a white, unfiltered stream): the measured sensor
+    starts the fit at the first averaging time and says so; both ways report the adequacy.
+    """
+    measured = json.loads(run_command('analyze', sim_csv, '--json').stdout)
+    asked = json.loads(run_command('analyze', sim_csv, '--json', '--tau-range', '0.5,50').stdout)
+    plain = json.loads(run_command('analyze', sim_csv, '--json', '--plain-fit').stdout)
+    assert 'sensor' in measured and 'sensor' not in plain
+    for axis, entry in asked['axes'].items():
+        lo, hi = entry['fit']['tau_range_s']
+        assert 0.5 <= lo < 0.7 and 40 < hi <= 50, (axis, lo, hi)
+        assert entry['fit']['tau_range_limited_by'] == 'asked'
+        first = measured['axes'][axis]['fit']
+        assert first['tau_range_s'][0] == pytest.approx(0.01)
+        assert first['tau_range_limited_by'] is None and first['filter_moment'] == 0.0
+        assert plain['axes'][axis]['fit']['adequacy']['p'] == pytest.approx(
+            first['adequacy']['p'])
+
+
+@pytest.mark.parametrize('bad', ['1', '1,x', '5,1', '0,1', '1,inf'])
+def test_bad_tau_range_one_line_exit_2(sim_csv, bad):
+    proc = run_command('analyze', sim_csv, '--tau-range', bad)
+    assert proc.returncode == 2
+    assert proc.stderr.startswith('analyze: --tau-range:') and proc.stderr.count('\n') == 1
