@@ -5,8 +5,9 @@ The family of frequency-stability deviations (Stable32's): one module per family
 - :mod:`.modified`: mdev, tdev (SP1065 eqs 14, 15)
 - :mod:`.total`: totdev, mtotdev, htotdev (SP1065 eqs 25, 27, 29)
 - :mod:`.theo`: theo1 (SP1065 eq 30)
-- :mod:`.grid`: averaging factors; :mod:`.noise_id`: noise type per averaging time;
-  :mod:`.greenhall`: Greenhall & Riley EDF; :mod:`.api`: :func:`deviation`.
+- :mod:`.kinds`: one entry per kind (what the dispatch reads); :mod:`.grid`: averaging factors;
+  :mod:`.noise_id`: noise type per averaging time; :mod:`.greenhall`: Greenhall & Riley EDF;
+  :mod:`.api`: :func:`deviation`.
 """
 
 from .api import deviation, DeviationResult, extra_deviations, KINDS, parse_kinds
