@@ -5,7 +5,7 @@ What each kind computes is in its family module (:mod:`.allan_family`, :mod:`.mo
 :mod:`.total`, :mod:`.theo`) and everything that sets the kinds apart is one entry of
 :data:`.kinds.KIND`, which this module reads: it turns rate samples into the phase they share,
 picks the averaging factors (:mod:`.grid`), identifies the noise per averaging time
-(:mod:`.noise_id`), applies Stable32's bias corrections and
+(:mod:`.noise_id`; theo1 per run, :mod:`.theobr`), applies Stable32's bias corrections and
 attaches each kind's EDF and chi-square interval (:func:`imu_allan.core.edf.chi2_interval`,
 SP1065 eq 45).
 """
@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import grid, noise_id
+from . import grid, noise_id, theo
 from .kinds import KIND, kind_of
 from .. import allan as _allan
 from ..edf import chi2_interval
@@ -171,7 +171,7 @@ def run_bias(kind, x, data, fast=True):
                 pass
             else:
                 return total_kernel.variance('theo1', x, ms, strides)
-        return KIND['theo1'].variance(x, ms)  # numpy: exact (stride 1)
+        return theo.theo1_fast(x, ms, strides)
     return kind_of(kind).run_bias(x, avar, theo1)
 
 
@@ -261,7 +261,7 @@ def _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters):
 
 
 def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
-              min_clusters=_allan.DEFAULT_MIN_CLUSTERS, axes=None):
+              min_clusters=_allan.DEFAULT_MIN_CLUSTERS, axes=None, alpha=None):
     """
     Frequency-stability deviation ``kind`` of rate samples with 68.3 % intervals.
 
@@ -282,6 +282,12 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
         Grid density; the oadev guard.
     axes : sequence of str, optional
         Column names (default: the package axis order).
+    alpha : int, optional
+        The noise exponent, fixed for every averaging time and axis (Stable32's "Alpha"; +2
+        white PM .. -2 random-walk FM, -4 for the Hadamard kinds): the bias corrections and
+        EDFs are that noise's.  Default: identified from the data, per averaging time (lag-1
+        autocorrelation, B1 ratio: :mod:`.noise_id`); theo1 per axis for the whole run, with
+        Stable32's ThêoBR bias removal (:mod:`.theobr`).
 
     Returns
     -------
@@ -290,12 +296,16 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     """
     data = _check(data, rate_hz, kind)
     spec = kind_of(kind)
+    alpha = _fixed_alpha(spec, alpha)
     ms = _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters)
     n = data.shape[0]
     x = phase(data, ms)
     _finite(data, rate_hz, x)
     factor = None
-    if spec.run_bias is not None:
+    if alpha is not None:
+        raw = raw_variance(kind, x, ms, data)
+        alphas = np.full(raw.shape, alpha, dtype=int)
+    elif spec.run_bias is not None:
         raw = raw_variance(kind, x, ms, data)
         run_alpha, run_factor = run_bias(kind, x, data)
         alphas = np.repeat(run_alpha[None, :], len(ms), axis=0)
@@ -309,6 +319,22 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     result = DeviationResult(spec.derived_from or kind, tau, ms, dev, low, high, dof,
                              alphas, counts, axes, float(rate_hz), n)
     return derive(result, spec) if spec.derived_from else result
+
+
+def _fixed_alpha(spec, alpha):
+    """Return ``alpha`` as an int inside the kind's range, or None; ValueError otherwise."""
+    if alpha is None:
+        return None
+    lo, hi = spec.alpha_range
+    try:
+        value = int(alpha)
+        whole = value == alpha
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole or not lo <= value <= hi:
+        raise ValueError(f'alpha must be a whole number from {lo} to {hi} for {spec.name}, '
+                         f'not {alpha!r}')
+    return value
 
 
 def derive(base, spec):

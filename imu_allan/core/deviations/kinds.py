@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import functools
 from typing import Callable, Optional
 
-from . import allan_family, modified, theo, total
+from . import allan_family, modified, theo, theobr, total
 from .greenhall import edf_greenhall
 
 
@@ -61,7 +61,8 @@ class Kind:
         ratio (oadev).
     run_bias : callable or None
         ``(x, avar, theo1) -> (alpha (A,), factor (A,))``: one noise type and bias factor per
-        axis for the whole run instead of per averaging time.
+        axis for the whole run instead of per averaging time (theo1: Stable32's ThêoBR,
+        :mod:`.theobr`); used unless the caller fixes alpha.
     derived_from : str or None
         Computed as that kind's result, then scaled by ``scale(tau)`` (tdev: mdev x tau/sqrt 3).
     scale : callable or None
@@ -131,7 +132,8 @@ KIND = {kind.name: kind for kind in (
     _total_family('mtotdev', 3, 2, _ALLAN, total.mtotvar, 'windowed'),
     _total_family('htotdev', 3, 3, _HADAMARD, total.htotvar, 'windowed'),
     Kind('theo1', theo.theo1_fast, theo.terms, theo.edf, 1, 2, _ALLAN, bias=_theo1_bias,
-         compiled='windowed', tau_factor=0.75, m_step=2, edf_floor=True),
+         compiled='windowed', tau_factor=0.75, m_step=2, edf_floor=True,
+         run_bias=theobr.run_bias),
 )}
 
 
