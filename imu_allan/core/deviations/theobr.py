@@ -39,7 +39,7 @@ NOMINAL = {2: 0.4, 1: 0.6, 0: 1.0, -1: 1.71, -2: 2.24}
 EXACT_WORK = 1e8
 #: Ratios and Theo1 summands per ratio of the estimated mean beyond :data:`EXACT_WORK`.
 SAMPLES = 32
-SAMPLE_WORK = 1e6
+SAMPLE_WORK = 2e5
 
 
 def factors(n_phase):

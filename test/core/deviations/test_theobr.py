@@ -123,7 +123,7 @@ def test_sampled_mean_is_close_to_the_exact(monkeypatch):
     # Above EXACT_WORK the mean is taken over 32 ratios, Theo1 thinned.  On 2500 samples of
     # random-walk FM and white FM (generators of this test, seed 9) it stays within 5 % of the
     # mean of all 414 ratios (measured over 32 records of 3000 and 6000 samples and four noises:
-    # at most 3.6 %, the noise class always the same; the exact k itself ranged 0.75-1.65 on
+    # at most 3.3 %, the noise class always the same; the exact k itself ranged 0.75-1.65 on
     # white FM records, so 5 % is small against its own scatter).
     r = np.random.default_rng(9)
     y = np.column_stack([np.cumsum(r.standard_normal(2500)), r.standard_normal(2500)])
