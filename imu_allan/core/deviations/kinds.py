@@ -97,9 +97,9 @@ def _greenhall(d, overlapping, modif):
 
 
 def _allan_family(name, stop_ratio, differences, alpha_range, compiled, **extra):
-    d, overlapping, _ = allan_family.SPEC[name]
     return Kind(name, functools.partial(allan_family.variance_reference, name),
-                functools.partial(allan_family.terms, name), _greenhall(d, overlapping, False),
+                functools.partial(allan_family.terms, name),
+                _greenhall(*allan_family.edf_args(name)),
                 stop_ratio, differences, alpha_range, compiled=compiled, **extra)
 
 
