@@ -16,7 +16,10 @@ full 1.7 M x 6 is printed beside it (window starts thinned on long records, :mod
 paired ratios (with their range): the machine is shared, and a pair taken back to back sees
 the same conditions.  ``--load P`` starts P busy processes of its own for the whole run (each
 a pure-Python ``while True: pass``, one core's worth; started and stopped by this script), so
-that "under load" means the same thing from run to run on top of whatever else runs.
+that "under load" means the same thing from run to run on top of whatever else runs.  Where
+the kernel groups tasks by session (autogroup), they take from our share and allantools'
+alike, and load from other sessions brings the ratio down to the ratio of CPU times
+(docs/benchmarks.md).
 
 Goals: >= 10x allantools per kind (adev, hdev: >= 3x), same numbers, quiet and under load.
 """
