@@ -1,30 +1,26 @@
 """
 ``deviation()``: every frequency-stability deviation Stable32 has, with 68.3 % intervals.
 
-The kinds and what they compute are in their family modules (:mod:`.allan_family`,
-:mod:`.modified`, :mod:`.total`, :mod:`.theo`); this module turns rate samples into the phase
-they share, picks the averaging factors (:mod:`.grid`), identifies the noise per averaging time
-(:mod:`.noise_id`), applies Stable32's bias corrections and attaches each kind's EDF and
-chi-square interval (:func:`imu_allan.core.edf.chi2_interval`, SP1065 eq 45).
+What each kind computes is in its family module (:mod:`.allan_family`, :mod:`.modified`,
+:mod:`.total`, :mod:`.theo`) and everything that sets the kinds apart is one entry of
+:data:`.kinds.KIND`, which this module reads: it turns rate samples into the phase they share,
+picks the averaging factors (:mod:`.grid`), identifies the noise per averaging time
+(:mod:`.noise_id`; theo1 per run, :mod:`.theobr`), applies Stable32's bias corrections and
+attaches each kind's EDF and chi-square interval (:func:`imu_allan.core.edf.chi2_interval`,
+SP1065 eq 45).
 """
 
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import allan_family, grid, modified, noise_id, theo, total
-from .greenhall import edf_greenhall
+from . import grid, noise_id, theo
+from .kinds import KIND, kind_of
 from .. import allan as _allan
 from ..edf import chi2_interval
 from ..units import AXES
 
 KINDS = grid.KINDS
-
-#: kind -> (most differences of the noise identification, allowed alpha range)
-_NOISE_ID = {'adev': (2, (-2, 2)), 'oadev': (2, (-2, 2)), 'mdev': (2, (-2, 2)),
-             'tdev': (2, (-2, 2)), 'hdev': (3, (-4, 2)), 'ohdev': (3, (-4, 2)),
-             'totdev': (2, (-2, 2)), 'mtotdev': (2, (-2, 2)), 'htotdev': (3, (-4, 2)),
-             'theo1': (2, (-2, 2))}
 
 
 @dataclass
@@ -78,44 +74,35 @@ def raw_variance(kind, x, ms, data=None, fast=True):
     """
     Uncorrected variance (T, A) of ``kind`` from the phase ``x`` (A, N) in sample units.
 
-    tdev gives MVAR (scaled afterwards); ``data`` (n, A), when given, lets oadev use the
-    package's compiled Allan kernel (:func:`imu_allan.core.allan.avar_function`); adev, hdev,
-    ohdev, mdev, tdev and totdev run compiled (:mod:`.kernels`) from the same amount of work
-    as the Allan kernel (:data:`imu_allan.core.allan.SMALL_WORK`), numpy below it.  mtotdev,
-    htotdev and theo1 run compiled (:mod:`.total_kernel`; on long records with thinned window
-    starts, exact whenever the work fits its budget); ``fast=False``: their numpy oracles.
+    tdev gives MVAR (scaled afterwards).  The kind's compiled path (:attr:`.kinds.Kind.
+    compiled`) when ``fast``: oadev the package's Allan kernel
+    (:func:`imu_allan.core.allan.avar_function`; ``data`` (n, A) needed, else numpy); adev,
+    hdev, ohdev, mdev, tdev and totdev :mod:`.kernels` from the same amount of work as the
+    Allan kernel (:data:`imu_allan.core.allan.SMALL_WORK`), numpy below it; mtotdev, htotdev
+    and theo1 :mod:`.total_kernel` (on long records with thinned window starts, exact whenever
+    the work fits its budget).  ``fast=False`` or no numba: the kind's numpy variance.
     """
-    if kind == 'oadev':
-        if data is not None and fast and _compiled(data.size * len(ms)):
+    spec = kind_of(kind)
+    if fast and spec.compiled == 'allan' and data is not None:
+        if _compiled(data.size * len(ms)):
             from .. import allan_kernel
             return allan_kernel.avar_phase(x, ms)  # the phase given, not integrated again
-        if data is not None and fast:  # short: numpy (no numba import); no numba: logged
-            return _allan.avar_function(data.size * len(ms))(data, ms)
-        return allan_family.variance_reference(kind, x, ms)
-    if kind in ('adev', 'hdev', 'ohdev', 'mdev', 'tdev', 'totdev') and fast \
-            and x.size * len(ms) >= _allan.SMALL_WORK:
+        return _allan.avar_function(data.size * len(ms))(data, ms)  # short or no numba
+    if fast and spec.compiled == 'blocked' and x.size * len(ms) >= _allan.SMALL_WORK:
         try:
             from . import kernels
-        except ImportError:  # no numba: the numpy versions below
+        except ImportError:  # no numba: the numpy version below
             pass
         else:
             return kernels.variance(kind, x, ms)
-    if kind in ('adev', 'hdev', 'ohdev'):
-        return allan_family.variance_reference(kind, x, ms)
-    if kind in ('mdev', 'tdev'):
-        return modified.variance_fast(x, ms)
-    if kind == 'totdev':
-        return total.totvar(x, ms)
-    if kind in ('mtotdev', 'htotdev', 'theo1'):
-        if not fast:
-            return {'mtotdev': total.mtotvar, 'htotdev': total.htotvar,
-                    'theo1': theo.theo1_fast}[kind](x, ms)
+    if fast and spec.compiled == 'windowed':
         try:
             from . import total_kernel
-        except ImportError:  # no numba: the numpy versions (exact, slower)
-            return raw_variance(kind, x, ms, data, fast=False)
-        return total_kernel.variance(kind, x, ms)
-    raise ValueError(f'unknown deviation kind {kind!r}')
+        except ImportError:  # no numba: the numpy version (exact, slower)
+            pass
+        else:
+            return total_kernel.variance(kind, x, ms)
+    return spec.variance(x, ms)
 
 
 def _compiled(work):
@@ -149,12 +136,13 @@ def raw_and_alpha(kind, x, ms, data):
     adev and hdev, compiled: one pass per axis for both (:func:`.kernels.strided_and_alpha`),
     their sums being cheaper than reading the phase twice.
     """
-    dmax, span = _NOISE_ID[kind]
-    if kind in ('adev', 'hdev') and _compiled(x.size * len(ms)):
+    spec = kind_of(kind)
+    dmax, span = spec.differences, spec.alpha_range
+    if spec.gathers_id_points and _compiled(x.size * len(ms)):
         from . import kernels
         return kernels.strided_and_alpha(kind, x, ms, dmax, span)
     raw = raw_variance(kind, x, ms, data)
-    id_ms = np.maximum(np.round(ms * grid.tau_factor(kind)), 1).astype(np.int64)
+    id_ms = np.maximum(np.round(ms * spec.tau_factor), 1).astype(np.int64)
     return raw, identify(x, id_ms, dmax, span)
 
 
@@ -166,46 +154,57 @@ def identify(x, ms, dmax, span):
     return noise_id.identify_phase(x, ms, dmax, span)
 
 
+def run_bias(kind, x, data, fast=True):
+    """
+    Return the run-wide alpha (A,) and bias factor (A,) of a kind that has one (theo1).
+
+    Its AVAR and Theo1 ratios on the compiled paths of :func:`raw_variance` when ``fast``.
+    """
+    def avar(x, ms):
+        return raw_variance('oadev', x, ms, data, fast)
+
+    def theo1(x, ms, strides):
+        if fast:
+            try:
+                from . import total_kernel
+            except ImportError:
+                pass
+            else:
+                return total_kernel.variance('theo1', x, ms, strides)
+        return theo.theo1_fast(x, ms, strides)
+    return kind_of(kind).run_bias(x, avar, theo1)
+
+
 def n_terms(kind, n_phase, m):
     """Summands behind the estimate of ``kind`` at factor ``m`` (Stable32's '#')."""
-    if kind in allan_family.SPEC:
-        return allan_family.terms(kind, n_phase, m)
-    if kind in ('mdev', 'tdev'):
-        return modified.terms(n_phase, m)
-    if kind == 'theo1':
-        return theo.terms(n_phase, m)
-    return total.terms(kind, n_phase, m)
+    return kind_of(kind).terms(n_phase, m)
 
 
 def bias_factor(kind, alpha, m, n_phase):
     """E[raw variance] / (variance Stable32 prints), by kind and noise; 1 where none."""
-    if kind in ('totdev', 'mtotdev', 'htotdev'):
-        return total.bias_factor(kind, alpha, m, n_phase)
-    if kind == 'theo1':
-        return 1.0 / theo.bias(alpha, m)
-    return 1.0
+    return kind_of(kind).bias(alpha, m, n_phase)
 
 
 def edf(kind, alpha, m, n_phase):
     """EDF of ``kind`` at factor ``m`` for noise ``alpha`` and ``n_phase`` phase points."""
-    if kind in allan_family.SPEC:
-        d, overlapping, modif = allan_family.edf_args(kind)
-        return edf_greenhall(int(alpha), d, int(m), int(n_phase), overlapping, modif)
-    if kind in ('mdev', 'tdev'):
-        return edf_greenhall(int(alpha), 2, int(m), int(n_phase), True, True)
-    if kind == 'theo1':
-        return theo.edf(alpha, m, n_phase)
-    return total.edf(kind, alpha, m, n_phase)
+    return kind_of(kind).edf(alpha, m, n_phase)
 
 
-def finish(kind, raw, ms, alpha, n_phase):
-    """Bias-corrected deviation, EDF and 68.3 % interval from the raw variance (T, A)."""
-    factor = np.array([[bias_factor(kind, a, m, n_phase) for a in row]
-                       for m, row in zip(ms, alpha)]).reshape(raw.shape)
-    dev = np.sqrt(np.maximum(raw, 0.0) / factor)
-    dof = np.array([[edf(kind, a, m, n_phase) for a in row]
+def finish(kind, raw, ms, alpha, n_phase, factor=None):
+    """
+    Bias-corrected deviation, EDF and 68.3 % interval from the raw variance (T, A).
+
+    ``factor`` (broadcast to (T, A)), when given, is the bias factor instead of the kind's
+    per-noise one (theo1's run-wide ThêoBR factor, :func:`run_bias`).
+    """
+    spec = kind_of(kind)
+    if factor is None:
+        factor = np.array([[spec.bias(a, m, n_phase) for a in row]
+                           for m, row in zip(ms, alpha)]).reshape(raw.shape)
+    dev = np.sqrt(np.maximum(raw, 0.0) / np.broadcast_to(factor, raw.shape))
+    dof = np.array([[spec.edf(a, m, n_phase) for a in row]
                     for m, row in zip(ms, alpha)], dtype=float).reshape(raw.shape)
-    if kind in ('totdev', 'mtotdev', 'htotdev', 'theo1'):
+    if spec.edf_floor:
         # SP1065's fitted EDFs go below 1 (even negative) at the longest factors, outside the
         # range they were fitted on: one degree of freedom there, the widest honest interval.
         dof = np.where(np.isfinite(dof), np.maximum(dof, 1.0), dof)
@@ -249,7 +248,7 @@ def _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters):
         return ms
     tau_in = np.atleast_1d(np.asarray(taus, dtype=float))
     ms = grid.ms_from_taus(kind, tau_in, rate_hz)
-    low = 2 if kind == 'theo1' else 1
+    low = kind_of(kind).m_step
     if np.any(ms < low):
         raise ValueError(f'averaging time {tau_in[ms < low][0]:g} s is shorter than the '
                          f'shortest {kind} averaging time '
@@ -262,7 +261,7 @@ def _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters):
 
 
 def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
-              min_clusters=_allan.DEFAULT_MIN_CLUSTERS, axes=None):
+              min_clusters=_allan.DEFAULT_MIN_CLUSTERS, axes=None, alpha=None):
     """
     Frequency-stability deviation ``kind`` of rate samples with 68.3 % intervals.
 
@@ -283,6 +282,12 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
         Grid density; the oadev guard.
     axes : sequence of str, optional
         Column names (default: the package axis order).
+    alpha : int, optional
+        The noise exponent, fixed for every averaging time and axis (Stable32's "Alpha"; +2
+        white PM .. -2 random-walk FM, -4 for the Hadamard kinds): the bias corrections and
+        EDFs are that noise's.  Default: identified from the data, per averaging time (lag-1
+        autocorrelation, B1 ratio: :mod:`.noise_id`); theo1 per axis for the whole run, with
+        Stable32's ThêoBR bias removal (:mod:`.theobr`).
 
     Returns
     -------
@@ -290,18 +295,53 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
 
     """
     data = _check(data, rate_hz, kind)
+    spec = kind_of(kind)
+    alpha = _fixed_alpha(spec, alpha)
     ms = _factors(kind, data, rate_hz, taus, points_per_decade, min_clusters)
     n = data.shape[0]
     x = phase(data, ms)
     _finite(data, rate_hz, x)
-    raw, alpha = raw_and_alpha(kind, x, ms, data)
-    dev, low, high, dof = finish(kind, raw, ms, alpha, n + 1)
-    tau = ms * grid.tau_factor(kind) / float(rate_hz)
+    factor = None
+    if alpha is not None:
+        raw = raw_variance(kind, x, ms, data)
+        alphas = np.full(raw.shape, alpha, dtype=int)
+    elif spec.run_bias is not None:
+        raw = raw_variance(kind, x, ms, data)
+        run_alpha, run_factor = run_bias(kind, x, data)
+        alphas = np.repeat(run_alpha[None, :], len(ms), axis=0)
+        factor = run_factor[None, :]
+    else:
+        raw, alphas = raw_and_alpha(kind, x, ms, data)
+    dev, low, high, dof = finish(kind, raw, ms, alphas, n + 1, factor)
+    tau = ms * spec.tau_factor / float(rate_hz)
     axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]
-    counts = np.array([n_terms(kind, n + 1, int(m)) for m in ms], dtype=np.int64)
-    result = DeviationResult('mdev' if kind == 'tdev' else kind, tau, ms, dev, low, high, dof,
-                             alpha, counts, axes, float(rate_hz), n)
-    return tdev_of(result) if kind == 'tdev' else result
+    counts = np.array([spec.terms(n + 1, int(m)) for m in ms], dtype=np.int64)
+    result = DeviationResult(spec.derived_from or kind, tau, ms, dev, low, high, dof,
+                             alphas, counts, axes, float(rate_hz), n)
+    return derive(result, spec) if spec.derived_from else result
+
+
+def _fixed_alpha(spec, alpha):
+    """Return ``alpha`` as an int inside the kind's range, or None; ValueError otherwise."""
+    if alpha is None:
+        return None
+    lo, hi = spec.alpha_range
+    try:
+        value = int(alpha)
+        whole = value == alpha
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole or not lo <= value <= hi:
+        raise ValueError(f'alpha must be a whole number from {lo} to {hi} for {spec.name}, '
+                         f'not {alpha!r}')
+    return value
+
+
+def derive(base, spec):
+    """Scale a base kind's result (mdev) into its derived kind's (``spec``: tdev)."""
+    scale = spec.scale(base.tau)[:, None]
+    return replace(base, kind=spec.name, dev=base.dev * scale, ci_low=base.ci_low * scale,
+                   ci_high=base.ci_high * scale)
 
 
 def tdev_of(mdev):
@@ -311,9 +351,7 @@ def tdev_of(mdev):
     SP1065 eq 15; ``deviation(..., 'tdev')`` is this of ``deviation(..., 'mdev')`` with the
     same arguments, so a caller that wants both computes the modified variance once.
     """
-    scale = modified.tdev_scale(mdev.tau)[:, None]
-    return replace(mdev, kind='tdev', dev=mdev.dev * scale, ci_low=mdev.ci_low * scale,
-                   ci_high=mdev.ci_high * scale)
+    return derive(mdev, KIND['tdev'])
 
 
 def parse_kinds(text, where='--estimators'):

@@ -5,8 +5,8 @@ No temporaries (numpy makes three to five full-length arrays per averaging time)
 the package's thread pool (:func:`imu_allan.core.jit.map_threads`).  adev and hdev (stride
 m: N / m terms), ohdev and totdev (N terms per m) are summed block by block over the phase,
 every averaging time per 32 KiB block, as the Allan kernel (:mod:`..allan_kernel`): each
-phase point comes from memory once per axis.  mdev is
-Stable32's recursion, one pass per (m, three axes).  The numpy versions in
+phase point comes from memory once per axis.  mdev is Stable32's recursion, blocked the
+same way, four factors per loop.  The numpy versions in
 :mod:`.allan_family`, :mod:`.modified` and :mod:`.total` are the oracles these are tested
 against.
 """
@@ -16,46 +16,85 @@ import numpy as np
 from .noise_id_kernel import gather_block
 from ..jit import jit, map_threads
 
-
-@jit(nogil=True, fastmath=False)
-def _modified_sum(x, m):  # pragma: no cover - compiled; tested vs numpy
-    # Stable32's recursion: consecutive inner sums differ by one third difference.
-    count = x.shape[0] - 3 * m + 1
-    v = 0.0
-    for i in range(m):
-        v += x[i + 2 * m] - 2.0 * x[i + m] + x[i]
-    s = v * v
-    # Views indexed from 0: numba then drops its negative-index checks (1.7-2x faster).
-    x3, x2, x1 = x[3 * m:], x[2 * m:], x[m:]
-    for j in range(count - 1):
-        v += x3[j] - 3.0 * x2[j] + 3.0 * x1[j] - x[j]
-        s += v * v
-    return s, count
+#: Fused multiply-adds only (no reassociation): the recursion's adds stay in order, and a
+#: multiply and the add after it become one instruction with one rounding.  30 % less CPU
+#: (0.41 -> 0.28 s on 1.7 M x 6: the two FP adders were the limit).  The sums differ from
+#: numpy's unfused ones by rounding: 1e-14 on white noise, up to 2e-10 at m = 1 on random-walk
+#: FM (phase ~ n^1.5), where both are 1e-11 to 6e-10 off the exact sums (test_compiled_paths).
+_CONTRACT = {'contract'}
 
 
-@jit(nogil=True, fastmath=False)
-def _modified_three(xa, xb, xc, m):  # pragma: no cover - compiled; tested vs numpy
-    # _modified_sum of three axes in one loop, each in its own order of operations (the same
-    # sums bit for bit): the recursion is one dependent chain of adds per axis, and one chain
-    # left the core's other adders idle (1.2-1.35x faster here, 1.7 M points).
-    count = xa.shape[0] - 3 * m + 1
-    va = vb = vc = 0.0
-    for i in range(m):
-        va += xa[i + 2 * m] - 2.0 * xa[i + m] + xa[i]
-        vb += xb[i + 2 * m] - 2.0 * xb[i + m] + xb[i]
-        vc += xc[i + 2 * m] - 2.0 * xc[i + m] + xc[i]
-    sa, sb, sc = va * va, vb * vb, vc * vc
-    a3, a2, a1 = xa[3 * m:], xa[2 * m:], xa[m:]
-    b3, b2, b1 = xb[3 * m:], xb[2 * m:], xb[m:]
-    c3, c2, c1 = xc[3 * m:], xc[2 * m:], xc[m:]
-    for j in range(count - 1):
-        va += a3[j] - 3.0 * a2[j] + 3.0 * a1[j] - xa[j]
-        vb += b3[j] - 3.0 * b2[j] + 3.0 * b1[j] - xb[j]
-        vc += c3[j] - 3.0 * c2[j] + 3.0 * c1[j] - xc[j]
+@jit(nogil=True, fastmath=_CONTRACT, inline='never')
+def _modified_four(xa, ma, mb, mc, md, j0, j1, v, s, t):  # pragma: no cover - compiled
+    # Stable32's recursion for four factors over steps j in [j0, j1): v[t + k] += x_{j+3m} -
+    # 3 x_{j+2m} + 3 x_{j+m} - x_j, s[t + k] += v^2.  Four independent add chains per loop
+    # (one chain left the core's other adders idle) and x_j loaded once for the four; each
+    # chain in the one-factor order of operations (_modified_one's).
+    x0 = xa[j0:]
+    a1, a2, a3 = xa[j0 + ma:], xa[j0 + 2 * ma:], xa[j0 + 3 * ma:]
+    b1, b2, b3 = xa[j0 + mb:], xa[j0 + 2 * mb:], xa[j0 + 3 * mb:]
+    c1, c2, c3 = xa[j0 + mc:], xa[j0 + 2 * mc:], xa[j0 + 3 * mc:]
+    d1, d2, d3 = xa[j0 + md:], xa[j0 + 2 * md:], xa[j0 + 3 * md:]
+    va, vb, vc, vd = v[t], v[t + 1], v[t + 2], v[t + 3]
+    sa, sb, sc, sd = s[t], s[t + 1], s[t + 2], s[t + 3]
+    for j in range(j1 - j0):
+        x = x0[j]
+        va += a3[j] - 3.0 * a2[j] + 3.0 * a1[j] - x
+        vb += b3[j] - 3.0 * b2[j] + 3.0 * b1[j] - x
+        vc += c3[j] - 3.0 * c2[j] + 3.0 * c1[j] - x
+        vd += d3[j] - 3.0 * d2[j] + 3.0 * d1[j] - x
         sa += va * va
         sb += vb * vb
         sc += vc * vc
-    return sa, sb, sc
+        sd += vd * vd
+    v[t], v[t + 1], v[t + 2], v[t + 3] = va, vb, vc, vd
+    s[t], s[t + 1], s[t + 2], s[t + 3] = sa, sb, sc, sd
+
+
+@jit(nogil=True, fastmath=_CONTRACT, inline='never')
+def _modified_one(xa, m, j0, j1, v, s, t):  # pragma: no cover - compiled; tested vs numpy
+    # One factor's recursion over steps [j0, j1), as _modified_four's chains.
+    x0, x1, x2, x3 = xa[j0:], xa[j0 + m:], xa[j0 + 2 * m:], xa[j0 + 3 * m:]
+    vt, st = v[t], s[t]
+    for j in range(j1 - j0):
+        vt += x3[j] - 3.0 * x2[j] + 3.0 * x1[j] - x0[j]
+        st += vt * vt
+    v[t], s[t] = vt, st
+
+
+@jit(nogil=True, fastmath=False)
+def _modified_blocks(xa, ms, s):  # pragma: no cover - compiled; tested vs numpy
+    # s[t] = sum over j = 0 .. N - 3m of v_j^2, v_j the m-sum of second differences at ms[t]
+    # (ascending): the first one summed directly, the others by Stable32's recursion,
+    # v_{j+1} = v_j + x_{j+3m} - 3 x_{j+2m} + 3 x_{j+m} - x_j.  Block by block over j, every
+    # factor per block, four at a time: one pass per factor streamed the phase's four
+    # neighbourhoods x_j .. x_{j+3m} from memory once per m; here each block's are read for
+    # every factor while they sit in the caches.
+    n = xa.shape[0]
+    n_tau = ms.shape[0]
+    v = np.zeros(n_tau)
+    last = np.empty(n_tau, dtype=np.int64)  # steps j < last[t]: count - 1 of them
+    for t in range(n_tau):
+        m = ms[t]
+        for i in range(m):
+            v[t] += xa[i + 2 * m] - 2.0 * xa[i + m] + xa[i]
+        s[t] = v[t] * v[t]
+        last[t] = n - 3 * m
+    for b0 in range(0, last[0], BLOCK):
+        b1 = min(b0 + BLOCK, last[0])
+        t = 0
+        while t < n_tau and last[t] > b0:
+            if t + 4 <= n_tau and last[t + 3] > b0:
+                common = min(b1, last[t + 3])  # the fourth factor is the longest: fewest steps
+                _modified_four(xa, ms[t], ms[t + 1], ms[t + 2], ms[t + 3], b0, common, v, s, t)
+                for k in range(4):
+                    end = min(b1, last[t + k])
+                    if common < end:
+                        _modified_one(xa, ms[t + k], common, end, v, s, t + k)
+                t += 4
+            else:
+                _modified_one(xa, ms[t], b0, min(b1, last[t]), v, s, t)
+                t += 1
 
 
 #: Phase points per block of the overlapping sums (as :data:`..allan_kernel.BLOCK`: 32 KiB).
@@ -87,15 +126,36 @@ def _centred_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
 def _stride_one(xa, m, d, q0, q1):  # pragma: no cover - compiled; tested vs numpy
     # Squared d-th differences (2: Allan, 3: Hadamard) ending at q = q0, q0 + m, ... < q1,
     # in allan_family's order of operations (x_{k+2m} - 2 x_{k+m} + x_k, and the third).
+    # Consecutive terms share all but one point: the d older ones are carried in registers,
+    # one load per term instead of d + 1 (each a new cache line from m = 8 on); m = 1 runs
+    # contiguous, the form LLVM vectorises.  2.8x (Allan) and 3.1x (Hadamard) less CPU here.
     s = 0.0
+    if m == 1:
+        x3, x2, x1 = xa[q0:], xa[q0 - 1:], xa[q0 - 2:]
+        if d == 2:
+            for k in range(q1 - q0):
+                e = x3[k] - 2.0 * x2[k] + x1[k]
+                s += e * e
+        else:
+            x0 = xa[q0 - 3:]
+            for k in range(q1 - q0):
+                e = x3[k] - 3.0 * x2[k] + 3.0 * x1[k] - x0[k]
+                s += e * e
+        return s
     if d == 2:
+        a, b = xa[q0 - 2 * m], xa[q0 - m]
         for q in range(q0, q1, m):
-            e = xa[q] - 2.0 * xa[q - m] + xa[q - 2 * m]
+            c = xa[q]
+            e = c - 2.0 * b + a
             s += e * e
+            a, b = b, c
     else:
+        a, b, c = xa[q0 - 3 * m], xa[q0 - 2 * m], xa[q0 - m]
         for q in range(q0, q1, m):
-            e = xa[q] - 3.0 * xa[q - m] + 3.0 * xa[q - 2 * m] - xa[q - 3 * m]
+            z = xa[q]
+            e = z - 3.0 * c + 3.0 * b - a
             s += e * e
+            a, b, c = b, c, z
     return s
 
 
@@ -122,18 +182,56 @@ def _stride_blocks(xa, ms, d, acc, ks, offs, points):  # pragma: no cover - comp
                 gather_block(xa, m, ks[t], b0, b1, points, offs[t])
 
 
+@jit(fastmath=True, nogil=True, inline='never')
+def _third_four(xa, ma, mb, mc, md, k0, k1):  # pragma: no cover - compiled
+    # _third_one of four factors in one loop, x_k loaded once for the four (as _centred_four).
+    x0 = xa[k0:]
+    a1, a2, a3 = xa[k0 + ma:], xa[k0 + 2 * ma:], xa[k0 + 3 * ma:]
+    b1, b2, b3 = xa[k0 + mb:], xa[k0 + 2 * mb:], xa[k0 + 3 * mb:]
+    c1, c2, c3 = xa[k0 + mc:], xa[k0 + 2 * mc:], xa[k0 + 3 * mc:]
+    d1, d2, d3 = xa[k0 + md:], xa[k0 + 2 * md:], xa[k0 + 3 * md:]
+    sa = sb = sc = sd = 0.0
+    for k in range(k1 - k0):
+        x = x0[k]
+        ea = a3[k] - 3.0 * a2[k] + 3.0 * a1[k] - x
+        eb = b3[k] - 3.0 * b2[k] + 3.0 * b1[k] - x
+        ec = c3[k] - 3.0 * c2[k] + 3.0 * c1[k] - x
+        ed = d3[k] - 3.0 * d2[k] + 3.0 * d1[k] - x
+        sa += ea * ea
+        sb += eb * eb
+        sc += ec * ec
+        sd += ed * ed
+    return sa, sb, sc, sd
+
+
 @jit(nogil=True)
 def _hadamard_blocks(xa, ms, k_lo, k_hi, acc):  # pragma: no cover - compiled
-    # acc[t] += sum of squared third differences at ms[t] for k in [k_lo, k_hi), k + 3m < N:
-    # block by block, every averaging time per block, so that each phase point comes from
-    # memory once and the 3 m window behind it from the caches (as the Allan kernel).
+    # acc[t] += sum of squared third differences at ms[t] (ascending) for k in [k_lo, k_hi),
+    # k + 3m < N: block by block, every averaging time per block, so that each phase point
+    # comes from memory once and the 3 m window behind it from the caches (as the Allan
+    # kernel); four factors per loop over their common range (22 % less CPU than one).
     n_phase = xa.shape[0]
+    n_tau = ms.shape[0]
     for k0 in range(k_lo, k_hi, BLOCK):
         k1 = min(k0 + BLOCK, k_hi)
-        for t in range(ms.shape[0]):
-            k1t = min(k1, n_phase - 3 * ms[t])
-            if k1t > k0:
-                acc[t] += _third_one(xa, ms[t], k0, k1t)
+        t = 0
+        while t < n_tau:
+            top = min(t + 4, n_tau)
+            common = k0  # the group's common range [k0, common): the last factor is longest
+            if top - t == 4:
+                common = max(k0, min(k1, n_phase - 3 * ms[t + 3]))
+                if common > k0:
+                    sa, sb, sc, sd = _third_four(xa, ms[t], ms[t + 1], ms[t + 2], ms[t + 3],
+                                                 k0, common)
+                    acc[t] += sa
+                    acc[t + 1] += sb
+                    acc[t + 2] += sc
+                    acc[t + 3] += sd
+            for u in range(t, top):
+                end = min(k1, n_phase - 3 * ms[u])
+                if end > common:
+                    acc[u] += _third_one(xa, ms[u], common, end)
+            t = top
 
 
 @jit(fastmath=True, nogil=True, inline='never')
@@ -159,24 +257,30 @@ def _centred_four(xa, ma, mb, mc, md, i0, i1):  # pragma: no cover - compiled
 
 
 @jit(fastmath=True, nogil=True, inline='never')
-def _left_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
-    # Centres c < m (c + m inside): x*_{c-m} = 2 x_0 - x_{m-c}, as total.reflect computes it.
+def _left_one(xa, ra, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
+    # Centres c < m (c + m inside): x*_{c-m} = 2 x_0 - x_{m-c}, as total.reflect computes it,
+    # x_{m-c} read ascending from the reversed phase ra (ra[j] = x_{N-1-j}): a descending
+    # index kept numba's negative-index check and the loop scalar (3-4x the inside's cost).
+    n = xa.shape[0]
     x0 = xa[0]
+    lo, mid, hi = ra[n - 1 - m + i0:], xa[i0:], xa[i0 + m:]
     s = 0.0
-    for c in range(i0, i1):
-        d = (2.0 * x0 - xa[m - c]) - 2.0 * xa[c] + xa[c + m]
+    for k in range(i1 - i0):
+        d = (2.0 * x0 - lo[k]) - 2.0 * mid[k] + hi[k]
         s += d * d
     return s
 
 
 @jit(fastmath=True, nogil=True, inline='never')
-def _right_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
-    # Centres c + m > N - 1 (c - m inside): x*_{c+m} = 2 x_{N-1} - x_{2N-2-c-m}.
+def _right_one(xa, ra, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
+    # Centres c + m > N - 1 (c - m inside): x*_{c+m} = 2 x_{N-1} - x_{2N-2-c-m}, that point
+    # read ascending from the reversed phase (ra[c + m - N + 1]).
     n = xa.shape[0]
     xn = xa[n - 1]
+    lo, mid, hi = xa[i0 - m:], xa[i0:], ra[i0 + m - n + 1:]
     s = 0.0
-    for c in range(i0, i1):
-        d = xa[c - m] - 2.0 * xa[c] + (2.0 * xn - xa[2 * n - 2 - c - m])
+    for k in range(i1 - i0):
+        d = lo[k] - 2.0 * mid[k] + (2.0 * xn - hi[k])
         s += d * d
     return s
 
@@ -193,7 +297,7 @@ def _both_one(xa, m, i0, i1):  # pragma: no cover - compiled; tested vs numpy
 
 
 @jit(nogil=True)
-def _total_blocks(xa, ms, c_lo, c_hi, acc):  # pragma: no cover - compiled
+def _total_blocks(xa, ra, ms, c_lo, c_hi, acc):  # pragma: no cover - compiled
     # acc[t] += sum over centres c in [c_lo, c_hi) of (x*_{c-m} - 2 x_c + x*_{c+m})^2 at
     # ms[t] (ascending), x* the reflected phase of total.reflect (SP1065 eq 25), block by
     # block as _hadamard_blocks, without its 3N-point copy: the centres whose neighbours are
@@ -233,25 +337,32 @@ def _total_blocks(xa, ms, c_lo, c_hi, acc):  # pragma: no cover - compiled
                         s += _centred_one(xa, m, a, b)
                 left = min(c1, m, n - m)
                 if c0 < left:
-                    s += _left_one(xa, m, c0, left)
+                    s += _left_one(xa, ra, m, c0, left)
                 right = max(c0, m, n - m)
                 if right < c1:
-                    s += _right_one(xa, m, right, c1)
+                    s += _right_one(xa, ra, m, right, c1)
                 both0, both1 = max(c0, n - m), min(c1, m)
                 if both0 < both1:
                     s += _both_one(xa, m, both0, both1)
                 acc[t] += s
 
 
-def _blocked(kernel, rows, ms, lo, hi):
-    """Run a block kernel on every row of ``rows`` over [lo, hi) in (row, range) jobs: (T, A)."""
+def _blocked(kernel, rows, ms, lo, hi, mirrors=None):
+    """
+    Run a block kernel on every row of ``rows`` over [lo, hi) in (row, range) jobs: (T, A).
+
+    ``mirrors`` (A, N), when given, go to the kernel after the row (totdev: reversed rows).
+    """
     chunks = -(-8 // rows.shape[0])  # at least 8 jobs: balance on a shared machine
     cut = [lo + (hi - lo) * c // chunks for c in range(chunks + 1)]
     part = np.zeros((rows.shape[0], chunks, ms.size))
 
     def job(index):
         a, c = divmod(index, chunks)
-        kernel(rows[a], ms, cut[c], cut[c + 1], part[a, c])
+        if mirrors is None:
+            kernel(rows[a], ms, cut[c], cut[c + 1], part[a, c])
+        else:
+            kernel(rows[a], mirrors[a], ms, cut[c], cut[c + 1], part[a, c])
     map_threads(job, list(range(rows.shape[0] * chunks)))
     return part.sum(axis=1).T
 
@@ -261,20 +372,25 @@ def _overlapping(kind, x, ms):
     n_phase = x.shape[1]
     ms = np.asarray(ms, dtype=np.int64)
     out = np.full((ms.size, x.shape[0]), np.nan)
+    mirrors = None
     if kind == 'ohdev':
         ok = n_phase - 3 * ms >= 1
-        if ok.any():
-            use = np.ascontiguousarray(ms[ok])
-            sums = _blocked(_hadamard_blocks, x, use, 0, n_phase - 3 * int(use.min()))
-            out[ok] = sums / (6.0 * use * use * (n_phase - 3 * use))[:, None]
-        return out
-    ok = (ms <= n_phase - 2) & (n_phase >= 3)
+        kernel, lo, hi = _hadamard_blocks, 0, n_phase - 3 * int(ms[ok].min()) if ok.any() else 0
+    else:
+        ok = (ms <= n_phase - 2) & (n_phase >= 3)
+        kernel, lo, hi = _total_blocks, 1, n_phase - 1  # centres 1 .. N-2
     if ok.any():
-        order = np.argsort(ms[ok], kind='stable')  # _total_blocks groups ascending factors
+        if kind == 'totdev':  # the reflected ends read the phase backwards
+            mirrors = np.ascontiguousarray(x[:, ::-1])
+        order = np.argsort(ms[ok], kind='stable')  # both kernels group ascending factors
         use = np.ascontiguousarray(ms[ok][order])
         sums = np.empty((use.size, x.shape[0]))
-        sums[order] = _blocked(_total_blocks, x, use, 1, n_phase - 1)  # centres 1 .. N-2
-        out[ok] = sums / (2.0 * ms[ok] * ms[ok] * (n_phase - 2))[:, None]
+        sums[order] = _blocked(kernel, x, use, lo, hi, mirrors)
+        m = ms[ok]
+        if kind == 'ohdev':
+            out[ok] = sums / (6.0 * m * m * (n_phase - 3 * m))[:, None]
+        else:
+            out[ok] = sums / (2.0 * m * m * (n_phase - 2))[:, None]
     return out
 
 
@@ -285,25 +401,20 @@ def variance(kind, x, ms):
         return _overlapping(kind, x, ms)
     if kind in ('adev', 'hdev'):
         return _strided(kind, x, ms)
-    # mdev, tdev: one job per (m, three axes), N - 3m + 1 steps each.
-    groups = [tuple(range(a, min(a + 3, x.shape[0]))) for a in range(0, x.shape[0], 3)]
-    jobs = [(t, g) for t in range(len(ms)) for g in groups]
-
-    def run(job):
-        t, axes = job
-        m = int(ms[t])
-        count = x.shape[1] - 3 * m + 1
-        if count < 1:
-            return [np.nan] * len(axes)
-        if len(axes) == 3:
-            sums = _modified_three(x[axes[0]], x[axes[1]], x[axes[2]], m)
-        else:
-            sums = [_modified_sum(x[a], m)[0] for a in axes]
-        return [s / (2.0 * m ** 4 * count) for s in sums]
-
-    out = np.full((len(ms), x.shape[0]), np.nan)
-    for (t, axes), values in zip(jobs, map_threads(run, jobs)):
-        out[t, list(axes)] = values
+    # mdev, tdev: one blocked pass per axis (ascending factors; nan: no inner sum).
+    ms = np.asarray(ms, dtype=np.int64)
+    out = np.full((ms.size, x.shape[0]), np.nan)
+    ok = x.shape[1] - 3 * ms + 1 >= 1
+    if ok.any():
+        order = np.argsort(ms[ok], kind='stable')
+        use = np.ascontiguousarray(ms[ok][order])
+        sums = np.empty((x.shape[0], use.size))
+        map_threads(lambda a: _modified_blocks(x[a], use, sums[a]), list(range(x.shape[0])))
+        # the numpy reference's normalisation (exact int m^4), so the results equal it
+        norm = np.array([2.0 * int(m) ** 4 * (x.shape[1] - 3 * int(m) + 1) for m in use])
+        values = np.empty((use.size, x.shape[0]))
+        values[order] = sums.T / norm[:, None]
+        out[ok] = values
     return out
 
 

@@ -53,13 +53,14 @@ def theo1_reference(x, ms):
     return out
 
 
-def theo1_fast(x, ms):
+def theo1_fast(x, ms, strides=None):
     """
     Theo1 like :func:`theo1_reference`, the inner sum as one vectorized pass per delta.
 
     The summand is (u_i - x_{i+h-delta} - x_{i+h+delta})^2 with u_i = x_i + x_{i+m} and
     h = m/2, so u is formed once per m and each delta costs one pass over N - m values (O(N m)
-    per m in all, like the definition, without its index arrays).
+    per m in all, like the definition, without its index arrays).  ``strides`` (T,): only every
+    stride-th i enters the average (:mod:`.total_kernel`'s thinned estimate; 1: exact).
     """
     n_phase = x.shape[1]
     out = np.full((len(ms), x.shape[0]), np.nan)
@@ -69,12 +70,14 @@ def theo1_fast(x, ms):
             continue
         h = m // 2
         count = n_phase - m
-        u = x[:, :count] + x[:, m:m + count]
+        s = 1 if strides is None else int(strides[t])
+        u = x[:, :count:s] + x[:, m:m + count:s]
         total = np.zeros(x.shape[0])
         for delta in range(h):
-            a = u - x[:, h - delta:h - delta + count] - x[:, h + delta:h + delta + count]
+            a = (u - x[:, h - delta:h - delta + count:s]
+                 - x[:, h + delta:h + delta + count:s])
             total += np.einsum('ij,ij->i', a, a) / (h - delta)
-        out[t] = total / (0.75 * count * m * m)
+        out[t] = total / (0.75 * u.shape[1] * m * m)
     return out
 
 

@@ -79,14 +79,22 @@ def test_compiled_totvar_reflects_like_numpy(n_phase):
 
 @pytest.mark.parametrize('kind', ['adev', 'oadev', 'mdev', 'tdev', 'hdev', 'ohdev', 'totdev'])
 def test_deviation_compiled_equals_numpy(kind, monkeypatch):
-    # Not the random run: the compiled MDEV recursion (kernels._modified_sum, Stable32's) and
-    # numpy's sums differ by ~1e-7 relative on a phase growing as n^2.5 (as before).
+    # Not the random run: the compiled MDEV recursion (Stable32's) and numpy's sums differ by
+    # ~1e-7 relative on a phase growing as n^2.5 (as before).  The random-walk FM column
+    # (index 2, phase ~ n^1.5) at mdev/tdev: the compiled recursion fuses each multiply and
+    # add (kernels._CONTRACT), numpy cannot; both orders are off the exact value (long double,
+    # direct sums) by 1e-11 to 6e-10 at m = 1 (measured, seeds 3, 17, 18: the recursion's own
+    # rounding, the fused one no worse) and differ from each other by up to 2.1e-10 over 20
+    # seeds: 1e-9 there; 1e-12 everywhere else (rounding of the phase only).
     y = _power_laws(30_000)[:, [0, 1, 2, 4]]
     monkeypatch.setattr(allan, 'SMALL_WORK', np.inf)
     slow = api.deviation(y, 100.0, kind)
     monkeypatch.setattr(allan, 'SMALL_WORK', 0)
     fast = api.deviation(y, 100.0, kind)
     np.testing.assert_array_equal(fast.alpha, slow.alpha)
+    rtol = [1e-12, 1e-12, 1e-9 if kind in ('mdev', 'tdev') else 1e-12, 1e-12]
     for name in ('dev', 'ci_low', 'ci_high', 'edf'):
-        np.testing.assert_allclose(getattr(fast, name), getattr(slow, name), rtol=1e-12,
-                                   err_msg=name)
+        for column, tol in enumerate(rtol):
+            np.testing.assert_allclose(getattr(fast, name)[:, column],
+                                       getattr(slow, name)[:, column], rtol=tol,
+                                       err_msg=f'{name}, column {column}')
