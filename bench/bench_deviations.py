@@ -33,8 +33,8 @@ import time
 import allantools
 from benchlib import goal, header, load
 from imu_allan import deviation, simulate, thesis_gx3_25_model
-from imu_allan.core import allan
-from imu_allan.core.allan import _phase
+from imu_allan.core.allan import estimate as allan
+from imu_allan.core.allan.estimate import _phase
 from imu_allan.core.deviations import api
 import numpy as np
 

@@ -15,10 +15,10 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from benchlib import header  # noqa: E402
-from imu_allan.core.allan import allan_deviation  # noqa: E402
+from imu_allan.core.allan.estimate import allan_deviation  # noqa: E402
 from imu_allan.core.discrepancy import run_discrepancy  # noqa: E402
 from imu_allan.core.model import thesis_gx3_25_model  # noqa: E402
-from imu_allan.core.simulate import simulate  # noqa: E402
+from imu_allan.core.simulation.simulate import simulate  # noqa: E402
 
 RATE = 100.0
 HOURS = 2.0

@@ -32,7 +32,8 @@ def status(key):
     line = [x for x in open('/proc/self/status') if x.startswith(key)][0]
     return int(line.split()[1]) * 1024
 before = status('VmRSS')
-from imu_allan.core import allan_kernel  # (numba's registries load with the kernels' module)
+# (numba's registries load with the kernels' module)
+from imu_allan.core.allan import kernel as allan_kernel
 allan_kernel.avar(np.random.default_rng(0).normal(size=(20_000, 6)), np.array([1, 2, 10]))
 gc.collect()
 base = status('VmRSS')

@@ -15,7 +15,7 @@ CODE = """
 import sys, time
 if sys.argv[1] == 'off':
     sys.modules['numba'] = None
-from imu_allan.core.allan import allan_deviation
+from imu_allan.core.allan.estimate import allan_deviation
 data = np.random.default_rng(1).normal(size=(1_700_000, 6))
 allan_deviation(data[:1000], 100.0)   # compile / load the kernel, log the fallback once
 best = min((lambda t0: (allan_deviation(data, 100.0), time.perf_counter() - t0)[1])(

@@ -38,11 +38,11 @@ import sys  # noqa: E402
 import time  # noqa: E402
 
 from benchlib import header  # noqa: E402
-from imu_allan.core.allan import allan_deviation  # noqa: E402
+from imu_allan.core.allan.estimate import allan_deviation  # noqa: E402
+from imu_allan.core.live.online import OnlineAllan  # noqa: E402
+from imu_allan.core.live.streaming import StreamingAllan  # noqa: E402
 from imu_allan.core.model import NoiseModel, thesis_gx3_25_model  # noqa: E402
-from imu_allan.core.online import OnlineAllan  # noqa: E402
-from imu_allan.core.simulate import simulate  # noqa: E402
-from imu_allan.core.streaming import StreamingAllan  # noqa: E402
+from imu_allan.core.simulation.simulate import simulate  # noqa: E402
 import numpy as np  # noqa: E402
 
 
@@ -72,7 +72,7 @@ def bench_estimator():
     print(f'  OnlineAllan (stamps + gate + estimator): {dt / n * 1e6:6.2f} us per sample '
           f'({100 * dt / (n / rate):.2f} % of one core); memory '
           f'{pipe.memory_bytes() / 1024:.0f} KiB (fixed)')
-    from imu_allan.core.change_monitor import ChangeMonitor
+    from imu_allan.core.live.change_monitor import ChangeMonitor
     from imu_allan.core.units import AXES
     monitor = ChangeMonitor(rate, 600.0, AXES)
     start = time.perf_counter()

@@ -21,8 +21,8 @@ import time
 
 from benchlib import best_of, goal, header
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.sensor import MAX_EXAMINED, measure_sensor, SensorAccumulator
-from imu_allan.core.simulate import simulate
+from imu_allan.core.sensor.measure import MAX_EXAMINED, measure_sensor, SensorAccumulator
+from imu_allan.core.simulation.simulate import simulate
 import numpy as np
 
 RATE = 100.0

@@ -20,18 +20,18 @@ __version__ = '0.1.0'
 
 _API = {
     # Allan deviation, EDF and intervals
-    'allan_deviation': 'core.allan', 'AllanResult': 'core.allan',
-    'edf_oadev': 'core.edf', 'chi2_interval': 'core.edf', 'CI_LEVEL': 'core.edf',
+    'allan_deviation': 'core.allan.estimate', 'AllanResult': 'core.allan.estimate',
+    'edf_oadev': 'core.allan.edf', 'chi2_interval': 'core.allan.edf', 'CI_LEVEL': 'core.allan.edf',
     # the family of deviations (Stable32's), with intervals
     'deviation': 'core.deviations', 'DeviationResult': 'core.deviations',
     # noise terms, fit, models, simulation
     'fit_noise_model': 'core.fit', 'FittedModel': 'core.fit',
     'NoiseModel': 'core.model', 'thesis_gx3_25_model': 'core.model',
-    'simulate': 'core.simulate',
+    'simulate': 'core.simulation.simulate',
     'export': 'report.exporters',
     # streaming and online estimation
-    'StreamingAllan': 'core.streaming', 'OnlineAllan': 'core.online',
-    'online_allan': 'core.online',
+    'StreamingAllan': 'core.live.streaming', 'OnlineAllan': 'core.live.online',
+    'online_allan': 'core.live.online',
     # denoising, discrepancy workflow
     'denoise': 'core.denoise', 'run_discrepancy': 'core.discrepancy',
     # recordings

@@ -93,7 +93,7 @@ def live_part(env):
 def offline_part(env):
     """Simulate 2 h of the thesis model, write an MCAP bag, run analyze; return the page path."""
     from imu_allan import simulate, thesis_gx3_25_model
-    from imu_allan.core.device_processing import DeviceProcessing
+    from imu_allan.core.simulation.device_processing import DeviceProcessing
     from imu_allan.core.units import STANDARD_GRAVITY
     from imu_allan.formats.bag_writer import write_imu_bag
     from imu_allan.formats.samples import Samples

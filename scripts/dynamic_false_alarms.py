@@ -14,10 +14,10 @@ import argparse
 import math
 import time
 
-from imu_allan.core.change_detection import detect_changes
-from imu_allan.core.dynamic import dynamic_allan
+from imu_allan.core.change.detection import detect_changes
+from imu_allan.core.change.dynamic import dynamic_allan
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 
 
 def main():

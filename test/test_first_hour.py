@@ -14,7 +14,7 @@ import sys
 
 from conftest import REPO
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.formats.bag_writer import write_imu_bag
 from imu_allan.formats.samples import Samples
 import numpy as np

@@ -59,10 +59,10 @@ def build_parser():
     p.add_argument('--tau-max', type=bounded_float(0.0, 1e9, low_open=True), metavar='S',
                    help='longest averaging time, s')
     p.add_argument('--tau-range', metavar='LO,HI',
-                   help="fit only these averaging times, s (default: chosen from the data, "
+                   help='fit only these averaging times, s (default: chosen from the data, '
                         "where the sensor's own processing does not shape the curve)")
     p.add_argument('--plain-fit', action='store_true',
-                   help="fit the IEEE terms over every averaging time, without measuring the "
+                   help='fit the IEEE terms over every averaging time, without measuring the '
                         "sensor's processing (its filter, lines and resonances)")
     p.add_argument('--replace-outliers', action='store_true',
                    help='replace Tukey F=3 outliers by the axis mean (as the thesis did)')
@@ -115,7 +115,7 @@ def _options(args):
     for term in terms or []:
         if term not in ALL_TERMS:
             raise InputError('--terms', f'unknown term {term!r} (known: {", ".join(ALL_TERMS)})')
-    from ..core.advisor import parse_targets
+    from ..core.fit.advisor import parse_targets
     targets = parse_targets(args.target, '--target')
     from .export_args import export_options
     from ..core.deviations import parse_kinds

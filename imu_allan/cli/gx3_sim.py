@@ -7,7 +7,7 @@ first line on stdout, and then behaves like a 3DM-GX3-25 with single-byte firmwa
 1000 Hz / decimation, paced by the baud rate, with the noise model's samples through the
 device's own processing: generated at the internal 1 kHz, averaged over the current 0xDB
 gyro/accel window (power-up 15 samples), decimated, sent as float32; one continuous stream
-for the whole run (:class:`imu_allan.core.noise_stream.NoiseStream`).
+for the whole run (:class:`imu_allan.core.simulation.noise_stream.NoiseStream`).
 
 Choices where the DCP manual is silent: unknown command bytes and a bare
 ``FA`` are ignored; an invalid continuous-command byte is ignored and the current one echoed;

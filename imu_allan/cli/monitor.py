@@ -29,7 +29,7 @@ import time
 
 from .common import ArgumentParser, guarded
 from ..core.fit.adequacy import ADEQUACY_LEVEL
-from ..core.health import LEVEL_NAMES
+from ..core.live.health import LEVEL_NAMES
 from ..core.units import ALL_TERMS, AXES, conventional, IEEE_TERMS
 from ..errors import InputError
 from ..report.advice import format_duration

@@ -11,19 +11,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .allan import (
+from .allan.estimate import (
     allan_deviation,
     AllanResult,
     DEFAULT_MIN_CLUSTERS,
     DEFAULT_POINTS_PER_DECADE,
     tau_grid,
 )
+from .checks.preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
+from .checks.stamp_order import drop_isolated, without_dropped
+from .checks.warmup import find_warmup
 from .fit import fit_noise_model, FitError, FittedModel
-from .preprocess import check_timing, OutlierReport, replace_outliers, TimingReport
-from .sensor import measure_sensor
-from .stamp_order import drop_isolated, without_dropped
+from .sensor.measure import measure_sensor
 from .units import is_gyro, physical_limits, sample_unit
-from .warmup import find_warmup
 from ..errors import InputError
 
 #: Motion thresholds on 1-s block means, relative to the record's median: a still MEMS IMU's
@@ -243,7 +243,7 @@ def analyze_samples(samples, options=None):
     pool.shutdown(wait=False)   # the thread ends with the checks
     sensor = None
     if options.online:  # the node's pipeline, its sensor measurement included
-        from .online import run_online
+        from .live.online import run_online
         pipeline = run_online(data, rate, t=t, axes=samples.axes)
         result = pipeline.result()
         if result is None:

@@ -12,7 +12,7 @@ one at every averaging time from tau0 to a horizon, and as small as possible.
 
 The bound at each averaging time is the upper end of the chi-square interval of the measured
 Allan deviation with that point's EDF (Greenhall & Riley 2004; NIST SP1065 eq. 45), at 95 %
-two-sided (:func:`imu_allan.core.edf.chi2_interval`), squared: an AVAR, unit^2.
+two-sided (:func:`imu_allan.core.allan.edf.chi2_interval`), squared: an AVAR, unit^2.
 
 The model's AVAR is linear in the squared amplitudes x_j (N^2, K^2, B^2, sigma^2 of a
 Gauss-Markov; the shapes of :mod:`imu_allan.core.terms`, with the sampled-data corrections), so
@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from .edf import chi2_interval
+from .allan.edf import chi2_interval
 from .terms import TERMS
 
 #: Two-sided confidence level of the bound the model must lie above (its upper end).
@@ -103,7 +103,7 @@ def upper_bound(result, axes, horizon_s=None, level=OVERBOUND_LEVEL):
     """
     ``(tau, bound)``: the upper end of the measured AVAR's interval up to the horizon.
 
-    ``result`` is an :class:`~imu_allan.core.allan.AllanResult`; ``axes`` one axis name or
+    ``result`` is an :class:`~imu_allan.core.allan.estimate.AllanResult`; ``axes`` one axis name or
     several (the bound is then their envelope, the largest at each tau: one model for several
     axes, for consumers with one number per sensor).  Points without a finite EDF are left
     out.  ValueError if ``horizon_s`` is outside [tau0, longest tau] or nothing is left.

@@ -206,7 +206,7 @@ def record_advice(analysis, options):
     A record the motion verdict calls moving gets its moving axes in ``advice.moving``: its
     curve measures the motion, so the advice is to record at rest.
     """
-    from .advisor import advise, analysis_grid
+    from .fit.advisor import advise, analysis_grid
     opts = options.analysis
     m_max = None if opts.tau_max is None else int(opts.tau_max * analysis.rate_hz)
     advice = advise(analysis.result, analysis.fit, options.targets,
@@ -235,8 +235,8 @@ def dynamic_analysis(analysis, window_s=None):
     ``window_s``: None or 0 for the default window.  InputError if the record is too short.
     Times are moved from the first analysed sample to the record's first sample.
     """
-    from .change_detection import detect_changes
-    from .dynamic import dynamic_allan
+    from .change.detection import detect_changes
+    from .change.dynamic import dynamic_allan
     try:
         dyn = dynamic_allan(analysis.data, analysis.rate_hz, window_s or None,
                             axes=analysis.axes)

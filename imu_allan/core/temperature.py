@@ -199,7 +199,7 @@ def simulated_stderr(terms, x, block_s, replicas=REPLICAS, seed=0):
     :data:`SUB_SAMPLES` samples per block (block means keep the statistics of every term:
     white noise averages to ``N^2 / block_s``, flicker and random walks are low-frequency).
     """
-    from .simulate import simulate_axis
+    from .simulation.simulate import simulate_axis
     rng = np.random.default_rng(seed)
     nb = len(x)
     rate = SUB_SAMPLES / block_s
@@ -220,9 +220,9 @@ def bias_slopes(t, data, rate_hz, axes, temp_t, temp_c, block_s=None, replicas=R
     (default: the overlap / :data:`N_BLOCKS`).  Returns ``({axis: SlopeEstimate}, notes)``:
     an empty dict and a one-line reason when the records do not allow a slope.
     """
-    from .allan import allan_deviation
+    from .allan.estimate import allan_deviation
     from .fit import fit_noise_model, FitError
-    from .sensor import measure_sensor
+    from .sensor.measure import measure_sensor
     temp_t = np.asarray(temp_t, dtype=np.float64)
     temp_c = np.asarray(temp_c, dtype=np.float64)
     order = np.argsort(temp_t, kind='stable')

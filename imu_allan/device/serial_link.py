@@ -43,7 +43,7 @@ import numpy as np
 
 from . import gx3_protocol as p
 from .gx3_stream import StreamParser
-from ..core.preprocess import count_gaps, GAP_FACTOR
+from ..core.checks.preprocess import count_gaps, GAP_FACTOR
 
 
 class LinkError(Exception):

@@ -20,9 +20,9 @@ import tty
 import numpy as np
 
 from . import gx3_protocol as p
-from ..core.device_processing import DeviceProcessing
 from ..core.model import thesis_gx3_25_model
-from ..core.noise_stream import NoiseStream
+from ..core.simulation.device_processing import DeviceProcessing
+from ..core.simulation.noise_stream import NoiseStream
 from ..core.temperature import TemperatureProfile
 from ..core.units import AXES, STANDARD_GRAVITY
 
@@ -170,8 +170,8 @@ class NoiseSource:
     """
     Noise rows (gyro rad/s, accel m/s^2) of the simulated unit, in AXES order.
 
-    One :class:`~imu_allan.core.noise_stream.NoiseStream` at the internal 1 kHz through the
-    device's current window and decimation: the noise goes on across blocks and settings (no
+    One :class:`~imu_allan.core.simulation.noise_stream.NoiseStream` at the internal 1 kHz through
+    the device's current window and decimation: the noise goes on across blocks and settings (no
     term restarts).  A change of settings drops the rest of the current block (at most
     ``BLOCK_SECONDS`` of sensor time skipped).
     """

@@ -27,7 +27,7 @@ Allan variance comes from rounding the integrated angle).  Writing (:func:`expor
 :func:`export_px4`) goes the other way from a fitted model; terms these simulators cannot
 represent (bias instability, several bias terms, a ramp, a sinusoid) become the one
 Gauss-Markov that matches them best over the measured averaging times
-(:func:`imu_allan.core.gauss_markov.best_gauss_markov`), and the file says so.
+(:func:`imu_allan.core.simulation.gauss_markov.best_gauss_markov`), and the file says so.
 :meth:`SimImu.corrected` writes the same file back with what the discrepancy workflow added.
 """
 
@@ -38,8 +38,8 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from ..core import gauss_markov as gm
 from ..core.model import NoiseModel
+from ..core.simulation import gauss_markov as gm
 from ..core.terms import gauss_markov_shape
 from ..core.units import AXES, is_gyro, si_unit
 from ..errors import InputError

@@ -16,7 +16,7 @@ columns ``mag_x, mag_y, mag_z``.
 import numpy as np
 
 from .samples import Samples
-from ..core.preprocess import count_gaps, nominal_interval
+from ..core.checks.preprocess import count_gaps, nominal_interval
 from ..core.units import AXES, GYRO_AXES, STANDARD_GRAVITY
 from ..device.gx3_protocol import (
     decode_records,

@@ -17,7 +17,7 @@ and publishes every ``publish_period`` seconds:
 * ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share), each axis
   against the noise budget (OK / WARN / ERROR / STALE) and the recording advice (OK when every
   precision target is met, WARN with the longest additional recording time otherwise;
-  :mod:`imu_allan.core.advisor`, recomputed every ``advice_period`` s in steps).
+  :mod:`imu_allan.core.fit.advisor`, recomputed every ``advice_period`` s in steps).
 
 With ``covariance_topic`` set, every ``imu/data_raw`` message is also republished there as it
 is drained, its angular-velocity and linear-acceleration covariance diagonals set to the live
@@ -28,7 +28,7 @@ above the measured upper 95 % bound at every published averaging time
 (:func:`imu_allan.core.overbound.white_overbound`): conservative for a filter without bias
 states.
 
-The numerics are :class:`imu_allan.core.online.OnlineAllan` (stamp checks, stationarity
+The numerics are :class:`imu_allan.core.live.online.OnlineAllan` (stamp checks, stationarity
 gate, bounded-memory overlapping Allan variance, fit): ``analyze``'s online option runs the same
 code, so the numbers agree for the same samples.  Messages are not handled one by one: the
 subscription sits in a callback group the executor never waits on, and a timer takes the queued
@@ -57,12 +57,12 @@ from .common import (
     take_batch,
     validate_on_set,
 )
-from ..core import health as hm
-from ..core.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
-from ..core.change_monitor import ChangeMonitor
+from ..core.fit.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
+from ..core.live import health as hm
+from ..core.live.change_monitor import ChangeMonitor
+from ..core.live.online import check_rate_options, OnlineAllan, StagedEstimate
+from ..core.live.streaming import parse_estimators
 from ..core.model import NoiseModel
-from ..core.online import check_rate_options, OnlineAllan, StagedEstimate
-from ..core.streaming import parse_estimators
 from ..core.temperature import TemperatureRange
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
@@ -211,7 +211,7 @@ def check_parameters(p):
         if 0 < p['change_window_s'] * p['rate_hz'] < CHANGE_MIN_SAMPLES:
             raise InputError('change_window_s', f'too short: needs at least '
                                                 f'{CHANGE_MIN_SAMPLES} samples')
-    from ..core.health import NoiseBudget
+    from ..core.live.health import NoiseBudget
     from ..core.model import ModelError, NoiseModel
     parse_terms(p['terms'])
     parse_estimators(p['estimators'])
@@ -287,7 +287,7 @@ class AllanNode(Node):
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
             if self.params['covariance_topic'] else None
         self._cov_variance = None  # per-sample N^2 f per axis, once estimated
-        self._change = None  # the change test (core.change_monitor), once the rate is known
+        self._change = None  # the change test (core.live.change_monitor), once the rate is known
         self._plot = PlotPublisher(self)
         self._last_arrival = None
         self._cycle = None

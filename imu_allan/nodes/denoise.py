@@ -31,7 +31,7 @@ from .common import (
     take_batch,
     validate_on_set,
 )
-from ..core.health import RateFinder
+from ..core.live.health import RateFinder
 from ..core.units import AXES, IEEE_TERMS
 from ..errors import InputError
 from ..formats.imu_adapter import imus_to_arrays

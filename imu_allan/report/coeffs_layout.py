@@ -81,7 +81,7 @@ def deviation_table(result, axes=AXES):
     Return the ``imu/allan_deviation`` numbers: array (1 + len(axes), T): tau then ADEV per axis.
 
     Axes missing from ``result`` are NaN rows.  ``result`` may also be another deviation
-    (``.dev``, e.g. a :class:`~imu_allan.core.streaming.StreamingDeviation` for
+    (``.dev``, e.g. a :class:`~imu_allan.core.live.streaming.StreamingDeviation` for
     ``imu/allan_deviation/<kind>``, the same layout).
     """
     if result is None:

@@ -19,7 +19,7 @@ from matplotlib.colors import LogNorm  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ..core.dynamic import normalized_adev  # noqa: E402
+from ..core.change.dynamic import normalized_adev  # noqa: E402
 from ..core.units import is_gyro, sample_unit  # noqa: E402
 
 

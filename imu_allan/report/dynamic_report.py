@@ -7,7 +7,7 @@ measured on simulated static data, per axis), ``target_false_alarms_per_day``, `
 sample, ``what``, ``ratio``, ...).  Renders a :class:`~imu_allan.core.record.DynamicAnalysis`.
 """
 
-from ..core.change_detection import ChangeTest, MEASURED_AXIS_DAYS, MEASURED_FALSE_ALARMS_PER_DAY
+from ..core.change.detection import ChangeTest, MEASURED_AXIS_DAYS, MEASURED_FALSE_ALARMS_PER_DAY
 
 
 def dynamic_json(part):

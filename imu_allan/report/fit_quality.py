@@ -3,13 +3,13 @@ What the reports say about a fit's quality and the sensor behind it: adequacy, s
 
 Renders (never computes) :class:`~imu_allan.core.fit.adequacy.Adequacy`, the fitted span
 (:class:`~imu_allan.core.fit.tau_range.TauRange`) and the sensor's processing
-(:class:`~imu_allan.core.sensor.SensorReport`) for report.json, the console, the HTML page and
-the node's diagnostics, in one wording.
+(:class:`~imu_allan.core.sensor.measure.SensorReport`) for report.json, the console, the HTML page
+and the node's diagnostics, in one wording.
 """
 
 import math
 
-from ..core.health import Health, OK, WARN
+from ..core.live.health import Health, OK, WARN
 from ..core.units import conventional, is_gyro
 
 
@@ -144,7 +144,7 @@ def _amplitude(axis, value):
 
 
 def sensor_json(report):
-    """report.json ``sensor``: :meth:`~imu_allan.core.sensor.SensorReport.to_json`."""
+    """report.json ``sensor``: :meth:`~imu_allan.core.sensor.measure.SensorReport.to_json`."""
     return report.to_json()
 
 

@@ -27,8 +27,8 @@ from .fit_quality import (
 )
 from .kalibr import kalibr_values
 from .temperature_report import temperature_json, temperature_sentence
+from ..core.checks.warmup import warmup_sentence
 from ..core.units import sample_unit
-from ..core.warmup import warmup_sentence
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
              'intervals with Greenhall-Riley EDF; joint GLS non-negative fit')

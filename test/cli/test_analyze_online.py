@@ -10,7 +10,7 @@ import json
 
 from conftest import run_command
 from imu_allan import simulate, thesis_gx3_25_model
-from imu_allan.core.online import OnlineAllan
+from imu_allan.core.live.online import OnlineAllan
 from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples

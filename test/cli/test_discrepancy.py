@@ -4,10 +4,10 @@ import json
 import math
 
 from conftest import run_command
-from imu_allan.core.allan import allan_deviation
+from imu_allan.core.allan.estimate import allan_deviation
 from imu_allan.core.discrepancy import gap_summary
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
 import numpy as np

@@ -10,7 +10,7 @@ import json
 from conftest import run_command
 from formats.sim_reference import EXAMPLE_SDF, gz_noise_params, gz_simulate
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
 import numpy as np

@@ -26,7 +26,7 @@ from types import SimpleNamespace
 
 from conftest import DOMAIN, executable, ros_env, run_command
 from imu_allan.cli.monitor import advice_words, format_interval, MonitorState, REDRAW, render
-from imu_allan.core.advisor import Advice, advice_health, TermAdvice, Unresolved
+from imu_allan.core.fit.advisor import Advice, advice_health, TermAdvice, Unresolved
 from imu_allan.core.units import AXES, conventional, IEEE_TERMS
 from imu_allan.nodes.allan import multiarray
 from imu_allan.report.coeffs_layout import COEFF_LABELS, decode_coefficients

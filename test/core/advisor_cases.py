@@ -14,11 +14,11 @@ import math
 import sys
 import time
 
-from imu_allan.core.advisor import advise
-from imu_allan.core.allan import allan_deviation
+from imu_allan.core.allan.estimate import allan_deviation
 from imu_allan.core.fit import fit_noise_model
+from imu_allan.core.fit.advisor import advise
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 
 RATE_HZ = 10.0
 #: name, terms (one gyro axis, SI), fitted terms (None: automatic), base record s

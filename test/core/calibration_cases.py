@@ -3,7 +3,7 @@ Calibration of the fit, measured: term selection, alternatives and interval cove
 
 Many axes are simulated with known truth, analysed with the overlapping Allan variance and
 fitted with automatic term selection (:func:`imu_allan.core.fit.fit_noise_model`).  Two
-generators: the package's own (:func:`imu_allan.core.simulate.simulate_axis`) and an
+generators: the package's own (:func:`imu_allan.core.simulation.simulate.simulate_axis`) and an
 independent one written here from the textbook definitions, sharing no code with the package:
 
 * white noise N: per-sample std N sqrt(fs);
@@ -30,11 +30,11 @@ import math
 import sys
 import time
 
-from imu_allan.core.allan import AllanResult, avar_fast, tau_grid
+from imu_allan.core.allan.edf import CI_LEVEL
+from imu_allan.core.allan.estimate import AllanResult, avar_fast, tau_grid
 from imu_allan.core.deviations import deviation
-from imu_allan.core.edf import CI_LEVEL
 from imu_allan.core.fit import fit_noise_model, Processing
-from imu_allan.core.simulate import simulate_axis
+from imu_allan.core.simulation.simulate import simulate_axis
 from imu_allan.core.units import AXES
 import numpy as np
 import scipy.fft
@@ -115,7 +115,7 @@ def independent_axis(truth, n, rate_hz, rng):
 
 
 def package_axis(truth, n, rate_hz, rng):
-    """Rate samples of one axis from :func:`imu_allan.core.simulate.simulate_axis`."""
+    """Rate samples of one axis from :func:`imu_allan.core.simulation.simulate.simulate_axis`."""
     return simulate_axis({t: {'value': v} for t, v in truth.items()}, n, rate_hz, rng)
 
 
@@ -235,10 +235,11 @@ def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6, hadamard=F
     Axes are generated ``chunk`` (at most 6: the package's axis names) at a time into one
     (n, chunk) array, their Allan variances computed in one call and fitted together; with
     ``hadamard`` the fit also sees the OHDEV curve (:mod:`imu_allan.core.fit.hadamard_check`).
-    The fit is given the sensor's processing as :func:`imu_allan.core.sensor.measure_sensor`
-    measures it from the samples (``processing='measured'``, what ``analyze`` does), as the
-    realistic generator made it (``'known'``: the device's window, the line), or not at all
-    (None).  For realistic records the truth is :func:`realistic_truth`.
+    The fit is given the sensor's processing as
+    :func:`imu_allan.core.sensor.measure.measure_sensor` measures it from the samples
+    (``processing='measured'``, what ``analyze`` does), as the realistic generator made it
+    (``'known'``: the device's window, the line), or not at all (None).  For realistic records the
+    truth is :func:`realistic_truth`.
     """
     rng = np.random.default_rng(seed)
     n = int(round(hours * 3600.0 * rate_hz))
@@ -263,7 +264,7 @@ def batch(scenario, generator, hours, rate_hz, n_axes, seed, chunk=6, hadamard=F
                   if hadamard else None)
         proc = None
         if processing == 'measured':
-            from imu_allan.core.sensor import measure_sensor
+            from imu_allan.core.sensor.measure import measure_sensor
             proc = measure_sensor(data, rate_hz, AXES[:count]).processing()
         elif processing == 'known' and known:
             proc = known

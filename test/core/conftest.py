@@ -1,7 +1,7 @@
 """Fixtures shared by the core tests."""
 
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 import pytest
 
 RATE = 100.0

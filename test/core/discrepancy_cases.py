@@ -18,7 +18,7 @@ import math
 
 from imu_allan.core.discrepancy import run_discrepancy
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.units import AXES
 import numpy as np
 

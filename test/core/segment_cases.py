@@ -4,7 +4,7 @@ The batch oracle for the online estimator with gaps: segments, and the batch est
 Shared by test_streaming.py and test_hostile_online.py.
 """
 
-from imu_allan.core.allan import allan_deviation
+from imu_allan.core.allan.estimate import allan_deviation
 import numpy as np
 
 

@@ -2,9 +2,10 @@
 IMU simulators' noise, intended and as implemented, re-implemented here from their sources.
 
 Written for the discrepancy findings tests, independently of the package (no
-``imu_allan.core.simulate``, no ``imu_allan.formats.gazebo_sdf``): each *pair* is the noise a
-simulator's parameters are documented (or reported) to mean, and the noise its code produces,
-vectorised from the C++ with the same recursions.  Sources, as read (public repositories):
+``imu_allan.core.simulation.simulate``, no ``imu_allan.formats.gazebo_sdf``): each *pair* is the
+noise a simulator's parameters are documented (or reported) to mean, and the noise its code
+produces, vectorised from the C++ with the same recursions.  Sources, as read (public
+repositories):
 
 * gz-sensors ``src/GaussianNoiseModel.cc`` (gazebosim/gz-sensors, 9ba02f2, the version with
   ``ApplyImpl(double _in, double _dt)``): ``Load`` draws the constant bias

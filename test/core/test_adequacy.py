@@ -10,7 +10,7 @@ Gauss-Markov hump for records with an effect the model lacks.
 import math
 
 from core import calibration_cases as cc
-from imu_allan.core.allan import AllanResult, avar_fast, tau_grid
+from imu_allan.core.allan.estimate import AllanResult, avar_fast, tau_grid
 from imu_allan.core.fit import ADEQUACY_LEVEL, fit_noise_model
 from imu_allan.core.fit.adequacy import misfit_runs, trigamma
 from imu_allan.core.units import AXES

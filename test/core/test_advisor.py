@@ -8,8 +8,9 @@ import json
 import math
 
 from core.advisor_cases import cases, RATE_HZ, rel_halfwidth, SEEDS
-from imu_allan.core import health
-from imu_allan.core.advisor import (
+from imu_allan.core.allan.estimate import allan_deviation
+from imu_allan.core.fit import fit_noise_model
+from imu_allan.core.fit.advisor import (
     _AxisAdvisor,
     _nonlinear,
     Advice,
@@ -22,11 +23,10 @@ from imu_allan.core.advisor import (
     TermAdvice,
     Unresolved,
 )
-from imu_allan.core.allan import allan_deviation
-from imu_allan.core.bisection import run
-from imu_allan.core.fit import fit_noise_model
+from imu_allan.core.fit.bisection import run
+from imu_allan.core.live import health
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.errors import InputError
 from imu_allan.report.advice import advice_sentence, advice_to_json
 import pytest

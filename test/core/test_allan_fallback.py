@@ -12,18 +12,18 @@ import json
 import subprocess
 import sys
 
-from imu_allan.core.allan import avar_fast, tau_grid
+from imu_allan.core.allan.estimate import avar_fast, tau_grid
 import numpy as np
 
 CHILD = """
 import json, sys
 sys.modules['numba'] = None
 import numpy as np
-from imu_allan.core.allan import avar_fast, tau_grid
+from imu_allan.core.allan.estimate import avar_fast, tau_grid
 data = np.random.default_rng(3).normal(size=(20000, 3))
 first = avar_fast(data, tau_grid(20000))
 second = avar_fast(data[:5000], tau_grid(5000))   # the log line comes once, not per call
-from imu_allan.core import preprocess
+from imu_allan.core.checks import preprocess
 preprocess.KERNEL_ROWS = 0                          # Tukey's quartiles: numpy without numba
 quart = preprocess.quartiles(data)
 print(json.dumps([first.tolist(), second.tolist(), quart.tolist()]))

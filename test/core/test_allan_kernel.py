@@ -13,8 +13,9 @@ import shutil
 import subprocess
 import sys
 
-from imu_allan.core import allan_kernel, jit, scipy_compiled
-from imu_allan.core.allan import _phase, avar_reference
+from imu_allan.core import jit, scipy_compiled
+from imu_allan.core.allan import kernel as allan_kernel
+from imu_allan.core.allan.estimate import _phase, avar_reference
 import numpy as np
 import pytest
 
@@ -216,7 +217,7 @@ def _twice(tmp_path, args, module, kernels):
 
 _QUARTILE_SCRIPT = """
 import numpy as np
-from imu_allan.core import preprocess
+from imu_allan.core.checks import preprocess
 preprocess.KERNEL_ROWS = 0   # the compiled order statistics even for a short record
 data = np.random.default_rng(4).normal(size=(2000, 6))
 data[10, 3] = 99.0
@@ -228,7 +229,7 @@ print(report.counts, preprocess.quartiles(data).tolist())
 @pytest.mark.slow
 def test_quantile_kernels_second_process_compile_nothing(tmp_path):
     """
-    The compiled order statistics (imu_allan.core.quantile_kernel) are compiled once too.
+    The compiled order statistics (imu_allan.core.checks.quantile_kernel) are compiled once too.
 
     Budget: one compile (about 3 s) and one load.
     """

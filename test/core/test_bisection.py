@@ -2,8 +2,8 @@
 
 import math
 
-from imu_allan.core.advisor import _crossing, bisection_crossing
-from imu_allan.core.bisection import bisection, guided, log_ratio, run
+from imu_allan.core.fit.advisor import _crossing, bisection_crossing
+from imu_allan.core.fit.bisection import bisection, guided, log_ratio, run
 import numpy as np
 import pytest
 

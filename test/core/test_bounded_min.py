@@ -2,7 +2,7 @@
 
 import math
 
-from imu_allan.core.bounded_min import bounded_minimum
+from imu_allan.core.fit.bounded_min import bounded_minimum
 import numpy as np
 import pytest
 from scipy.optimize import minimize_scalar

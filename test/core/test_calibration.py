@@ -12,7 +12,7 @@ import math
 
 from core.calibration_cases import run, summary
 from imu_allan import allan_deviation, fit_noise_model, NoiseModel, simulate
-from imu_allan.core.edf import CI_LEVEL
+from imu_allan.core.allan.edf import CI_LEVEL
 from imu_allan.core.fit import coefficient_interval, Problem, ramp_drift_variance
 import numpy as np
 import pytest

@@ -1,9 +1,9 @@
 """Wavelet / median denoising: block streaming == batch, latency, effect on Allan deviation."""
 
-from imu_allan.core.allan import allan_deviation
+from imu_allan.core.allan.estimate import allan_deviation
 from imu_allan.core.denoise import block_geometry, BlockDenoiser, denoise, sure_threshold
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 import numpy as np
 import pytest
 

@@ -2,7 +2,7 @@
 
 import math
 
-from imu_allan.core.allan import allan_deviation
+from imu_allan.core.allan.estimate import allan_deviation
 from imu_allan.core.discrepancy import (
     excursion_band,
     fit_terms,
@@ -13,7 +13,7 @@ from imu_allan.core.discrepancy import (
     run_discrepancy,
 )
 from imu_allan.core.model import ModelError, NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 import numpy as np
 import pytest
 

@@ -31,7 +31,7 @@ from core.discrepancy_cases import (
 )
 from imu_allan.core.discrepancy import run_discrepancy
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 import pytest
 
 

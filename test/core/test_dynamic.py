@@ -2,8 +2,8 @@
 
 import math
 
-from imu_allan.core.change_detection import ChangeTest, detect_changes
-from imu_allan.core.dynamic import (
+from imu_allan.core.change.detection import ChangeTest, detect_changes
+from imu_allan.core.change.dynamic import (
     _level_of,
     BlockAllan,
     default_window,
@@ -12,7 +12,7 @@ from imu_allan.core.dynamic import (
     layout,
 )
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.simulate import flicker_noise, simulate
+from imu_allan.core.simulation.simulate import flicker_noise, simulate
 import numpy as np
 import pytest
 

@@ -196,8 +196,8 @@ def test_upper_limit_of_a_term_the_data_want_is_above_its_fitted_value():
     more than 4 at small coefficients too; a search from below took that crossing and gave
     1e-14 rad/s^2/sqrt(Hz) as the "limit" of a 2e-5 random walk.
     """
-    from imu_allan.core.allan import identify_noise
-    from imu_allan.core.edf import edf_oadev
+    from imu_allan.core.allan.edf import edf_oadev
+    from imu_allan.core.allan.estimate import identify_noise
     from imu_allan.core.fit import upper_limit
     from imu_allan.core.terms import model_avar
     n, rate = 360_000, 100.0

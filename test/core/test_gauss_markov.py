@@ -3,7 +3,7 @@
 import math
 
 from imu_allan.core import terms
-from imu_allan.core.gauss_markov import (
+from imu_allan.core.simulation.gauss_markov import (
     best_gauss_markov,
     driving_density,
     RANDOM_WALK_TAU_FACTOR,

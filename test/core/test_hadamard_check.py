@@ -98,7 +98,7 @@ def test_the_advice_leaves_out_a_contradicted_set():
     Seed 3 of the clear ramp record leaves N K R selected and N B R open (the advisor then
     reports the B / K swap as unresolved); with that set marked contradicted it is gone.
     """
-    from imu_allan.core.advisor import advise
+    from imu_allan.core.fit.advisor import advise
     model = NoiseModel.from_dict({'gyro': {'white_noise': 2e-3, 'bias_instability': 2e-4,
                                            'rate_ramp': 3e-6}})
     data = simulate(model, 360_000, 100.0, seed=3, axes=['gyro_x'])

@@ -2,7 +2,7 @@
 
 import math
 
-from imu_allan.core import health as hm
+from imu_allan.core.live import health as hm
 from imu_allan.core.units import AXES, DEG, HOUR, IEEE_TERMS, STANDARD_GRAVITY
 from imu_allan.errors import InputError
 import numpy as np

@@ -8,7 +8,7 @@ Records are 2,000 samples (well under a second each).
 """
 
 from imu_allan.core.analysis import AnalysisOptions, analyze_samples
-from imu_allan.core.preprocess import check_timing, nominal_interval
+from imu_allan.core.checks.preprocess import check_timing, nominal_interval
 from imu_allan.core.units import PHYSICAL_LIMIT
 from imu_allan.errors import InputError
 from imu_allan.formats.samples import Samples

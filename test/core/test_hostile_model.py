@@ -6,7 +6,7 @@ through ``NoiseBudget.from_yaml``; both validate against the schema of
 :mod:`imu_allan.core.model`.  Each case runs in milliseconds.
 """
 
-from imu_allan.core.health import NoiseBudget
+from imu_allan.core.live.health import NoiseBudget
 from imu_allan.core.model import NoiseModel
 from imu_allan.errors import InputError
 import pytest

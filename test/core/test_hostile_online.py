@@ -11,8 +11,8 @@ never taken for motion.  20,000 samples at 100 Hz with fixed seeds: a few second
 import warnings
 
 from core.segment_cases import pooled_batch, split_segments
-from imu_allan.core import health as hm
-from imu_allan.core.online import OnlineAllan
+from imu_allan.core.live import health as hm
+from imu_allan.core.live.online import OnlineAllan
 from imu_allan.core.units import AXES
 import numpy as np
 import pytest

@@ -1,6 +1,6 @@
 """The fits' NNLS equals scipy's public ``nnls`` and keeps its refusals."""
 
-from imu_allan.core import nnls as core_nnls
+from imu_allan.core.fit import nnls as core_nnls
 import numpy as np
 import pytest
 from scipy.optimize import nnls as scipy_nnls

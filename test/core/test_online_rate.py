@@ -4,8 +4,8 @@ A measured sample rate (rate_hz 0): RateFinder and OnlineAllan.
 Deterministic stamps and seeded data; all comparisons are exact or at float rounding.
 """
 
-from imu_allan.core.health import RateFinder
-from imu_allan.core.online import OnlineAllan
+from imu_allan.core.live.health import RateFinder
+from imu_allan.core.live.online import OnlineAllan
 from imu_allan.core.units import AXES
 from imu_allan.errors import InputError
 import numpy as np

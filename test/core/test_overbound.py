@@ -19,7 +19,7 @@ have, not numbers copied from its output:
 import math
 
 import imu_allan
-from imu_allan.core.edf import chi2_interval
+from imu_allan.core.allan.edf import chi2_interval
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.overbound import overbound, overbound_axes, upper_bound, white_overbound
 from imu_allan.core.terms import model_avar

@@ -1,7 +1,7 @@
 """Thesis preprocessing: Tukey outlier replacement, time-stamp gaps and jitter, units."""
 
 
-from imu_allan.core.preprocess import check_timing, replace_outliers, tukey_fences
+from imu_allan.core.checks.preprocess import check_timing, replace_outliers, tukey_fences
 import numpy as np
 import pytest
 

@@ -5,8 +5,8 @@ Compiled order statistics for Tukey's fences: the same numbers as numpy, to the 
 so that short arrays, which cover the edge cases, go through the kernel too.
 """
 
-from imu_allan.core import preprocess
-from imu_allan.core.quantile_kernel import column_order_stats
+from imu_allan.core.checks import preprocess
+from imu_allan.core.checks.quantile_kernel import column_order_stats
 import numpy as np
 import pytest
 

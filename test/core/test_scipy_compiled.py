@@ -4,7 +4,7 @@ import subprocess
 import sys
 
 from imu_allan.core import scipy_compiled
-from imu_allan.core.edf import chi2_interval
+from imu_allan.core.allan.edf import chi2_interval
 import numpy as np
 import pytest
 import scipy.special
@@ -12,8 +12,8 @@ import scipy.special
 
 def test_the_fits_and_intervals_import_neither_scipy_optimize_nor_scipy_special():
     """The point of the module: the 0.6 s of those imports is not paid by ``analyze``."""
-    code = ('import sys; import imu_allan.core.analysis, imu_allan.core.advisor; '
-            'from imu_allan.core import edf, nnls; '
+    code = ('import sys; import imu_allan.core.analysis, imu_allan.core.fit.advisor; '
+            'from imu_allan.core.allan import edf; from imu_allan.core.fit import nnls; '
             'assert nnls._compiled_nnls is not None; '
             'print(sorted(m for m in sys.modules if m.startswith("scipy")))')
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
@@ -42,7 +42,8 @@ def test_missing_module_falls_back_to_the_public_function():
 
 def test_numba_kernels_load_without_importing_scipy_linalg():
     """The BLAS probe of numba is served without scipy.linalg, which imports normally later."""
-    code = ('import sys; import numpy as np; from imu_allan.core import allan_kernel; '
+    code = ('import sys; import numpy as np; '
+            'from imu_allan.core.allan import kernel as allan_kernel; '
             'allan_kernel.column_means(np.ones((8, 2))); '
             'assert "scipy.linalg" not in sys.modules, "the probe imported scipy.linalg"; '
             'import scipy.linalg; '

@@ -11,8 +11,8 @@ max(0, M - D k) / M exactly), rounded to an LSB, with sinusoids, flicker and ran
 import json
 import math
 
-from imu_allan.core.allan import allan_deviation
-from imu_allan.core.sensor import MAX_EXAMINED, measure_sensor, SensorAccumulator
+from imu_allan.core.allan.estimate import allan_deviation
+from imu_allan.core.sensor.measure import MAX_EXAMINED, measure_sensor, SensorAccumulator
 import numpy as np
 import pytest
 

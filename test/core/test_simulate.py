@@ -8,9 +8,9 @@ the noise stream's continuity.
 import math
 
 from imu_allan import allan_deviation, NoiseModel, simulate
-from imu_allan.core.device_processing import DeviceProcessing
-from imu_allan.core.noise_stream import NoiseStream
-from imu_allan.core.simulate import (
+from imu_allan.core.simulation.device_processing import DeviceProcessing
+from imu_allan.core.simulation.noise_stream import NoiseStream
+from imu_allan.core.simulation.simulate import (
     ar1_scan,
     FLICKER_BANK_CORNERS,
     FLICKER_BANK_WEIGHTS,

@@ -7,8 +7,8 @@ stretch of them, or more than 1 in 1000 samples, refuses the record as before.
 """
 
 from imu_allan.core.analysis import analyze_samples
-from imu_allan.core.health import StampMonitor
-from imu_allan.core.stamp_order import drop_isolated, keep_increasing, MAX_DROPPED_SHARE
+from imu_allan.core.checks.stamp_order import drop_isolated, keep_increasing, MAX_DROPPED_SHARE
+from imu_allan.core.live.health import StampMonitor
 from imu_allan.errors import InputError
 from imu_allan.formats.samples import Samples
 import numpy as np

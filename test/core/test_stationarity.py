@@ -1,9 +1,9 @@
 """Stationarity gate on synthetic motion, and the gated online estimate."""
 
+from imu_allan.core.live.online import online_allan
+from imu_allan.core.live.stationarity import StationarityGate, stationary_mask
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.online import online_allan
-from imu_allan.core.simulate import simulate
-from imu_allan.core.stationarity import StationarityGate, stationary_mask
+from imu_allan.core.simulation.simulate import simulate
 import numpy as np
 import pytest
 

@@ -1,9 +1,9 @@
 """The bounded-memory online Allan estimator against the batch overlapping estimator."""
 
 from core.segment_cases import feed_chunked, pooled_batch, split_segments
-from imu_allan.core.allan import allan_deviation
-from imu_allan.core.online import online_allan, OnlineAllan
-from imu_allan.core.streaming import factor_grid, StreamingAllan
+from imu_allan.core.allan.estimate import allan_deviation
+from imu_allan.core.live.online import online_allan, OnlineAllan
+from imu_allan.core.live.streaming import factor_grid, StreamingAllan
 import numpy as np
 import pytest
 

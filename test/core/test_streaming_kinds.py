@@ -10,8 +10,8 @@ samples (both variances ignore a constant rate), and allantools (``mdev``, ``ohd
 """
 
 from core.segment_cases import feed_chunked, split_segments
-from imu_allan.core.online import online_allan, OnlineAllan, StagedEstimate
-from imu_allan.core.streaming import parse_estimators, StreamingAllan
+from imu_allan.core.live.online import online_allan, OnlineAllan, StagedEstimate
+from imu_allan.core.live.streaming import parse_estimators, StreamingAllan
 from imu_allan.errors import InputError
 import numpy as np
 import pytest

@@ -1,7 +1,7 @@
 """core.temperature: profiles, bias-versus-temperature slopes and their intervals, moves."""
 
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.temperature import (
     bias_slopes,
     coinciding_change,

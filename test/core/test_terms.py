@@ -101,7 +101,7 @@ def test_hadamard_shape_matches_the_ohdev_of_simulated_data(name):
     (to rounding: 1e-20 of the rate squared).
     """
     from imu_allan.core.deviations import deviation
-    from imu_allan.core.simulate import simulate_axis
+    from imu_allan.core.simulation.simulate import simulate_axis
     from imu_allan.core.terms import hadamard_shape
     rng = np.random.default_rng(11)
     data = np.column_stack([simulate_axis({name: {'value': 1.0}}, 100_000, 100.0, rng)

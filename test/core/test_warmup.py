@@ -3,9 +3,9 @@
 import math
 
 from imu_allan.core.analysis import analyze_samples
+from imu_allan.core.checks.warmup import find_warmup, warmup_sentence
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.simulate import simulate
-from imu_allan.core.warmup import find_warmup, warmup_sentence
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.formats.samples import Samples
 from imu_allan.report.json_report import analysis_to_json, console_summary
 import numpy as np

@@ -17,11 +17,11 @@ from formats.sim_reference import (
     px4_simulate,
 )
 from imu_allan.core import terms as T
-from imu_allan.core.allan import allan_deviation
+from imu_allan.core.allan.estimate import allan_deviation
 from imu_allan.core.discrepancy import measure_gap, model_band, run_discrepancy
 from imu_allan.core.fit import fit_noise_model
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.errors import InputError
 from imu_allan.formats import gazebo_sdf
 import numpy as np
@@ -407,7 +407,7 @@ def test_overbound_file_stays_above_the_bound(fitted, tmp_path, kind):
     quantile within 1 % of 1, so a driving density read as the bias's std, or a missing
     sqrt(f), fails.
     """
-    from imu_allan.core.edf import chi2_interval
+    from imu_allan.core.allan.edf import chi2_interval
     from imu_allan.core.overbound import upper_bound
     from imu_allan.report.exporters import write_exports
     res = fitted.result

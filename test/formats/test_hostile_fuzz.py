@@ -13,7 +13,7 @@ import signal
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from imu_allan.core.health import NoiseBudget
+from imu_allan.core.live.health import NoiseBudget
 from imu_allan.core.model import NoiseModel
 from imu_allan.device.gx3_protocol import encode_record
 from imu_allan.errors import InputError

@@ -13,7 +13,7 @@ import os
 import threading
 import time
 
-from imu_allan.core.preprocess import check_timing
+from imu_allan.core.checks.preprocess import check_timing
 from imu_allan.device.gx3_protocol import encode_record
 from imu_allan.errors import InputError
 from imu_allan.formats import input_file

@@ -12,7 +12,7 @@ import time
 
 from conftest import executable, NodeRun, spin_until
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 import numpy as np
 
 RATE = 100.0

@@ -12,9 +12,9 @@ import subprocess
 import time
 
 from conftest import DOMAIN, executable, ros_env, spin_until
+from imu_allan.core.live.online import OnlineAllan
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.online import OnlineAllan
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
 from imu_allan.report.coeffs_layout import coefficient_table, decode_adequacy

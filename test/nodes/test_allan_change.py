@@ -10,7 +10,7 @@ other axes OK, and go back to OK after ``ros2 param set`` of ``change_reset``.
 
 import math
 
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from nodes.allan_feed import AllanFeed, imu_messages, MODEL, RATE, status_values
 import numpy as np
 import pytest

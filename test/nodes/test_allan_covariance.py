@@ -12,7 +12,7 @@ import subprocess
 
 from conftest import executable, NodeRun, spin_until
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.units import IEEE_TERMS
 import numpy as np
 import pytest

@@ -16,7 +16,7 @@ import subprocess
 
 from conftest import DOMAIN, executable, ros_env, spin_until
 from imu_allan import deviation
-from imu_allan.core.online import OnlineAllan
+from imu_allan.core.live.online import OnlineAllan
 from imu_allan.core.units import AXES
 from imu_allan.formats.imu_adapter import imus_to_arrays
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options

@@ -12,7 +12,7 @@ import math
 from conftest import domain, executable
 from imu_allan.core.analysis import AnalysisOptions, analyze_samples
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.formats.imu_adapter import imus_to_arrays
 from imu_allan.formats.samples import Samples
 from imu_allan.report.coeffs_layout import coefficient_table

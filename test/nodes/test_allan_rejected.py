@@ -11,8 +11,8 @@ real time with RELIABLE QoS so that every sample arrives.
 
 
 from conftest import executable
-from imu_allan.core.online import OnlineAllan
-from imu_allan.core.simulate import simulate
+from imu_allan.core.live.online import OnlineAllan
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.formats.imu_adapter import imus_to_arrays
 from imu_allan.nodes.allan import _DEFAULTS, pipeline_options

@@ -4,10 +4,10 @@ import math
 import subprocess
 
 from conftest import DOMAIN, executable, NodeRun, ros_env, spin_until
-from imu_allan.core.allan import allan_deviation
-from imu_allan.core.health import RateFinder
+from imu_allan.core.allan.estimate import allan_deviation
+from imu_allan.core.live.health import RateFinder
 from imu_allan.core.model import thesis_gx3_25_model
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.formats.imu_adapter import imus_to_arrays
 from imu_allan.nodes.denoise import _DEFAULTS, make_denoiser
 import numpy as np

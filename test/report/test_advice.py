@@ -2,7 +2,7 @@
 
 import json
 
-from imu_allan.core.advisor import Advice, DEFAULT_TARGETS, TermAdvice, Unresolved
+from imu_allan.core.fit.advisor import Advice, DEFAULT_TARGETS, TermAdvice, Unresolved
 from imu_allan.report.advice import advice_sentence, advice_to_json, format_duration
 import pytest
 

@@ -7,9 +7,9 @@ hold detected and undetected (NaN) terms.
 
 import math
 
+from imu_allan.core.live.online import OnlineAllan
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.online import OnlineAllan
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.units import AXES, conventional, IEEE_TERMS, si_unit
 from imu_allan.errors import InputError
 from imu_allan.report.coeffs_layout import (

@@ -34,10 +34,10 @@ import sys
 
 from conftest import run_command
 import imu_allan
-from imu_allan.core.edf import chi2_interval
+from imu_allan.core.allan.edf import chi2_interval
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.overbound import upper_bound
-from imu_allan.core.simulate import flicker_noise
+from imu_allan.core.simulation.simulate import flicker_noise
 from imu_allan.errors import InputError
 from imu_allan.report.exporters import export, EXPORTERS, write_exports
 import numpy as np

@@ -7,9 +7,9 @@ through ``--out``.  5 min of simulated 100 Hz data, fixed seed; about 5 s (three
 
 import io
 
+from imu_allan.core.live.online import OnlineAllan
 from imu_allan.core.model import NoiseModel
-from imu_allan.core.online import OnlineAllan
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.units import AXES
 from imu_allan.report.plots import LiveFigure
 import matplotlib.image

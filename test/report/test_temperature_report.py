@@ -5,7 +5,7 @@ from types import SimpleNamespace
 from imu_allan.cli.analyze import _options, build_parser, run_one
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.record import COINCIDENCE_MARGIN, coincidences
-from imu_allan.core.simulate import simulate
+from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.temperature import TemperatureChange, TemperatureProfile
 from imu_allan.core.units import AXES
 from imu_allan.device import gx3_protocol as p

@@ -6,7 +6,7 @@ What each kind computes is in its family module (:mod:`.allan_family`, :mod:`.mo
 :data:`.kinds.KIND`, which this module reads: it turns rate samples into the phase they share,
 picks the averaging factors (:mod:`.grid`), identifies the noise per averaging time
 (:mod:`.noise_id`; theo1 per run, :mod:`.theobr`), applies Stable32's bias corrections and
-attaches each kind's EDF and chi-square interval (:func:`imu_allan.core.edf.chi2_interval`,
+attaches each kind's EDF and chi-square interval (:func:`imu_allan.core.allan.edf.chi2_interval`,
 SP1065 eq 45).
 """
 
@@ -16,8 +16,8 @@ import numpy as np
 
 from . import grid, noise_id, theo
 from .kinds import KIND, kind_of
-from .. import allan as _allan
-from ..edf import chi2_interval
+from ..allan import estimate as _allan
+from ..allan.edf import chi2_interval
 from ..units import AXES
 
 KINDS = grid.KINDS
@@ -76,16 +76,16 @@ def raw_variance(kind, x, ms, data=None, fast=True):
 
     tdev gives MVAR (scaled afterwards).  The kind's compiled path (:attr:`.kinds.Kind.
     compiled`) when ``fast``: oadev the package's Allan kernel
-    (:func:`imu_allan.core.allan.avar_function`; ``data`` (n, A) needed, else numpy); adev,
-    hdev, ohdev, mdev, tdev and totdev :mod:`.kernels` from the same amount of work as the
-    Allan kernel (:data:`imu_allan.core.allan.SMALL_WORK`), numpy below it; mtotdev, htotdev
-    and theo1 :mod:`.total_kernel` (on long records with thinned window starts, exact whenever
-    the work fits its budget).  ``fast=False`` or no numba: the kind's numpy variance.
+    (:func:`imu_allan.core.allan.estimate.avar_function`; ``data`` (n, A) needed, else numpy);
+    adev, hdev, ohdev, mdev, tdev and totdev :mod:`.kernels` from the same amount of work as the
+    Allan kernel (:data:`imu_allan.core.allan.estimate.SMALL_WORK`), numpy below it; mtotdev,
+    htotdev and theo1 :mod:`.total_kernel` (on long records with thinned window starts, exact
+    whenever the work fits its budget).  ``fast=False`` or no numba: the kind's numpy variance.
     """
     spec = kind_of(kind)
     if fast and spec.compiled == 'allan' and data is not None:
         if _compiled(data.size * len(ms)):
-            from .. import allan_kernel
+            from ..allan import kernel as allan_kernel
             return allan_kernel.avar_phase(x, ms)  # the phase given, not integrated again
         return _allan.avar_function(data.size * len(ms))(data, ms)  # short or no numba
     if fast and spec.compiled == 'blocked' and x.size * len(ms) >= _allan.SMALL_WORK:
@@ -124,7 +124,7 @@ def phase(data, ms):
     runs compiled, numpy (``allan._phase``) otherwise; the two are equal bit for bit.
     """
     if _compiled(data.size * len(ms)):
-        from .. import allan_kernel
+        from ..allan import kernel as allan_kernel
         return allan_kernel.phase_exact(data)
     return _allan._phase(data)
 

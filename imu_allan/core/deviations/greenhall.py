@@ -14,7 +14,7 @@ and the noise by the frequency-PSD exponent alpha (+2 white PM .. -4 random-run 
 must exceed 1).  Eqs (7)-(10) of the paper define the basic sum; Tables 1-3 give its
 large-J asymptotes, used where the sum would have more than ``J_max = 100`` terms, exactly as
 the paper (and Stable32) do.  The unmodified, fully overlapping Allan case (d = 2, F = S = m) is
-:func:`imu_allan.core.edf.edf_oadev`, which sums exactly where the paper uses Table 2 (within
+:func:`imu_allan.core.allan.edf.edf_oadev`, which sums exactly where the paper uses Table 2 (within
 0.3 % of it); :func:`edf_greenhall` follows the paper in every case, which is what the printed
 Stable32 bounds are made of.
 """

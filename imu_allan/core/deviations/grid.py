@@ -5,14 +5,14 @@ Stable32 stops a run at the largest averaging factor n / ratio (Riley, "The evol
 stability analysis", table III; allantools ``tau_generator``): adev 5, oadev 4, mdev and tdev
 4, hdev 5, ohdev 4, totdev 2, mtotdev and htotdev 3, theo1 1 (:attr:`.kinds.Kind.stop_ratio`).
 ``oadev`` keeps the package's own guard instead (at least ``min_clusters`` non-overlapping
-clusters at the longest tau, :func:`imu_allan.core.allan.tau_grid`), so that it stays the grid
-of ``allan_deviation``.  Theo1 uses even m only and tau = 0.75 m tau0.
+clusters at the longest tau, :func:`imu_allan.core.allan.estimate.tau_grid`), so that it stays the
+grid of ``allan_deviation``.  Theo1 uses even m only and tau = 0.75 m tau0.
 """
 
 import numpy as np
 
 from .kinds import KIND
-from ..allan import log_grid, tau_grid
+from ..allan.estimate import log_grid, tau_grid
 
 STOP_RATIO = {name: kind.stop_ratio for name, kind in KIND.items()}
 KINDS = tuple(KIND)

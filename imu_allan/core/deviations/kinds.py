@@ -44,7 +44,7 @@ class Kind:
         and a fixed alpha must lie in it.
     compiled : str or None
         Its compiled path: ``'allan'`` (the package's Allan kernel), ``'blocked'``
-        (:func:`.kernels.variance`, from :data:`imu_allan.core.allan.SMALL_WORK` on),
+        (:func:`.kernels.variance`, from :data:`imu_allan.core.allan.estimate.SMALL_WORK` on),
         ``'windowed'`` (:func:`.total_kernel.variance`, always when numba is there).
     gathers_id_points : bool
         Its compiled pass also gathers the noise identification's points (non-overlapping

@@ -4,12 +4,12 @@ The discrepancy workflow: where do a noise model and measured data disagree, and
 Given measured IMU samples and a starting noise model (a model file, or a few named terms fitted
 to the data), the workflow
 
-1. computes the measured overlapping Allan deviation (:func:`~imu_allan.core.allan.
+1. computes the measured overlapping Allan deviation (:func:`~imu_allan.core.allan.estimate.
    allan_deviation`);
 2. builds, for every averaging time, where the measured log-deviation should lie if the model
    were complete: the analytic curve of the model (:mod:`imu_allan.core.terms`) corrected for the
    bias of the log of a chi-square estimate, with a spread from the model's equivalent degrees of
-   freedom (Greenhall EDF of each term, :mod:`imu_allan.core.edf`), pooled with ``n_sims``
+   freedom (Greenhall EDF of each term, :mod:`imu_allan.core.allan.edf`), pooled with ``n_sims``
    independent simulations of the model at the measured rate and length through the same
    estimator;
 3. measures the gap per averaging time, z_i = (ln adev_meas - centre_i) / spread_i, and one

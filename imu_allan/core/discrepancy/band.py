@@ -14,7 +14,7 @@ import numpy as np
 from scipy.special import digamma, polygamma
 from scipy.stats import chi2
 
-from ..edf import edf_oadev
+from ..allan.edf import edf_oadev
 from ..fit import correlation_matrix
 from ..terms import TERMS
 

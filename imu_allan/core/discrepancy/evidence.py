@@ -29,7 +29,7 @@ import numpy as np
 from .band import ALPHA, measure_gap, measured_band, model_band
 from .logfit import fit_terms, FitProblem, improvement_test
 from .workflow import evaluate_candidates
-from ..allan import allan_deviation
+from ..allan.estimate import allan_deviation
 from ..terms import TERMS
 
 #: Share of the record whose mean stands for the turn-on bias (first tenth) and for the end.

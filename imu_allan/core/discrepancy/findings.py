@@ -286,7 +286,8 @@ def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
     alpha : float
         Family-wise level of the whole analysis (Bonferroni over :func:`count_tests`).
     points_per_decade, min_clusters : int
-        Averaging-time grid of the estimator (as :func:`~imu_allan.core.allan.allan_deviation`).
+        Averaging-time grid of the estimator (as
+        :func:`~imu_allan.core.allan.estimate.allan_deviation`).
 
     Returns
     -------

@@ -16,7 +16,7 @@ from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 from .band import Z95
-from ..nnls import nnls_scaled
+from ..fit.nnls import nnls_scaled
 from ..terms import TERMS
 from ..units import ALL_TERMS
 

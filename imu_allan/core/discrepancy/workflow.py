@@ -7,9 +7,9 @@ import numpy as np
 
 from .band import ALPHA, measure_gap, measured_band, model_band, pool_simulations
 from .logfit import AxisFit, fit_terms, FitProblem, improvement_test
-from ..allan import allan_deviation, avar_fast
+from ..allan.estimate import allan_deviation, avar_fast
 from ..model import ModelError, NoiseModel
-from ..simulate import simulate
+from ..simulation.simulate import simulate
 from ..terms import model_avar, TERMS
 from ..units import ALL_TERMS, AXES
 

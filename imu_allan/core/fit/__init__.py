@@ -6,7 +6,10 @@ The fit of noise terms to an Allan curve: the machinery per axis, the fitted mod
 * :mod:`.tau_range`: the averaging times the sensor's own processing does not shape;
 * :mod:`.adequacy`: does the fitted model describe the curve (a test with a calibrated p);
 * :mod:`.hadamard_check`: the OHDEV curve decides a rate random walk against a rate ramp;
-* :mod:`.fitted_model`: :func:`fit_noise_model` over every axis and its :class:`FittedModel`.
+* :mod:`.fitted_model`: :func:`fit_noise_model` over every axis and its :class:`FittedModel`;
+* :mod:`.advisor`: how much longer to record, from the fit's covariance forecast;
+* :mod:`.nnls`, :mod:`.bounded_min`, :mod:`.bisection`: the solvers they share (non-negative
+  least squares, a bounded 1-D minimum, guided bisection).
 """
 
 from .adequacy import Adequacy, ADEQUACY_LEVEL, Misfit

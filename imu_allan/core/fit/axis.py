@@ -32,10 +32,10 @@ import math
 
 import numpy as np
 
-from ..bisection import guided, log_ratio, run
-from ..bounded_min import bounded_minimum
-from ..edf import _gammainccinv, CI_LEVEL
-from ..nnls import nnls_scaled
+from .bisection import guided, log_ratio, run
+from .bounded_min import bounded_minimum
+from .nnls import nnls_scaled
+from ..allan.edf import _gammainccinv, CI_LEVEL
 from ..terms import sinusoid_shape, TERMS
 from ..units import ALL_TERMS, IEEE_TERMS
 

@@ -28,7 +28,7 @@ from .axis import (
 )
 from .tau_range import choose, TauRange
 from .. import terms as _terms
-from ..edf import CI_LEVEL
+from ..allan.edf import CI_LEVEL
 from ..model import NoiseModel
 from ..terms import sinusoid_shape, TERMS
 from ..units import conventional, si_unit
@@ -192,7 +192,7 @@ class FittedModel:
 def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=None,
                     tau_range=None):
     """
-    Fit noise terms to every axis of an :class:`~imu_allan.core.allan.AllanResult`.
+    Fit noise terms to every axis of an :class:`~imu_allan.core.allan.estimate.AllanResult`.
 
     Parameters
     ----------
@@ -210,8 +210,8 @@ def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=N
     processing : dict, optional
         ``{axis: Processing}``: what the sensor's own processing does to each axis (filter,
         lines, resonances; :class:`.tau_range.Processing`, measured by
-        :func:`imu_allan.core.sensor.measure_sensor` or known from the device).  The fit then
-        leaves out the averaging times it shapes and fits a visible line as the ``sinusoid``
+        :func:`imu_allan.core.sensor.measure.measure_sensor` or known from the device).  The fit
+        then leaves out the averaging times it shapes and fits a visible line as the ``sinusoid``
         term (:mod:`.tau_range`).  Without it every usable averaging time is fitted.
     tau_range : (float, float), optional
         Fit only these averaging times (s) on every axis, instead of the choice above.
@@ -318,11 +318,11 @@ def _bounded_drift(fit, rate_hz, processing):
     adequacy test's p is below :data:`DRIFT_TRIAL_P`, the selected set plus a Gauss-Markov
     term, and the same with the random walk or ramp replaced by it, are fitted (a set without
     one is left as selected: beside white noise and flicker on a short record a hump is more
-    often the noise's own wander; it took 3 % off N of a 5-min simulated gyro); the one the test likes best is kept if it lowers the test's chi^2 by
-    more than :data:`DRIFT_GAIN` (under the selected model the drop is about chi^2 with that
-    many degrees of freedom: kept wrongly about once in a hundred tries).  The selection
-    criterion cannot decide this: the GLS chi^2 is blind to such a smooth bend
-    (:mod:`.adequacy`).
+    often the noise's own wander; it took 3 % off N of a 5-min simulated gyro); the one the test
+    likes best is kept if it lowers the test's chi^2 by more than :data:`DRIFT_GAIN` (under the
+    selected model the drop is about chi^2 with that many degrees of freedom: kept wrongly about
+    once in a hundred tries).  The selection criterion cannot decide this: the GLS chi^2 is blind
+    to such a smooth bend (:mod:`.adequacy`).
     """
     unbounded = {'rate_random_walk', 'rate_ramp'} & set(fit.terms)
     if (fit.adequacy is None or not fit.adequacy.p < DRIFT_TRIAL_P or not unbounded

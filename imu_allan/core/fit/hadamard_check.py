@@ -91,8 +91,8 @@ def hadamard_problem(ohdev, axis, coef=None, tau_min=None):
 
     With ``coef`` (the selected Allan fit's squared coefficients) the noise at each averaging
     time is the term that dominates the predicted Hadamard curve, as the Allan side
-    identifies it on the fitted model (:func:`~imu_allan.core.allan.identify_noise`), and the
-    OHDEV EDF is Greenhall & Riley's for that noise (d = 3, F = S = m).  The per-tau
+    identifies it on the fitted model (:func:`~imu_allan.core.allan.estimate.identify_noise`), and
+    the OHDEV EDF is Greenhall & Riley's for that noise (d = 3, F = S = m).  The per-tau
     identification of the curve itself (lag-1 ACF, B1 below 30 block means) is not used: at
     the longest taus, from a handful of blocks, it returns white or flicker PM now and then
     (alpha = 2: an EDF of 1e5 for one point of a flicker curve, which then decides the fit).

@@ -2,8 +2,8 @@
 
 from pathlib import Path
 
-from imu_allan.core.allan import _phase
-from imu_allan.core.edf import CI_LEVEL
+from imu_allan.core.allan.edf import CI_LEVEL
+from imu_allan.core.allan.estimate import _phase
 import numpy as np
 from scipy import stats
 

@@ -1,14 +1,14 @@
 """
 The compiled phase, Allan sums and noise identification of ``deviation`` against numpy.
 
-``deviation`` switches to them above :data:`imu_allan.core.allan.SMALL_WORK`; here the
+``deviation`` switches to them above :data:`imu_allan.core.allan.estimate.SMALL_WORK`; here the
 threshold is moved so that the same short records run both ways.  The noise exponent must be
 identical (it is an integer chosen by thresholds the two summation orders cannot move on
 these records) and every number equal to 1e-12 relative (the two phases differ by rounding
 only, ~1e-16 of the phase).
 """
 
-from imu_allan.core import allan
+from imu_allan.core.allan import estimate as allan
 from imu_allan.core.deviations import api, noise_id
 import numpy as np
 import pytest
@@ -39,7 +39,7 @@ def test_compiled_noise_id_equals_numpy(dmax):
 
 
 def test_allan_from_the_phase_equals_from_the_samples():
-    from imu_allan.core import allan_kernel
+    from imu_allan.core.allan import kernel as allan_kernel
     y = _power_laws(20_001)
     ms = np.array([1, 2, 7, 64, 333, 2000])
     ours = allan_kernel.avar_phase(allan_kernel.phase(y), ms)
@@ -52,7 +52,7 @@ def test_allan_from_the_phase_equals_from_the_samples():
 def test_one_pass_means_equal_numpy_bit_for_bit(n):
     # numpy's pairwise tree changes shape at 8 and 128 values and splits at multiples of 8:
     # lengths around each boundary; a large offset makes every rounding visible.
-    from imu_allan.core import allan_kernel
+    from imu_allan.core.allan import kernel as allan_kernel
     y = np.random.default_rng(n).standard_normal((n, 6)) * 1e-3 + 9.80665
     expected = np.array([y[:, a].mean() for a in range(6)])
     np.testing.assert_array_equal(allan_kernel.means_exact(y), expected)

@@ -8,7 +8,7 @@ Theo1 to 5, "no bias correction"); HTOTDEV there carries the white FM bias corre
 (divided by sqrt(0.995) at m > 1, as Stable32 prints it).  Tolerance rtol 1e-4 as allantools.
 """
 
-from imu_allan.core.allan import _phase
+from imu_allan.core.allan.estimate import _phase
 from imu_allan.core.deviations import api
 import numpy as np
 import pytest

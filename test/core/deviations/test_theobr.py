@@ -10,7 +10,7 @@ compared at rtol 1e-4 (the tables' 5 digits, as the other Stable32 tests), the b
 """
 
 import imu_allan
-from imu_allan.core.allan import _phase
+from imu_allan.core.allan.estimate import _phase
 from imu_allan.core.deviations import api, theobr
 import numpy as np
 import pytest

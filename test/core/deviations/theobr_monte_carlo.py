@@ -14,7 +14,7 @@ and the true alpha fixed; and how often ThêoBR's k names the noise.
 
 import sys
 
-from imu_allan.core.allan import _phase
+from imu_allan.core.allan.estimate import _phase
 from imu_allan.core.deviations import allan_family, api, noise_id, theo, total_kernel
 import numpy as np
 

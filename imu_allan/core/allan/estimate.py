@@ -10,7 +10,7 @@ i.e. the fully overlapping (stride 1) estimator.  The mean of each axis is remov
 cumulative sum; AVAR is unchanged by a constant and the phase stays small, which keeps the
 second differences exact to float64 precision even for accelerometers reading 1 g.
 
-Intervals: Greenhall EDF (:mod:`imu_allan.core.edf`) for the noise type that dominates each
+Intervals: Greenhall EDF (:mod:`imu_allan.core.allan.edf`) for the noise type that dominates each
 averaging time, chi-square quantiles at the 68.27 % level.
 """
 
@@ -21,8 +21,8 @@ import math
 import numpy as np
 
 from . import edf as _edf
-from .terms import ID_ALPHA, TERMS
-from .units import AXES
+from ..terms import ID_ALPHA, TERMS
+from ..units import AXES
 
 #: Fewest non-overlapping clusters allowed at the longest averaging time (tau_max = T / 10).
 DEFAULT_MIN_CLUSTERS = 10
@@ -182,7 +182,7 @@ def avar_function(work):
     if work < SMALL_WORK:
         return avar_reference
     try:
-        from . import allan_kernel
+        from . import kernel as allan_kernel
     except ImportError:
         if not _NO_NUMBA:
             _NO_NUMBA.append(True)
@@ -209,7 +209,7 @@ def identify_noise(tau, avar):
     contribution of each term; the exponent of the largest one is used.  Robust where the
     local slope of a noisy curve is not.
     """
-    from .nnls import nnls_scaled
+    from ..fit.nnls import nnls_scaled
     tau = np.asarray(tau, dtype=float)
     avar = np.atleast_2d(avar)
     basis = np.column_stack([TERMS[t].id_shape(tau) for t in ID_ALPHA])

@@ -1,19 +1,19 @@
 """
 A noise model as an endless stream of device output, for simulated devices that run for hours.
 
-:func:`~imu_allan.core.simulate.simulate` makes one record; a simulated device makes its noise in
-blocks, and a record cut into independent blocks has the wrong Allan variance at averaging
+:func:`~imu_allan.core.simulation.simulate.simulate` makes one record; a simulated device makes its
+noise in blocks, and a record cut into independent blocks has the wrong Allan variance at averaging
 times near and above the block length: flicker, random walk, Gauss-Markov and sinusoid would
 restart at every block.  :class:`NoiseStream` carries every term over (``simulate_axis`` with a
 state; bias instability from the bank of first-order sections,
-:func:`~imu_allan.core.simulate.flicker_bank`) and the device's window over the internal samples
-of the previous block, so any split of the stream into blocks gives one continuous record.
+:func:`~imu_allan.core.simulation.simulate.flicker_bank`) and the device's window over the internal
+samples of the previous block, so any split of the stream into blocks gives one continuous record.
 """
 
 import numpy as np
 
-from .model import NoiseModel
 from .simulate import scaled_white, simulate_axis
+from ..model import NoiseModel
 
 
 class NoiseStream:
@@ -26,8 +26,8 @@ class NoiseStream:
         The noise model (continuous-time coefficients, SI).
     processing : DeviceProcessing
         The device's window, decimation and rounding
-        (:class:`~imu_allan.core.device_processing.DeviceProcessing`); may be replaced between
-        blocks (:attr:`processing`), the internal rate staying the same.
+        (:class:`~imu_allan.core.simulation.device_processing.DeviceProcessing`); may be replaced
+        between blocks (:attr:`processing`), the internal rate staying the same.
     seed : int or numpy.random.Generator, optional
         Seed for reproducible output.
     axes : sequence of str, optional

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from . import terms as _terms
+from .. import terms as _terms
 
 #: The terms that only a simulator's Gauss-Markov bias can stand in for.
 BIAS_TERMS = ('bias_instability', 'rate_random_walk', 'rate_ramp', 'gauss_markov', 'sinusoid')

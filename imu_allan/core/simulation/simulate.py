@@ -16,13 +16,13 @@ Every term is generated with the statistics its analytic Allan variance assumes
 
 All arrays are float64 with shape ``(n_samples, n_axes)``; units SI (rad/s, m/s^2).
 
-With ``processing`` (:class:`~imu_allan.core.device_processing.DeviceProcessing`) the record is
-what such a device sends: the terms are generated at its internal rate, windowed, decimated and
-rounded (float32), with the white noise scaled so that the output's low-frequency density is the
-model's N; bias instability is generated at the output rate with the spectrum the window and
-decimation give it.  A stream that goes on over many calls (the simulated 3DM-GX3-25) is
-:class:`~imu_allan.core.noise_stream.NoiseStream`: :func:`simulate_axis` with a ``state``, every
-term at the internal rate.
+With ``processing`` (:class:`~imu_allan.core.simulation.device_processing.DeviceProcessing`) the
+record is what such a device sends: the terms are generated at its internal rate, windowed,
+decimated and rounded (float32), with the white noise scaled so that the output's low-frequency
+density is the model's N; bias instability is generated at the output rate with the spectrum the
+window and decimation give it.  A stream that goes on over many calls (the simulated 3DM-GX3-25) is
+:class:`~imu_allan.core.simulation.noise_stream.NoiseStream`: :func:`simulate_axis` with a
+``state``, every term at the internal rate.
 """
 
 import functools
@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from .model import NoiseModel
+from ..model import NoiseModel
 
 #: The flicker series is generated this many times longer than asked for and cut, so that
 #: frequencies down to 1/(FLICKER_SPAN T) are present: a real 1/f process has power below 1/T
@@ -210,7 +210,7 @@ def scaled_white(terms, processing):
     One axis's terms with the white noise at the internal density N / sqrt(alias gain).
 
     So that the output's low-frequency density is the model's N
-    (:mod:`imu_allan.core.device_processing`); the other terms are unchanged.
+    (:mod:`imu_allan.core.simulation.device_processing`); the other terms are unchanged.
     """
     if 'white_noise' not in terms:
         return terms
@@ -237,8 +237,8 @@ def simulate(model, n_samples, rate_hz, seed=None, axes=None, processing=None):
         Axes to simulate (default: the model's axes, in the package's axis order).
     processing : DeviceProcessing, optional
         The device's window, decimation and output rounding
-        (:class:`~imu_allan.core.device_processing.DeviceProcessing`); ``rate_hz`` must be its
-        output rate (ValueError otherwise).  None: white samples at ``rate_hz``, unrounded.
+        (:class:`~imu_allan.core.simulation.device_processing.DeviceProcessing`); ``rate_hz`` must
+        be its output rate (ValueError otherwise).  None: white samples at ``rate_hz``, unrounded.
 
     Returns
     -------

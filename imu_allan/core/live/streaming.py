@@ -15,8 +15,8 @@ only the phase 2m points back.  :class:`StreamingAllan` keeps, per *stride level
 the cumulative sum loses nothing) and running sums of the squared second differences:
 
 * factors m <= ``stride_base`` (default 256) are tracked at stride 1: every term of the batch
-  estimator is formed, so the result equals :func:`imu_allan.core.allan.allan_deviation` on
-  the same samples (to float rounding, about 1e-13 relative; ``test/core/test_streaming.py``
+  estimator is formed, so the result equals :func:`imu_allan.core.allan.estimate.allan_deviation`
+  on the same samples (to float rounding, about 1e-13 relative; ``test/core/test_streaming.py``
   proves it for any chunking);
 * a larger factor m is rounded to a multiple of its level's stride s = 2^ceil(log2(m / base)),
   so m / s is between base / 2 and base, and only the terms with k a multiple of s are formed:
@@ -80,9 +80,9 @@ import math
 
 import numpy as np
 
-from .allan import AllanResult, DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, log_grid
-from .units import AXES
-from ..errors import InputError
+from ..allan.estimate import AllanResult, DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, log_grid
+from ..units import AXES
+from ...errors import InputError
 
 DEFAULT_STRIDE_BASE = 256
 DEFAULT_MAX_TAU = 10000.0

@@ -13,7 +13,7 @@ all columns together in three passes over the rows:
 3. the values of the bins that hold a wanted rank, gathered and sorted.
 
 The result is the order statistic itself, not an approximation, so quartiles interpolated
-from it are numpy's to the bit (:func:`imu_allan.core.preprocess.quartiles`, tested against
+from it are numpy's to the bit (:func:`imu_allan.core.checks.preprocess.quartiles`, tested against
 ``np.percentile``).  Values bunched into few bins (quantised samples, one huge outlier) only
 make step 3 sort more.  NaN, infinities or a range that overflows give no answer: the caller
 then uses ``np.percentile``.  The columns are split between two threads (the kernel releases
@@ -24,7 +24,7 @@ Compiled once per install (:mod:`.jit`).
 
 import numpy as np
 
-from .jit import jit, map_threads
+from ..jit import jit, map_threads
 
 #: Histogram bins per column: 512 KiB of counts for six axes, in the L2 cache.
 BINS = 1 << 16

@@ -3,7 +3,7 @@ The one rule for out-of-order and repeated header stamps, offline and online.
 
 A sample is kept when its stamp is later than every stamp kept before it (the running
 maximum): a stamp that went backwards, or repeats the one before, is dropped and counted.
-The allan node applies it batch by batch (:class:`~imu_allan.core.health.StampMonitor`, the
+The allan node applies it batch by batch (:class:`~imu_allan.core.live.health.StampMonitor`, the
 running maximum carried between batches) and ``analyze`` to the whole record
 (:func:`drop_isolated`), so both drop the same samples.
 

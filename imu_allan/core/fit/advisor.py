@@ -37,14 +37,8 @@ import math
 
 import numpy as np
 
-from . import terms as _terms
-from .allan import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
-from .bisection import bisection, guided, log_ratio
-from .bounded_min import bounded_minimum
-from .edf import CI_LEVEL, edf_oadev
-
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
-from .fit import (
+from .axis import (
     coefficient_interval,
     deterministic_index,
     fit_terms,
@@ -54,8 +48,13 @@ from .fit import (
     shape_columns,
     UPPER_LIMIT_DELTA_CHI2,
 )
-from .units import IEEE_TERMS, TERM_PARAMETERS
-from ..errors import InputError
+from .bisection import bisection, guided, log_ratio
+from .bounded_min import bounded_minimum
+from .. import terms as _terms
+from ..allan.edf import CI_LEVEL, edf_oadev
+from ..allan.estimate import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
+from ..units import IEEE_TERMS, TERM_PARAMETERS
+from ...errors import InputError
 
 #: Default targets: relative 68.3 % half-width per term (main parameter; sigma for
 #: Gauss-Markov).  The one place these numbers live.
@@ -615,7 +614,7 @@ def advice_health(advice, name='recording advice'):
     term ``<axis>.<term>.more_s`` and ``.rel_halfwidth``, per unresolved pair
     ``<axis>.<a>_vs_<b>.more_s`` (s; NaN: no prediction) and ``record_more_s``.
     """
-    from .health import Health, OK, STALE, WARN
+    from ..live.health import Health, OK, STALE, WARN
     if advice is None:
         return Health(name, STALE, 'no estimate yet (collecting still samples)', {})
     values = {'record_more_s': advice.record_more_s, 'recorded_s': advice.duration_s}

@@ -1,8 +1,8 @@
 """
 A change test on the dynamic Allan variance, per axis, with a known false-alarm rate.
 
-Each new window (``k`` blocks of :class:`~imu_allan.core.dynamic.BlockAllan`) is compared with
-a *baseline*: the pooled terms of every block since the axis's last reset that is not in the
+Each new window (``k`` blocks of :class:`~imu_allan.core.change.dynamic.BlockAllan`) is compared
+with a *baseline*: the pooled terms of every block since the axis's last reset that is not in the
 window (its EDF grows with its length).  An axis is tested once its baseline holds
 :data:`BASELINE_WINDOWS` windows: with one window only, the noise type read from the
 baseline's slope (which sets both EDFs) is itself too noisy where flicker dominates, and the
@@ -13,7 +13,7 @@ thesis 3DM-GX3-25 model at the default window of a 1-h record (150 s) gave 2 fal
 * **spectrum**: at every averaging factor m, the ratio R = AVAR_window / AVAR_baseline of two
   independent chi-square estimates is F(nu_w, nu_b)-distributed when nothing changed (NIST
   SP1065 sec. 5.3: AVAR ~ sigma^2 chi^2_nu / nu, nu the Greenhall & Riley 2004 EDF of the
-  overlapping AVAR, :func:`~imu_allan.core.edf.edf_oadev`, for the power-law exponent alpha
+  overlapping AVAR, :func:`~imu_allan.core.allan.edf.edf_oadev`, for the power-law exponent alpha
   read from the baseline's own slope, capped at :data:`EDF_MAX`).  Two-sided p-value from the
   F distribution.
 * **level**: D = mean(second half of the window) - mean(first half) has variance
@@ -46,8 +46,8 @@ import math
 import numpy as np
 
 from .dynamic import phase_count
-from .edf import edf_oadev
-from .terms import (
+from ..allan.edf import edf_oadev
+from ..terms import (
     quantization_shape,
     random_walk_shape,
     sampled_flicker_shape,
@@ -409,7 +409,7 @@ def _level_split(ysum, ycount):
 
 
 def detect_changes(result, target_per_day=None):
-    """Run :class:`ChangeTest` over a :class:`~imu_allan.core.dynamic.DynamicResult`."""
+    """Run :class:`ChangeTest` over a :class:`~imu_allan.core.change.dynamic.DynamicResult`."""
     test = ChangeTest(result.rate_hz, int(round(result.step_s * result.rate_hz)), result.ms,
                       result.k, result.axes, target_per_day)
     return test.push(result.blocks)

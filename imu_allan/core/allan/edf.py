@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from .scipy_compiled import function
+from ..scipy_compiled import function
 
 #: Inverse of the regularized upper incomplete gamma function Q(a, x) (scipy's compiled ufunc,
 #: loaded without ``scipy.special``'s import cost; see :mod:`.scipy_compiled`).

@@ -2,8 +2,8 @@
 The change test on a live stream: what the allan node runs (ROS-free).
 
 :class:`ChangeMonitor` feeds header-stamped batches to a
-:class:`~imu_allan.core.dynamic.BlockAllan` (fixed memory: per-block sums, never samples) and
-its completed blocks to a :class:`~imu_allan.core.change_detection.ChangeTest`, the same test
+:class:`~imu_allan.core.change.dynamic.BlockAllan` (fixed memory: per-block sums, never samples)
+and its completed blocks to a :class:`~imu_allan.core.change.detection.ChangeTest`, the same test
 ``analyze --dynamic`` runs on a whole record.  Times are header stamps (s): a change's
 ``t_s`` is the stamp of the first sample of the block where it happened.
 
@@ -19,10 +19,10 @@ import math
 
 import numpy as np
 
-from .change_detection import ChangeTest
-from .dynamic import BlockAllan, BLOCKS_PER_WINDOW, layout
 from .health import Health, OK, WARN
-from .units import physical_limits
+from ..change.detection import ChangeTest
+from ..change.dynamic import BlockAllan, BLOCKS_PER_WINDOW, layout
+from ..units import physical_limits
 
 #: Samples gathered before a feed (s of data): the block sums cost a few milliseconds per
 #: call whatever its size (a few numpy calls per averaging factor), so the node's 50-ms drains
@@ -118,7 +118,7 @@ class ChangeMonitor:
         return changes
 
     def health(self, prefix=''):
-        """One :class:`~imu_allan.core.health.Health` per axis: ``<prefix><axis> change``."""
+        """One :class:`~imu_allan.core.live.health.Health` per axis: ``<prefix><axis> change``."""
         records = []
         for j, axis in enumerate(self.axes):
             change = self.latest.get(axis)

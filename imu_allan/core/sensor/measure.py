@@ -50,9 +50,9 @@ import math
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .fit.tau_range import Processing
-from .sensor_spectrum import find_lines, fit_white, Hump, Line, Welch  # noqa: F401 - API
-from .units import AXES, sample_unit
+from .spectrum import find_lines, fit_white, Hump, Line, Welch  # noqa: F401 - API
+from ..fit.tau_range import Processing
+from ..units import AXES, sample_unit
 
 #: Most samples per axis :func:`measure_sensor` examines (spread over a longer record).
 MAX_EXAMINED = 2 ** 18

@@ -27,9 +27,9 @@ import os
 
 import numpy as np
 
-from .model import as_number, ModelError, per_axis_entries, read_yaml_file
-from .stamp_order import keep_increasing
-from .units import AXES, conventional, IEEE_TERMS, si_unit
+from ..checks.stamp_order import keep_increasing
+from ..model import as_number, ModelError, per_axis_entries, read_yaml_file
+from ..units import AXES, conventional, IEEE_TERMS, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 #: Names of the levels (diagnostic_msgs/DiagnosticStatus), for people.
@@ -259,7 +259,7 @@ class RateFinder:
     Measures a stream's sample rate from its header stamps, holding the samples meanwhile.
 
     The rate is 1 / the median spacing of the increasing stamps (the rule ``analyze`` uses,
-    :func:`imu_allan.core.preprocess.check_timing`), fixed once the stamps span ``settle_s``
+    :func:`imu_allan.core.checks.preprocess.check_timing`), fixed once the stamps span ``settle_s``
     seconds (or ``max_samples`` have arrived).  The samples that arrive until then are held,
     not lost: :meth:`take` hands them back to be fed with the rate found.
     """
@@ -276,7 +276,7 @@ class RateFinder:
 
     def add(self, t, data):
         """Hold samples (stamps ``t`` in s, ``data`` (n, A)); return the rate (Hz) once fixed."""
-        from .preprocess import check_timing
+        from ..checks.preprocess import check_timing
         t = np.asarray(t, dtype=float)
         if self.rate_hz is not None or t.size == 0:
             return self.rate_hz
@@ -385,7 +385,7 @@ def discrepancy_health(model, result, axes=AXES, prefix=''):
     consistent, see docs/discrepancy.md) and the effect that fits the excess otherwise, STALE
     while there is no estimate or the model has no terms for the axis.
     """
-    from .discrepancy import gap_summary
+    from ..discrepancy import gap_summary
     summary = gap_summary(model, result) if result is not None else {}
     out = []
     for axis in axes:

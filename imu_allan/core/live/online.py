@@ -2,7 +2,7 @@
 The online pipeline the allan node runs, and the staged publish cycle.
 
 Stamp checks -> stationarity gate -> streaming
-Allan variance (:mod:`imu_allan.core.streaming`) -> fit.
+Allan variance (:mod:`imu_allan.core.live.streaming`) -> fit.
 
 ``analyze --online`` runs the same code through :func:`online_allan`, so the numbers agree
 with the node's for the same samples.
@@ -12,14 +12,14 @@ import math
 
 import numpy as np
 
-from .allan import AllanResult
-from .fit import fit_noise_model, FitError, FittedModel
 from .health import Health, RATE_SETTLE_S, RateFinder, STALE, StampMonitor, stream_health
-from .sensor import SensorAccumulator
 from .stationarity import StationarityGate
 from .streaming import StreamingAllan
-from .units import AXES, is_gyro, physical_limits
-from ..errors import InputError
+from ..allan.estimate import AllanResult
+from ..fit import fit_noise_model, FitError, FittedModel
+from ..sensor.measure import SensorAccumulator
+from ..units import AXES, is_gyro, physical_limits
+from ...errors import InputError
 
 
 class OnlineAllan:
@@ -33,12 +33,12 @@ class OnlineAllan:
     ----------
     rate_hz : float
         Configured sample rate, Hz; 0 or None: measured from the stamps
-        (:class:`~imu_allan.core.health.RateFinder`, median spacing over the first
+        (:class:`~imu_allan.core.live.health.RateFinder`, median spacing over the first
         ``settle_s`` seconds), the samples of those seconds held and fed once it is known.
     axes : sequence of str
         Columns of the data (default the six package axes).
     gate : bool
-        Leave moving spans out (:class:`~imu_allan.core.stationarity.StationarityGate`).
+        Leave moving spans out (:class:`~imu_allan.core.live.stationarity.StationarityGate`).
     gate_options : dict, optional
         Gate parameters.
     gap_factor : float
@@ -49,12 +49,12 @@ class OnlineAllan:
         Stamp span that fixes a measured rate, s.
     sensor : bool
         Measure the sensor's processing from the still samples
-        (:class:`~imu_allan.core.sensor.SensorAccumulator`) and fit where it does not shape
+        (:class:`~imu_allan.core.sensor.measure.SensorAccumulator`) and fit where it does not shape
         the curve (:mod:`imu_allan.core.fit.tau_range`).
     filter_window_s : float
         Length of the moving average the IMU applies before it outputs, s (the 3DM-GX3-25's
         0xDB window / 1000 Hz); 0: unknown (measured).  When given, its filter replaces the
-        measured one in the fit (:meth:`~imu_allan.core.sensor.SensorReport.processing`).
+        measured one in the fit (:meth:`~imu_allan.core.sensor.measure.SensorReport.processing`).
     **estimator_options
         :class:`StreamingAllan` parameters (max_tau, window_s, stride_base, ...).
 
@@ -231,12 +231,12 @@ class OnlineAllan:
         return recent
 
     def result(self, window=False):
-        """Return current :class:`~imu_allan.core.allan.AllanResult` (None until enough data)."""
+        """Return the current :class:`~..allan.estimate.AllanResult` (None until enough data)."""
         return None if self.estimator is None else self.estimator.result(window=window)
 
     def stream_health(self, silence_s, timeout_s=2.0, rate_tolerance=0.1, name='IMU stream'):
         """
-        Return the :func:`~imu_allan.core.health.stream_health` of the input.
+        Return the :func:`~imu_allan.core.live.health.stream_health` of the input.
 
         STALE while the rate is being measured; the values say whether tau0 was configured
         or measured.

@@ -1,7 +1,7 @@
 """
-Compiled overlapping Allan variance (numba), imported by :mod:`imu_allan.core.allan` on use.
+Compiled overlapping Allan variance (numba), imported by :mod:`.estimate` on use.
 
-Compiled once per install (:mod:`.jit`).  Where the compiled code could not go into this
+Compiled once per install (:mod:`..jit`).  Where the compiled code could not go into this
 package's own ``__pycache__``, a one-line warning says where it went; where no directory is
 writable at all, the warning says the kernel is compiled in every process and how to avoid it.
 
@@ -21,7 +21,7 @@ import os
 
 import numpy as np
 
-from .jit import jit, map_threads, UNCACHED
+from ..jit import jit, map_threads, UNCACHED
 
 #: Phase points per block (32 KiB of float64: the L1 data cache of current x86 cores).
 BLOCK = 4096

@@ -13,7 +13,7 @@ test compares the two.
 
 import numpy as np
 
-from .scipy_compiled import extension
+from ..scipy_compiled import extension
 
 _compiled_nnls = getattr(extension('optimize', '_slsqplib'), 'nnls', None)
 
