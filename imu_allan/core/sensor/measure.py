@@ -50,7 +50,7 @@ import math
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .spectrum import find_lines, fit_white, Hump, Line, Welch  # noqa: F401 - API
+from .spectrum import FIT_LOW_FRACTION, find_lines, fit_white, Hump, Line, Welch  # noqa: F401
 from ..fit.tau_range import Processing
 from ..units import AXES, sample_unit
 
@@ -166,10 +166,27 @@ class AxisSensor:
         return s / m - 1.5 * d / (m * m)
 
     def processing(self):
-        """Return this axis as the fit takes it (:class:`~.fit.tau_range.Processing`)."""
-        return Processing(self.filter_length or 0, self.filter_moment or 0.0,
+        """
+        Return this axis as the fit takes it (:class:`~.fit.tau_range.Processing`).
+
+        A "hump" that starts where the white part's fit starts (fs / 100) is a low-pass
+        shape, not a resonance: the main lobe of a filter longer than the lags fitted (a
+        32-tap window decimated by 5 reads as one lag and a 2-25 Hz hump).  The fit takes it
+        as the filter: correlated over about fs / f_hi samples (the lobe's width), its deficit
+        fitted (:mod:`..fit.tau_range`), no cut.
+        """
+        length, moment = self.filter_length or 0, self.filter_moment or 0.0
+        humps = []
+        for h in self.humps:
+            lo, hi = h.frequency_range_hz
+            if lo <= 2.0 * self.rate_hz / FIT_LOW_FRACTION:
+                length = max(length, math.ceil(self.rate_hz / hi))
+                moment = max(moment, 1.0)  # its size is the fit's; this says there is one
+            else:
+                humps.append((lo, hi, h.excess_variance))
+        return Processing(length, moment,
                           tuple((ln.frequency_hz, ln.amplitude) for ln in self.lines),
-                          tuple((*h.frequency_range_hz, h.excess_variance) for h in self.humps))
+                          tuple(humps))
 
     def to_json(self):
         """Return a JSON-ready dict: SI, per sample or continuous time as :data:`JSON_UNITS`."""
