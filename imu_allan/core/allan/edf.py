@@ -25,7 +25,7 @@ import numpy as np
 from ..scipy_compiled import function
 
 #: Inverse of the regularized upper incomplete gamma function Q(a, x) (scipy's compiled ufunc,
-#: loaded without ``scipy.special``'s import cost; see :mod:`.scipy_compiled`).
+#: loaded without ``scipy.special``'s import cost; see :mod:`..scipy_compiled`).
 _gammainccinv = function('special', '_special_ufuncs', 'gammainccinv')
 
 #: The 1-sigma (68.27 %) two-sided confidence level used throughout the package.

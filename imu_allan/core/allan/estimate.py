@@ -174,7 +174,7 @@ def avar_function(work):
     Return the AVAR implementation for ``work`` second differences: numpy reference or compiled.
 
     Both take ``(data, ms)`` and return the same numbers (the tests compare them); the
-    compiled one lives in :mod:`.allan_kernel`, imported here on first use so that commands
+    compiled one lives in :mod:`.kernel`, imported here on first use so that commands
     that never compute a long deviation (``--help``, short records) never import numba.
     numba is optional (not every platform packages it): without it the reference runs, with
     one log line saying so (docs/benchmarks.md: how much slower).

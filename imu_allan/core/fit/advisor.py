@@ -148,7 +148,7 @@ class Advice:
     unresolved: list = field(default_factory=list)
     #: axes the motion verdict calls moving (set by the report): no noise measurement
     moving: list = field(default_factory=list)
-    #: axes whose model the adequacy test rejects (:mod:`.fit.adequacy`): their precision
+    #: axes whose model the adequacy test rejects (:mod:`.adequacy`): their precision
     #: figures are those of a model that does not describe the curve, never "precise"
     inadequate: list = field(default_factory=list)
 

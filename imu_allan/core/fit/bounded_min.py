@@ -8,7 +8,7 @@ through the three best points whenever the parabola's step is inside the interva
 than half the step before last.  It is what ``scipy.optimize.minimize_scalar(method='bounded')``
 computes, point for point (a test compares them); the fits use it here because importing
 ``scipy.optimize`` costs 0.3 s, a third of a one-minute ``analyze`` (see
-:mod:`.scipy_compiled`).
+:mod:`..scipy_compiled`).
 """
 
 import math

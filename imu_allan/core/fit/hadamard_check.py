@@ -16,7 +16,7 @@ OHDEV EDF of Greenhall & Riley and a correlation between averaging times measure
 
 * a set without K is contradicted when adding K to the Hadamard fit gains more than
   :data:`MARGIN` (10, "very strong" on the scale of Kass & Raftery 1995, the advisor's
-  separation margin) in the selection criterion chi^2 + 2 k ln T of :mod:`.fit`: the
+  separation margin) in the selection criterion chi^2 + 2 k ln T of :mod:`.axis`: the
   Hadamard curve rises where only a random walk makes it rise;
 * a set with K is contradicted when the walk its Allan fit needs (the lower end of K^2's
   95 % interval) exceeds the most the Hadamard curve allows (the upper end of its 95 %

@@ -7,7 +7,7 @@ parameter profiles, the recording advisor's forecasts), and ``scipy.optimize.nnl
 about 29 us checking its arguments around a solve of about 6 us.  :func:`nnls` checks only
 what matters here (finite input: scipy's routine returns zeros for NaN without a word) and
 calls the compiled routine directly when the installed scipy has it, loaded without the
-0.3 s import of ``scipy.optimize`` (:mod:`.scipy_compiled`), the public function otherwise; a
+0.3 s import of ``scipy.optimize`` (:mod:`..scipy_compiled`), the public function otherwise; a
 test compares the two.
 """
 
