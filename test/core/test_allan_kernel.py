@@ -1,5 +1,5 @@
 """
-Tests of the compiled AVAR kernel (imu_allan/core/allan_kernel.py).
+Tests of the compiled AVAR kernel (imu_allan/core/allan/kernel.py).
 
 Every fast path is compared with the numpy reference (``allan.avar_reference``, ``allan._phase``)
 on shapes that reach its edges: odd lengths, block boundaries, m near n / 2, groups of four
@@ -77,7 +77,7 @@ _SCRIPT = """
 import sys
 import numpy as np
 sys.path.insert(0, sys.argv[1])
-from kernels import allan_kernel
+from kernels.allan import kernel as allan_kernel
 d = np.random.default_rng(0).normal(size=(5000, 2))
 ms = np.array([1, 2, 3, 5, 8, 13, 21, 34, 55])
 print(float(allan_kernel.avar(d, ms)[0, 0]))
@@ -85,7 +85,7 @@ print(float(allan_kernel.avar(d, ms)[0, 0]))
 
 
 def _run(folder, env):
-    proc = subprocess.run([sys.executable, '-c', _SCRIPT, str(folder.parent)], env=env,
+    proc = subprocess.run([sys.executable, '-c', _SCRIPT, str(folder.parent.parent)], env=env,
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     return proc
@@ -106,13 +106,18 @@ def _module_copy(tmp_path):
     """
     Copy the kernel module into a fresh package ``kernels`` (own source: own cache entries).
 
-    Return the package's folder; its parent goes on ``sys.path``.
+    The package has the installed one's shape (``kernels/allan/kernel.py`` beside
+    ``kernels/jit.py``: the kernel's relative imports).  Return the kernel's folder; the
+    package's parent goes on ``sys.path``.
     """
-    folder = tmp_path / 'pkg' / 'kernels'
+    package = tmp_path / 'pkg' / 'kernels'
+    folder = package / 'allan'
     folder.mkdir(parents=True)
-    (folder / '__init__.py').write_text('')
-    for module in (allan_kernel, jit, scipy_compiled):
-        shutil.copy(module.__file__, folder / Path(module.__file__).name)
+    for init in (package, folder):
+        (init / '__init__.py').write_text('')
+    shutil.copy(allan_kernel.__file__, folder / 'kernel.py')
+    for module in (jit, scipy_compiled):
+        shutil.copy(module.__file__, package / Path(module.__file__).name)
     return folder
 
 

@@ -28,7 +28,7 @@ import os
 import numpy as np
 
 from ..checks.stamp_order import keep_increasing
-from ..model import as_number, ModelError, per_axis_entries, read_yaml_file
+from ..model import as_number, DATA_DIR, ModelError, per_axis_entries, read_yaml_file
 from ..units import AXES, conventional, IEEE_TERMS, si_unit
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -36,8 +36,7 @@ OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES = {OK: 'OK', WARN: 'WARN', ERROR: 'ERROR', STALE: 'STALE'}
 
 #: The packaged 3DM-GX3-25 datasheet budget.
-DEFAULT_BUDGET_FILE = os.path.join(os.path.dirname(os.path.dirname(__file__)), 'data',
-                                   'gx3_25_budget.yaml')
+DEFAULT_BUDGET_FILE = os.path.join(DATA_DIR, 'gx3_25_budget.yaml')
 
 
 @dataclass

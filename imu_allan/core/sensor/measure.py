@@ -50,7 +50,7 @@ import math
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .spectrum import FIT_LOW_FRACTION, find_lines, fit_white, Hump, Line, Welch  # noqa: F401
+from .spectrum import find_lines, FIT_LOW_FRACTION, fit_white, Hump, Line, Welch  # noqa: F401
 from ..fit.tau_range import Processing
 from ..units import AXES, sample_unit
 
