@@ -1,5 +1,5 @@
 """
-Benchmark: measuring the sensor's processing (``core/sensor.py``) offline and streaming.
+Benchmark: measuring the sensor's processing (``core/sensor/measure.py``) offline and streaming.
 
 1. ``measure_sensor`` on 1e6 x 6 samples (the two real ADIS16405 runs when the shared data
    are there, else the thesis 3DM-GX3-25 model rounded to the ADIS's LSBs) and on 10 h at

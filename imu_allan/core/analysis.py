@@ -91,7 +91,7 @@ class Analysis:
     t: np.ndarray = None
     upper_limits: dict = field(default_factory=dict)
     integrity: str = ''
-    warmup_s: float = 0.0  # start left out: the bias was settling (core/warmup.py)
+    warmup_s: float = 0.0  # start left out: the bias was settling (core/checks/warmup.py)
     allow_motion: bool = False
     #: Extra deviations asked for (``AnalysisOptions.estimators``): kind -> DeviationResult.
     deviations: dict = field(default_factory=dict)
@@ -140,7 +140,7 @@ def _validate(samples):
     if not np.all(np.isfinite(samples.t)):
         raise InputError(where, f'non-finite time stamp at sample '
                                 f'{int(np.flatnonzero(~np.isfinite(samples.t))[0])}')
-    keep, problem = drop_isolated(samples.t)  # the node's rule (core/stamp_order.py)
+    keep, problem = drop_isolated(samples.t)  # the node's rule (core/checks/stamp_order.py)
     if problem:
         back = np.flatnonzero(np.diff(samples.t) <= 0)
         i = int(back[0]) + 1
@@ -259,7 +259,7 @@ def analyze_samples(samples, options=None):
                                   options.points_per_decade, options.min_clusters)
     try:
         # With OHDEV asked for, its curve decides a rate random walk against a rate ramp
-        # where the Allan fit alone cannot (core/hadamard_check.py).
+        # where the Allan fit alone cannot (core/fit/hadamard_check.py).
         sensor = measured.result() if measured is not None else sensor
         processing = (None if sensor is None else
                       sensor.processing(options.filter_window_s))

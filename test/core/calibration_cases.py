@@ -22,7 +22,7 @@ For every axis: is the selected term set the true one; is the true one selected 
 alternatives; and per true term (when selected), does its 68.3 % / 95 % interval hold the
 truth.  ``python test/core/calibration_cases.py [axes per cell] [--hadamard]`` prints the full
 table of docs/method.md (``--hadamard``: with the Hadamard check of
-:mod:`imu_allan.core.hadamard_check`); test_calibration.py runs a smaller batch and checks the
+:mod:`imu_allan.core.fit.hadamard_check`); test_calibration.py runs a smaller batch and checks the
 goals.
 """
 

@@ -1,5 +1,5 @@
 """
-The recording advisor (core/advisor.py): targets, forecasts, unresolved pairs, health.
+The recording advisor (core/fit/advisor.py): targets, forecasts, unresolved pairs, health.
 
 Budget: about 20 s in all, most of it the statistical test (one gyro axis at 10 Hz).
 """

@@ -1,4 +1,4 @@
-"""The Hadamard check of the term selection (core/hadamard_check.py): mechanics, not power."""
+"""The Hadamard check of the term selection (core/fit/hadamard_check.py): mechanics, not power."""
 
 from imu_allan import allan_deviation, fit_noise_model, NoiseModel, simulate
 from imu_allan.core.deviations import deviation

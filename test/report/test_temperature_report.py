@@ -193,7 +193,7 @@ def test_slopes_use_the_warm_up_the_estimate_leaves_out(tmp_path):
     A warm-up the Allan estimate leaves out (verdict.warmup_s > 0) still feeds the slopes.
 
     1 h at 100 Hz, the bias following a 20 -> 40 deg C warm-up (time constant 300 s) at five
-    times SLOPES, large enough for core/warmup.py to call it one.  The settling is where the
+    times SLOPES, large enough for core/checks/warmup.py to call it one.  The settling is where the
     temperature moves, so the slopes are regressed on every sample read: each within 3 of its
     standard errors of the truth (a 99.7 % band for a normal error).
     """

@@ -319,11 +319,11 @@ def _bounded_drift(fit, rate_hz, processing):
     the same with the random walk (and a ramp) replaced by it, are fitted.  Not otherwise:
     beside white noise and flicker a hump was more often the noise's own wander (it took
     3 % off N of a 5-min simulated gyro), beside a ramp the estimator's own curvature (kept
-    on 2 of 24 simulated ramp records); the one the test
-    likes best is kept if it lowers the test's chi^2 by more than :data:`DRIFT_GAIN` (under the
-    selected model the drop is about chi^2 with that many degrees of freedom: kept wrongly about
-    once in a hundred tries).  The selection criterion cannot decide this: the GLS chi^2 is blind
-    to such a smooth bend (:mod:`.adequacy`).
+    on 2 of 24 simulated ramp records).  The one the test likes best is kept if it lowers the
+    test's chi^2 by more than :data:`DRIFT_GAIN` (under the selected model the drop is about
+    chi^2 with that many degrees of freedom: kept wrongly about once in a hundred tries).  The
+    selection criterion cannot decide this: the GLS chi^2 is blind to such a smooth bend
+    (:mod:`.adequacy`).
     """
     if (fit.adequacy is None or not fit.adequacy.p < DRIFT_TRIAL_P
             or 'rate_random_walk' not in fit.terms

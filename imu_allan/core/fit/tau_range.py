@@ -10,16 +10,17 @@ effect does at tau = m tau0:
 
 * a filter (band-limited white noise; sample-and-hold repeats are one): for m at or beyond its
   correlation length L the white part's AVAR is exactly N^2 / tau - 1.5 (D / S) N^2 / (fs tau^2)
-  (D / S the filter moment; :func:`~imu_allan.core.terms.filtered_white_shape`).  The fit gives
-  white noise that shape and starts at m = L + 1 (one sample beyond the closed form's reach, for
-  a correlation the measurement cut short).  A negative moment is white phase noise's own
-  (quantization Q, a term of the fit): no correction then.
+  (D / S the filter moment).  The fit adds the deficit's column -tau0 / tau^2, its size fitted
+  (:class:`~.axis.Problem`), and starts at m = L + 1 (one sample beyond the closed form's
+  reach, for a correlation the measurement cut short).  A negative moment is white phase
+  noise's own (quantization Q, a term of the fit): no correction then.
 * a narrow line of amplitude A at f (aliased or not): A^2 sin^4(pi f tau) / (pi f tau)^2.  Every
   line visible in the curve is fitted at the frequency the spectrum shows, the most visible one
   as the ``sinusoid`` term (one per axis: the noise model holds one sinusoid), the others as
   nuisance columns of the fit (``AxisFit.lines``): a line is the sensor's, not a reason to
   lose the averaging times it crosses.
-* a broad resonance of excess variance P from f_lo up: on average 3 P / (4 (pi f_lo tau)^2).
+* a broad resonance of excess variance P over [f_lo, f_hi]: P times
+  :func:`~imu_allan.core.terms.band_shape`, on average 3 P / (4 (pi f tau)^2) beyond 1 / f_lo.
 
 What is not fitted (a resonance) is cut away: the fit starts at the shortest averaging time from
 which each of them stays below :data:`KAPPA` standard deviations of the AVAR estimate
@@ -100,11 +101,6 @@ class TauRange:
     def to_json(self):
         """JSON-ready ``[lo, hi]`` (report.json ``axes.<axis>.fit.tau_range_s``)."""
         return [float(self.lo), float(self.hi)]
-
-
-def _tail(amplitude_sq, f_hz, tau):
-    """Average AVAR of a narrow band of variance-scale ``amplitude_sq`` at f beyond tau ~ 1/f."""
-    return 3.0 * amplitude_sq / (8.0 * (math.pi * f_hz * tau) ** 2)
 
 
 def choose(processing, tau, avar, edf, rate_hz, kappa=KAPPA):

@@ -23,7 +23,7 @@ and broad resonances.  :func:`measure_sensor` reads that from a record ``(n, A)`
   R_0 the white part's per-sample variance (which contains the rounding).
 * **The white part** (the sensor's filter): the short-correlation noise, autocovariance R_k
   (k = 0..filter_length, zero beyond), fitted as the coefficients of its spectrum
-  (:func:`.sensor_spectrum.fit_white`): no moving average is subtracted, so the lags carry no
+  (:func:`.spectrum.fit_white`): no moving average is subtracted, so the lags carry no
   bias from one (a 1-s moving-average subtraction lowers every rho_k by about 1/101), and the
   low-frequency noise is a column of the fit, not a filter.  S = R_0 + 2 sum R_k is the
   per-sample variance of a white sequence with the same low-frequency density (N = sqrt(S/fs)),
@@ -31,7 +31,7 @@ and broad resonances.  :func:`measure_sensor` reads that from a record ``(n, A)`
   for averaging factors m >= filter_length the part's Allan variance is exactly
   S tau0 / tau - 1.5 D tau0^2 / tau^2 (:meth:`AxisSensor.white_avar`, derived in
   docs/method.md, "Sensor processing").
-* **Lines** and **humps** (:mod:`.sensor_spectrum`): narrow lines at a false-alarm probability
+* **Lines** and **humps** (:mod:`.spectrum`): narrow lines at a false-alarm probability
   of 1 % per axis, amplitude as the ``sinusoid`` term's peak amplitude; broad resonances with
   their range, peak and excess variance.
 
@@ -118,7 +118,7 @@ class AxisSensor:
     white_variance : float or None
         S = R_0 + 2 sum R_k, per sample, SI^2.
     lines, humps : list
-        :class:`~.sensor_spectrum.Line` and :class:`~.sensor_spectrum.Hump` found.
+        :class:`~.spectrum.Line` and :class:`~.spectrum.Hump` found.
 
     """
 
