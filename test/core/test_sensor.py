@@ -1,5 +1,5 @@
 """
-The sensor's processing measured from its samples (core/sensor/measure.py, core/sensor/spectrum.py).
+The sensor's processing measured from its samples (core/sensor/: measure.py, spectrum.py).
 
 Checked on the two real ADIS16405 records (against quantities the tests compute themselves:
 the full-record repeat fraction, a variogram estimate of rho_1, chunked least-squares sine

@@ -204,7 +204,7 @@ class StampMonitor:
         if n == 0:
             return np.zeros(0, bool), np.zeros(0, bool)
         last = -math.inf if self.last_t is None else self.last_t
-        keep = keep_increasing(t, last)  # the rule analyze applies too (core/checks/stamp_order.py)
+        keep = keep_increasing(t, last)  # the rule analyze applies too (checks/stamp_order.py)
         kept_t = t[keep]
         break_before = np.zeros(n, bool)
         if kept_t.size:
