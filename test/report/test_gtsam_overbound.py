@@ -4,8 +4,9 @@ The exported numbers inside GTSAM's OWN preintegration: raw, overbound and the f
 Protocol (issue 23):
 
 1. Truth: a static IMU at 100 Hz, z up; every axis has white noise N, bias instability B
-   (true 1/f flicker, ``core/simulation/simulate.py``) and rate random walk K; gyro_z and accel_x carry a
-   first-order Gauss-Markov as well.  Flicker dominates from about 5 s to beyond the horizon.
+   (true 1/f flicker, ``core/simulation/simulate.py``) and rate random walk K; gyro_z and
+   accel_x carry a first-order Gauss-Markov as well.  Flicker dominates from about 5 s to
+   beyond the horizon.
 2. Export: ONE record of 400 s (seed 1) is analysed (``allan_deviation``, ``fit_noise_model``)
    and written by the ``gtsam`` exporter three ways: raw, ``overbound=True`` (horizon: the
    longest measured averaging time, 40 s) and raw ``inflate=10``.  The generated
