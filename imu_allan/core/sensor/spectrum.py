@@ -20,6 +20,7 @@ variance per unit normalised frequency, the units of R_k.
 
 from dataclasses import dataclass
 import functools
+import itertools
 import math
 from statistics import NormalDist
 
@@ -406,7 +407,11 @@ def fit_white(psd, nu, length, rate_hz, line_mask, background):
     filter has follows a hump and cannot tell it from a filter.  Then lags are added one at a
     time while significant (:func:`_forward`); rho_k is 0 beyond filter_length (within its
     standard error, reported), and R_0..R_filter_length and the humps come from the fit with
-    filter_length lags.
+    filter_length lags.  A mask that reaches down to the lowest band fitted, or whose final
+    fit is no white part (R_0 or the low-frequency sum S = R_0 + 2 sum R_k not positive), is
+    the filter's main lobe taken for a hump by too stiff a fit (a 27-tap window decimated by 5
+    masks 2-67 Hz with 2 lags; a resonance does not reach down to fs / 100): more lags are
+    tried.
     """
     half = length // 2
     low_bin = max(int(math.ceil(length / FIT_LOW_FRACTION)), FIRST_BIN)
@@ -415,16 +420,18 @@ def fit_white(psd, nu, length, rate_hz, line_mask, background):
         return None
     lags = int(min(MAX_LAGS, max(high_bands // 4 - 3, 0)))
     bands = _Bands(psd, background, line_mask, nu, length, rate_hz, lags)
-    mask = None
-    for k in sorted({min(k, lags) for k in MASK_LAGS_TRIED}):
-        mask = _settle_mask(bands, k)
-        if mask is not None:
+    masks = (_settle_mask(bands, k) for k in sorted({min(k, lags) for k in MASK_LAGS_TRIED}))
+    # the last: no number of lags explains the rest, so leave out nothing
+    lowest = int(np.argmax(bands.high))
+    for mask in itertools.chain(masks, [np.zeros(bands.y.size, dtype=bool)]):
+        if mask is None or mask[lowest]:
+            continue
+        filter_length, use_low, rho_se = _forward(bands, mask, lags)
+        final = _Fit(bands, mask, filter_length, use_low)
+        if (final.coef is not None and final.coef[0] > 0
+                and final.coef[0] + 2.0 * final.coef[1:filter_length + 1].sum() > 0):
             break
-    if mask is None:     # no number of lags explains the rest: leave out nothing
-        mask = np.zeros(bands.y.size, dtype=bool)
-    filter_length, use_low, rho_se = _forward(bands, mask, lags)
-    final = _Fit(bands, mask, filter_length, use_low)
-    if final.coef is None or not final.coef[0] > 0:
+    else:
         return None
     rho = np.zeros(rho_se.size)
     rho[:filter_length] = final.coef[1:filter_length + 1] / final.coef[0]
