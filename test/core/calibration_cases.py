@@ -22,8 +22,9 @@ For every axis: is the selected term set the true one; is the true one selected 
 alternatives; and per true term (when selected), does its 68.3 % / 95 % interval hold the
 truth.  ``python test/core/calibration_cases.py [axes per cell] [--hadamard]`` prints the full
 table of docs/method.md (``--hadamard``: with the Hadamard check of
-:mod:`imu_allan.core.fit.hadamard_check`); test_calibration.py runs a smaller batch and checks the
-goals.
+:mod:`imu_allan.core.fit.hadamard_check`); ``... 48 --realistic`` the realistic tables of its
+section 10 (a third generator, :func:`realistic_axis`, with the sensor measured as ``analyze``
+does); test_calibration.py runs a smaller batch and checks the goals.
 """
 
 import math
@@ -38,6 +39,7 @@ from imu_allan.core.simulation.simulate import simulate_axis
 from imu_allan.core.units import AXES
 import numpy as np
 import scipy.fft
+import scipy.stats
 
 SCENARIOS = {
     'N B K': ('white_noise', 'bias_instability', 'rate_random_walk'),
@@ -310,7 +312,8 @@ def score(cases, levels=(CI_LEVEL, 0.95)):
                # the Hadamard check: ran (open sets differing in K), rejected the true set
                'checked': bool(fit.evidence),
                'truth_rejected': any(set(e['terms']) == set(truth) and e['rejected']
-                                     for e in fit.evidence)}
+                                     for e in fit.evidence),
+               'adequacy_p': fit.adequacy.p if fit.adequacy is not None else math.nan}
         for term, value in truth.items():
             if term not in chosen:
                 continue
@@ -327,14 +330,18 @@ def _inside(interval, value):
 
 CELLS = [(s, g, h, r) for s in SCENARIOS for g in GENERATORS for h, r in
          ((1.0, 100.0), (3.0, 100.0), (1.0, 400.0))]
+#: The realistic table of docs/method.md section 10, per rate (no quantization scenario: the
+#: rounding is the sensor's, in every record); seeds 900, 901, ... in this order.
+REALISTIC_CELLS = {rate: [(s, 'realistic', 1.0, rate) for s in SCENARIOS if s != 'Q N B']
+                   for rate in (100.0, 200.0)}
 
 
-def run(cells=CELLS, n_axes=24, seed=1, log=None, hadamard=False):
+def run(cells=CELLS, n_axes=24, seed=1, log=None, hadamard=False, seed_step=1000):
     """Return ``{cell: rows}`` for every (scenario, generator, hours, rate) cell."""
     out = {}
     for k, cell in enumerate(cells):
         t0 = time.process_time()
-        out[cell] = score(batch(*cell, n_axes, seed + 1000 * k, hadamard=hadamard))
+        out[cell] = score(batch(*cell, n_axes, seed + seed_step * k, hadamard=hadamard))
         if log:
             log(f'{cell}: {time.process_time() - t0:.1f} s CPU')
     return out
@@ -377,12 +384,24 @@ def table(outcomes):
 
 
 if __name__ == '__main__':
-    # python test/core/calibration_cases.py [axes per cell] [--hadamard]
-    args = [a for a in sys.argv[1:] if a != '--hadamard']
+    # python test/core/calibration_cases.py [axes per cell] [--hadamard | --realistic]
+    args = [a for a in sys.argv[1:] if not a.startswith('--')]
     axes = int(args[0]) if args else 24
     t0 = time.process_time()
-    result = run(n_axes=axes, log=lambda s: print(s, file=sys.stderr, flush=True),
-                 hadamard='--hadamard' in sys.argv)
+
+    def log(text):
+        print(text, file=sys.stderr, flush=True)
+
+    if '--realistic' in sys.argv:
+        for rate, cells in REALISTIC_CELLS.items():
+            result = run(cells, n_axes=axes, seed=900, log=log, seed_step=1)
+            p = np.array([r['adequacy_p'] for rs in result.values() for r in rs])
+            p = p[np.isfinite(p)]
+            print(f'\n{rate:.0f} Hz\n\n{table(result)}\n\nadequacy p against uniform: '
+                  f'Kolmogorov-Smirnov p = {scipy.stats.kstest(p, "uniform").pvalue:.2f}; '
+                  f'p < 0.001 on {100 * np.mean(p < 0.001):.1f} % of {p.size} axes')
+        sys.exit(0)
+    result = run(n_axes=axes, log=log, hadamard='--hadamard' in sys.argv)
     print(table(result))
     rows = [r for rs in result.values() for r in rs]
     if any(r['checked'] for r in rows):
