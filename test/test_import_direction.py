@@ -36,10 +36,6 @@ module may import its own layer and every layer below, transitively)::
 * The root ``imu_allan/__init__.py`` (the version and the lazy public names): its own code
   imports nothing of the package (checked), so any module may import from it; a lazy name
   counts as an import of its module (above), which the order then checks.
-
-Known cycles still in the code are listed in :data:`KNOWN_CYCLES`, each as its own strict
-xfail case: removing the cycle makes that case pass, and the strict xfail then fails until the
-entry is deleted.
 """
 
 import ast
@@ -63,9 +59,6 @@ LAYERS = {
     'cli': ('report',),
     'nodes': ('report',),
 }
-
-#: Cycles known today, to be removed (issue 30): the set of modules of each.
-KNOWN_CYCLES = {}
 
 
 def _modules(root):
@@ -245,19 +238,9 @@ def graph():
 
 
 def test_no_import_cycle(graph):
-    """No cycle in the import graph, apart from the known ones (each an xfail case below)."""
-    new = [cycle_path(graph, comp) for comp in import_cycles(graph)
-           if comp not in KNOWN_CYCLES]
-    assert not new, 'import cycles:\n' + '\n'.join(new)
-
-
-@pytest.mark.parametrize('cycle', [
-    pytest.param(cycle, id='-'.join(sorted(m.rsplit('.', 1)[1] for m in cycle)),
-                 marks=pytest.mark.xfail(strict=True, reason=reason))
-    for cycle, reason in KNOWN_CYCLES.items()])
-def test_known_cycle_is_gone(graph, cycle):
-    """A known cycle no longer exists (once it passes, delete its entry in KNOWN_CYCLES)."""
-    assert cycle not in import_cycles(graph), cycle_path(graph, cycle)
+    """No cycle in the import graph."""
+    cycles = [cycle_path(graph, comp) for comp in import_cycles(graph)]
+    assert not cycles, 'import cycles:\n' + '\n'.join(cycles)
 
 
 def test_every_import_in_layer_order(graph):
