@@ -244,7 +244,7 @@ def analyze_samples(samples, options=None):
     sensor = None
     if options.online:  # the node's pipeline, its sensor measurement included
         from .live.online import run_online
-        pipeline = run_online(data, rate, t=t, axes=samples.axes)
+        pipeline = run_online(data, rate, t=t, axes=samples.axes, sensor=options.sensor)
         result = pipeline.result()
         if result is None:
             raise InputError(where, "too short for the online estimator's shortest "
