@@ -372,25 +372,25 @@ def _overlapping(kind, x, ms):
     n_phase = x.shape[1]
     ms = np.asarray(ms, dtype=np.int64)
     out = np.full((ms.size, x.shape[0]), np.nan)
-    mirrors = None
     if kind == 'ohdev':
         ok = n_phase - 3 * ms >= 1
-        kernel, lo, hi = _hadamard_blocks, 0, n_phase - 3 * int(ms[ok].min()) if ok.any() else 0
     else:
         ok = (ms <= n_phase - 2) & (n_phase >= 3)
-        kernel, lo, hi = _total_blocks, 1, n_phase - 1  # centres 1 .. N-2
-    if ok.any():
-        if kind == 'totdev':  # the reflected ends read the phase backwards
-            mirrors = np.ascontiguousarray(x[:, ::-1])
-        order = np.argsort(ms[ok], kind='stable')  # both kernels group ascending factors
-        use = np.ascontiguousarray(ms[ok][order])
-        sums = np.empty((use.size, x.shape[0]))
-        sums[order] = _blocked(kernel, x, use, lo, hi, mirrors)
-        m = ms[ok]
-        if kind == 'ohdev':
-            out[ok] = sums / (6.0 * m * m * (n_phase - 3 * m))[:, None]
-        else:
-            out[ok] = sums / (2.0 * m * m * (n_phase - 2))[:, None]
+    if not ok.any():
+        return out
+    m = ms[ok]
+    if kind == 'ohdev':
+        kernel, lo, hi, mirrors = _hadamard_blocks, 0, n_phase - 3 * int(m.min()), None
+        norm = 6.0 * m * m * (n_phase - 3 * m)
+    else:  # centres 1 .. N-2; the reflected ends read the phase backwards
+        kernel, lo, hi = _total_blocks, 1, n_phase - 1
+        mirrors = np.ascontiguousarray(x[:, ::-1])
+        norm = 2.0 * m * m * (n_phase - 2)
+    order = np.argsort(m, kind='stable')  # both kernels group ascending factors
+    use = np.ascontiguousarray(m[order])
+    sums = np.empty((use.size, x.shape[0]))
+    sums[order] = _blocked(kernel, x, use, lo, hi, mirrors)
+    out[ok] = sums / norm[:, None]
     return out
 
 

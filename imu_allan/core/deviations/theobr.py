@@ -61,7 +61,8 @@ def plan(n_phase):
     them evenly spaced in i, each Theo1 thinned to about :data:`SAMPLE_WORK` summands.
     """
     m_avar, m_theo = factors(n_phase)
-    work = float(sum(_theo1_work(n_phase, int(m)) for m in m_theo))
+    # Summed in float: exact below 2^53, and any larger total is far above EXACT_WORK.
+    work = float(np.sum(_theo1_work(n_phase, m_theo), dtype=float))
     if work <= EXACT_WORK:
         return m_avar, m_theo, np.ones(m_theo.size, dtype=np.int64)
     pick = np.unique(np.round(np.linspace(0, m_theo.size - 1, SAMPLES)).astype(np.int64))
@@ -103,4 +104,5 @@ def run_bias(x, avar, theo1):
     """
     k = ratio(x, avar, theo1)
     ok = np.isfinite(k) & (k > 0)
-    return nominal_alpha(np.where(ok, k, 1.0)), np.where(ok, 1.0 / np.where(ok, k, 1.0), 1.0)
+    safe = np.where(ok, k, 1.0)
+    return nominal_alpha(safe), 1.0 / safe

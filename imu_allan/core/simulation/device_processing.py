@@ -176,10 +176,6 @@ class DeviceProcessing:
             total += gain * gain * internal_psd(nu)
         return total
 
-    def apply(self, internal):
-        """Run the whole chain: :meth:`filter_decimate`, then :meth:`rounded`."""
-        return self.rounded(self.filter_decimate(internal))
-
     def filter_decimate(self, internal):
         """
         Window and decimate: internal ``(window - 1 + n * decimation, ...)`` -> ``(n, ...)``.
