@@ -32,7 +32,7 @@ from ..core.fit.adequacy import ADEQUACY_LEVEL
 from ..core.live.health import LEVEL_NAMES
 from ..core.units import ALL_TERMS, AXES, conventional, IEEE_TERMS
 from ..errors import InputError
-from ..report.advice import format_duration
+from ..report.advice import format_duration, term_words
 from ..report.coeffs_layout import (
     coefficient_terms,
     decode_adequacy,
@@ -213,10 +213,6 @@ def _seconds(text):
     return value if math.isfinite(value) else None
 
 
-def _term_words(term):
-    return 'Gauss-Markov' if term == 'gauss_markov' else term.replace('_', ' ')
-
-
 def _split_terms(text):
     """Split ``'rate_random_walk_rate_ramp'`` into known term names; None if it is not that."""
     terms = []
@@ -258,7 +254,7 @@ def advice_words(values):
             terms.setdefault(what, {}).setdefault(axis, {})[field] = _seconds(text)
         elif axis in AXES and options and field == 'more_s':
             more = _seconds(text)
-            words = ' or '.join(map(_term_words, options))
+            words = ' or '.join(map(term_words, options))
             alternatives.setdefault((more is None, words), []).append((axis, more))
         else:
             others[key] = text
@@ -276,7 +272,7 @@ def advice_words(values):
         parts = [f'target met on {_axes_text(met)}'] if met else []
         parts += [', '.join(f'{a} {format_duration(m)} more' for a, m in late)] if late else []
         parts += [f'target out of reach on {_axes_text(never)}'] if never else []
-        out.append(f'{_term_words(term)}' + (f' (known to {spread})' if rels else '')
+        out.append(f'{term_words(term)}' + (f' (known to {spread})' if rels else '')
                    + f': {"; ".join(parts)}.')
     later = [f'{words}: ' + ', '.join(f'{a} {format_duration(m)} more' for a, m in entries)
              for (unknown, words), entries in alternatives.items() if not unknown]

@@ -54,7 +54,7 @@ def advice_to_json(advice):
                            for u in advice.unresolved],
             'record_more_s': _num(advice.record_more_s),
             'undetected': undetected,
-            'inadequate': list(getattr(advice, 'inadequate', []))}
+            'inadequate': list(advice.inadequate)}
 
 
 def format_duration(seconds):
@@ -68,7 +68,8 @@ def format_duration(seconds):
     return f'about {seconds / 86400:.2g} days'
 
 
-def _words(term):
+def term_words(term):
+    """Return a term's name for people: 'white noise', 'Gauss-Markov'."""
     return 'Gauss-Markov' if term == 'gauss_markov' else term.replace('_', ' ')
 
 
@@ -83,11 +84,11 @@ def alternative_words(u):
     'gyro_x: rate random walk or rate ramp: cannot tell yet; record about 4 h more'.
     """
     if len(u.terms) == 2:
-        what = f'{_words(u.terms[0])} or {_words(u.terms[1])}'
+        what = f'{term_words(u.terms[0])} or {term_words(u.terms[1])}'
     elif len(u.terms) == 1:
-        what = f'{_words(u.terms[0])} or none'
+        what = f'{term_words(u.terms[0])} or none'
     else:
-        what = 'which of ' + ', '.join(_words(t) for t in u.terms)
+        what = 'which of ' + ', '.join(term_words(t) for t in u.terms)
     if u.more_s:
         when = f'record {format_duration(u.more_s)} more'
     else:
@@ -119,23 +120,23 @@ def advice_sentence(advice):
         term = limiting[1]
         axes = [a for a, t, _ in detected if t == term]  # package axis order
         where = 'on all axes' if len(axes) == len(advice.axes) else 'on ' + ', '.join(axes)
-        clauses.append(f'record {format_duration(record)} more to pin {_words(term)} to '
+        clauses.append(f'record {format_duration(record)} more to pin {term_words(term)} to '
                        f'{_percent(advice.targets[term])} {where}')
     elif record > 0:
         clauses.append(f'record {format_duration(record)} more to tell the unresolved terms '
                        f'apart')
     clauses += [alternative_words(u) for u in advice.unresolved]
-    inadequate = list(getattr(advice, 'inadequate', []))
+    inadequate = list(advice.inadequate)
     if inadequate:
         clauses.append(f'the noise model does not describe {", ".join(inadequate)}: their '
                        'precision figures are not meaningful (see the model check); a longer '
                        'record does not mend a model')
     for axis, term, e in detected:
         if e.more_s is None:
-            clauses.append(f'{axis} {_words(term)} will not reach '
+            clauses.append(f'{axis} {term_words(term)} will not reach '
                            f'{_percent(advice.targets[term])} ({e.reason})')
     if not clauses and not advice.unresolved and not inadequate:
         met = sorted({t for _, t, _ in detected})
-        targets = ', '.join(f'{_words(t)} {_percent(advice.targets[t])}' for t in met)
+        targets = ', '.join(f'{term_words(t)} {_percent(advice.targets[t])}' for t in met)
         return f'advice: every precision target is met ({targets}): no need to record longer.'
     return 'advice: ' + '; '.join(clauses) + '.'

@@ -55,7 +55,7 @@ def adequacy_values(fitted, axes=AXES):
     """Return the trailing block of ``imu/allan_coeffs``: each axis's adequacy p (NaN: none)."""
     out = np.full(len(axes), np.nan)
     for i, axis in enumerate(axes):
-        adequacy = fitted.adequacy(axis) if fitted is not None and axis in fitted.fits else None
+        adequacy = fitted.adequacy(axis) if fitted is not None else None
         if adequacy is not None and math.isfinite(adequacy.p):
             out[i] = adequacy.p
     return out

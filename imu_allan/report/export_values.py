@@ -25,6 +25,7 @@ One place for the rules the Kalibr file introduced and every exporter shares:
 import math
 
 from .export_registry import WHITE_WALK
+from .fit_quality import inadequate
 from ..core.units import AXES, sensor_of
 
 #: Which inflation factor (index into ``inflate``) scales each term; others are not inflated.
@@ -193,9 +194,7 @@ class ExportValues:
 
     def inadequate(self, axis):
         """Return whether the adequacy test rejects the model of ``axis`` (p < 0.001)."""
-        adequacy = getattr(self.fit, 'adequacy', None)
-        found = adequacy(axis) if adequacy is not None and axis in self.fit.axes else None
-        return found is not None and not found.adequate
+        return inadequate(self.fit, axis) is not None
 
     def inadequate_keys(self):
         """Keys (with axes) taken from an axis whose model the adequacy test rejects."""

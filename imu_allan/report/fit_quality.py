@@ -10,7 +10,7 @@ and the node's diagnostics, in one wording.
 import math
 
 from ..core.live.health import Health, OK, WARN
-from ..core.units import conventional, is_gyro
+from ..core.units import conventional, is_gyro, STANDARD_GRAVITY
 
 
 def fit_json(fitted, axis):
@@ -79,7 +79,7 @@ def adequacy_health(fitted, axes, prefix=''):
     """
     out = []
     for axis in axes:
-        adequacy = fitted.adequacy(axis) if fitted is not None and axis in fitted.fits else None
+        adequacy = fitted.adequacy(axis) if fitted is not None else None
         if adequacy is None:
             continue
         span = fitted.tau_range(axis)
@@ -184,4 +184,4 @@ def _lsb(axis, value):
     """Return an LSB in the units people use for it (deg/s, mg)."""
     if is_gyro(axis):
         return math.degrees(value), 'deg/s'
-    return value / 9.80665 * 1e3, 'mg'
+    return value / STANDARD_GRAVITY * 1e3, 'mg'
