@@ -368,13 +368,10 @@ class _AxisAdvisor:
         self.axis = axis
         self.undetected = undetected
         self.targets = targets
-        j = result.axis_index(axis)
         self.fitted = fitted
         self.fit = fitted.fits[axis]
-        # the measured curve as the fit saw it (span, fixed lines), else set up here
-        self.problem = getattr(self.fit, 'problem', None) or Problem(
-            result.tau, result.avar[:, j], result.edf[:, j], result.alpha[:, j],
-            result.rate_hz, result.n_samples / result.rate_hz)
+        # the measured curve as the fit saw it (span, fixed lines)
+        self.problem = self.fit.problem
         self.rate_hz = result.rate_hz
         self.n = int(result.n_samples)
         self.forecast = _Forecast(result.rate_hz, grid, getattr(self.fit, 'tau_range', None))

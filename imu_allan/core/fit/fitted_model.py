@@ -235,9 +235,7 @@ def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=N
         if terms is None and ohdev is not None and axis in ohdev.axes and fit.terms:
             hadamard = hadamard_check.hadamard_problem(ohdev, axis, fit.coef, span.lo)
             if hadamard is not None:
-                problem = fit.problem
-                fit = hadamard_check.decide(fit, problem, hadamard)
-                fit.problem = problem
+                fit = hadamard_check.decide(fit, fit.problem, hadamard)
         fit.tau_range = span
         _assess(fit, result.rate_hz, proc)
         if terms is None:
@@ -337,7 +335,7 @@ def _bounded_drift(fit, rate_hz, processing):
         new = fit_terms(problem, trial + ('gauss_markov',))
         if 'gauss_markov' not in new.terms:
             continue
-        new.problem, new.tau_range = problem, fit.tau_range
+        new.tau_range = fit.tau_range
         _assess(new, rate_hz, processing)
         added = len(new.terms) + 1 - len(names)  # tau_c counts
         gain = (fit.adequacy.chi2 - new.adequacy.chi2) / STATISTIC_SCALE
