@@ -74,8 +74,6 @@ class AxisFit:
     candidates: list = field(default_factory=list)
     #: what another curve said about the open term sets (:func:`.hadamard_check.check`)
     evidence: list = field(default_factory=list)
-    #: the averaging times fitted, and why (:class:`.tau_range.TauRange`; None: all usable)
-    tau_range: object = None
     #: does the model describe the curve (:class:`.adequacy.Adequacy`; set by fit_noise_model)
     adequacy: object = None
     #: the measured curve as fitted (:class:`Problem`: span, weights, fixed line frequencies)
@@ -84,6 +82,11 @@ class AxisFit:
     lines: dict = field(default_factory=dict)
     #: the filter's deficit c (SI^2): AVAR - c tau0 / tau^2, 1.5 (D / S) N^2 (:mod:`.tau_range`)
     filter_deficit: float = 0.0
+
+    @property
+    def tau_range(self):
+        """Return the averaging times fitted, and why: the problem's span (a TauRange) or None."""
+        return None if self.problem is None else self.problem.span
 
 
 class FitError(ValueError):
