@@ -453,16 +453,14 @@ class _ValueStats:
             return
         finite = np.isfinite(x)
         all_finite = bool(finite.all())
+        same = x[1:] == x[:-1]
+        valid = None if all_finite else finite[1:] & finite[:-1]
         if segment is None:
-            same = x[1:] == x[:-1]
-            valid = None if all_finite else finite[1:] & finite[:-1]
             joins = np.array([], dtype=np.int64)
             self.pairs += int(self.last == self.last and finite[0])
             self.repeats += int(self.last == x[0])
             self.last = x[-1]
         else:
-            same = x[1:] == x[:-1]
-            valid = None if all_finite else finite[1:] & finite[:-1]
             joins = np.arange(segment - 1, x.size - 1, segment)   # pairs across segments
         if valid is None:
             self.pairs += same.size - joins.size
