@@ -50,7 +50,7 @@ import math
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .spectrum import find_lines, FIT_LOW_FRACTION, fit_white, Hump, Line, Welch  # noqa: F401
+from .spectrum import find_lines, FIT_LOW_FRACTION, fit_white, Welch
 from ..fit.tau_range import Processing
 from ..units import AXES, sample_unit
 
@@ -253,7 +253,7 @@ class SensorReport:
             if filter_window_s:
                 device = Processing.moving_average(filter_window_s * self.rate_hz)
                 proc = dataclasses.replace(proc, filter_length=device.filter_length,
-                                           filter_moment=device.filter_moment, source='device')
+                                           filter_moment=device.filter_moment)
             out[name] = proc
         return out
 
