@@ -248,10 +248,11 @@ class SensorReport:
         measured one (a float-output device, where nothing else correlates the samples).
         """
         out = {}
+        device = (Processing.moving_average(filter_window_s * self.rate_hz) if filter_window_s
+                  else None)
         for name, ax in self.axes.items():
             proc = ax.processing()
-            if filter_window_s:
-                device = Processing.moving_average(filter_window_s * self.rate_hz)
+            if device is not None:
                 proc = dataclasses.replace(proc, filter_length=device.filter_length,
                                            filter_moment=device.filter_moment)
             out[name] = proc
