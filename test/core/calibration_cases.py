@@ -293,7 +293,7 @@ def _known_processing(truth, proc, rate_hz):
         f_in, sigmas = proc['line']
         alias = abs(f_in - rate_hz * round(f_in / rate_hz))
         lines = ((alias, sigmas * _output_sigma(truth, proc)),)
-    return Processing(len(cov), moment, lines, source='device')
+    return Processing(len(cov), moment, lines)
 
 
 def score(cases, levels=(CI_LEVEL, 0.95)):

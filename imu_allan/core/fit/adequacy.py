@@ -97,8 +97,6 @@ class Misfit:
 
     tau_s: tuple          # (first, last) averaging time of the span, s
     ratio: float          # measured / model Allan deviation at the worst point
-    tau_worst_s: float    # where that is, s
-    z: float              # its standardised log residual
     effect: str = None    # what bends the curve there, when known
 
     def to_json(self):
@@ -234,6 +232,6 @@ def assess(tau, avar, edf, corr, model, columns, name_effect=None, deterministic
     for first, last, worst in misfit_runs(tau, z):
         ratio = math.sqrt(avar[worst] / model[worst])
         lo, hi = float(tau[first]), float(tau[last])
-        out.misfit.append(Misfit((lo, hi), ratio, float(tau[worst]), float(z[worst]),
+        out.misfit.append(Misfit((lo, hi), ratio,
                                  name_effect(lo, hi, ratio) if name_effect else None))
     return out

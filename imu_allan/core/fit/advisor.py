@@ -368,16 +368,13 @@ class _AxisAdvisor:
         self.axis = axis
         self.undetected = undetected
         self.targets = targets
-        j = result.axis_index(axis)
         self.fitted = fitted
         self.fit = fitted.fits[axis]
-        # the measured curve as the fit saw it (span, fixed lines), else set up here
-        self.problem = getattr(self.fit, 'problem', None) or Problem(
-            result.tau, result.avar[:, j], result.edf[:, j], result.alpha[:, j],
-            result.rate_hz, result.n_samples / result.rate_hz)
+        # the measured curve as the fit saw it (span, fixed lines)
+        self.problem = self.fit.problem
         self.rate_hz = result.rate_hz
         self.n = int(result.n_samples)
-        self.forecast = _Forecast(result.rate_hz, grid, getattr(self.fit, 'tau_range', None))
+        self.forecast = _Forecast(result.rate_hz, grid, self.fit.tau_range)
         self.terms = {}
         self.unresolved = []
 
@@ -558,8 +555,7 @@ class StagedAdvice:
         grid = grid or analysis_grid()
         self.advice = Advice(targets, result.n_samples / result.rate_hz)
         self.advice.inadequate = [a for a in fitted.axes
-                                  if getattr(fitted.fits[a], 'adequacy', None) is not None
-                                  and not fitted.fits[a].adequacy.adequate]
+                                  if (ad := fitted.adequacy(a)) is not None and not ad.adequate]
         self._axes = [_AxisAdvisor(result, fitted, axis, targets, grid, undetected)
                       for axis in fitted.axes if fitted.fits[axis].terms]
         self._gen = self._run()

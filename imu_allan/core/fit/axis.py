@@ -74,8 +74,6 @@ class AxisFit:
     candidates: list = field(default_factory=list)
     #: what another curve said about the open term sets (:func:`.hadamard_check.check`)
     evidence: list = field(default_factory=list)
-    #: the averaging times fitted, and why (:class:`.tau_range.TauRange`; None: all usable)
-    tau_range: object = None
     #: does the model describe the curve (:class:`.adequacy.Adequacy`; set by fit_noise_model)
     adequacy: object = None
     #: the measured curve as fitted (:class:`Problem`: span, weights, fixed line frequencies)
@@ -84,6 +82,11 @@ class AxisFit:
     lines: dict = field(default_factory=dict)
     #: the filter's deficit c (SI^2): AVAR - c tau0 / tau^2, 1.5 (D / S) N^2 (:mod:`.tau_range`)
     filter_deficit: float = 0.0
+
+    @property
+    def tau_range(self):
+        """Return the averaging times fitted, and why: the problem's span (a TauRange) or None."""
+        return None if self.problem is None else self.problem.span
 
 
 class FitError(ValueError):
@@ -276,6 +279,8 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
     """
     Fit the named terms; return an :class:`AxisFit` (profiling tau_c / f0 when present).
 
+    The fit keeps ``problem`` (``fit.problem``).
+
     ``profile_intervals=False`` leaves the intervals of tau_c / f0 NaN: their profile
     bisection is most of the cost of such a fit, and a caller comparing criteria (the
     recording advisor) does not need them.  ``peaks`` ``(lo, hi)`` (s): where the hump of a
@@ -310,7 +315,7 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
         nonlinear[name] = math.exp(logp)
         profiles[name] = (grid, values, logp, chi2_at)
     coef, chi2, g = evaluate(nonlinear)
-    fit = AxisFit(chi2=chi2, n_points=problem.tau.size)
+    fit = AxisFit(chi2=chi2, n_points=problem.tau.size, problem=problem)
     coef, extra = coef[:len(names)], coef[len(names):]
     fit.lines = {f: math.sqrt(c) for f, c in zip(problem.lines, extra) if c > 0}
     fit.filter_deficit = float(extra[-1]) if problem.filtered else 0.0
@@ -383,9 +388,7 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
         unknown = [t for t in terms if t not in ALL_TERMS]
         if unknown:
             raise ValueError(f'unknown noise term(s): {", ".join(unknown)}')
-        fit = fit_terms(problem, terms)
-        fit.problem = problem
-        return fit
+        return fit_terms(problem, terms)
     base = tuple(problem.fixed)
     candidates = list(IEEE_TERMS) if problem.tau.size >= 4 else ['white_noise']
     if problem.filtered or (span is not None and span.limited_by == 'resonance'):
@@ -408,7 +411,6 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
     if best is None:
         return AxisFit(n_points=problem.tau.size, problem=problem)
     best.candidates = sorted(scored, key=lambda item: item[0])
-    best.problem = problem
     return best
 
 

@@ -235,10 +235,7 @@ def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=N
         if terms is None and ohdev is not None and axis in ohdev.axes and fit.terms:
             hadamard = hadamard_check.hadamard_problem(ohdev, axis, fit.coef, span.lo)
             if hadamard is not None:
-                problem = fit.problem
-                fit = hadamard_check.decide(fit, problem, hadamard)
-                fit.problem = problem
-        fit.tau_range = span
+                fit = hadamard_check.decide(fit, fit.problem, hadamard)
         _assess(fit, result.rate_hz, proc)
         if terms is None:
             fit = _bounded_drift(fit, result.rate_hz, proc)
@@ -337,7 +334,6 @@ def _bounded_drift(fit, rate_hz, processing):
         new = fit_terms(problem, trial + ('gauss_markov',))
         if 'gauss_markov' not in new.terms:
             continue
-        new.problem, new.tau_range = problem, fit.tau_range
         _assess(new, rate_hz, processing)
         added = len(new.terms) + 1 - len(names)  # tau_c counts
         gain = (fit.adequacy.chi2 - new.adequacy.chi2) / STATISTIC_SCALE

@@ -30,7 +30,7 @@ coefficient by a small part of its interval; shifts of many deviations are what 
 ADIS16405 fits.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import math
 
 import numpy as np
@@ -52,18 +52,16 @@ class Processing:
     ``filter_length``: output samples over which the white noise is correlated (0: none);
     ``filter_moment``: D / S of that correlation (samples; positive for a low-pass);
     ``lines``: ``((frequency_hz, amplitude), ...)`` narrow lines (peak amplitude, SI);
-    ``humps``: ``((f_lo_hz, f_hi_hz, excess_variance), ...)`` broad resonances (SI^2);
-    ``source``: where the filter figures come from (``'measured'`` or ``'device'``).
+    ``humps``: ``((f_lo_hz, f_hi_hz, excess_variance), ...)`` broad resonances (SI^2).
     """
 
     filter_length: int = 0
     filter_moment: float = 0.0
     lines: tuple = ()
     humps: tuple = ()
-    source: str = 'measured'
 
     @classmethod
-    def moving_average(cls, window_samples, lines=(), humps=()):
+    def moving_average(cls, window_samples):
         """
         Return the filter of a moving average ``window_samples`` output samples long.
 
@@ -75,8 +73,7 @@ class Processing:
         k = np.arange(1, max(math.ceil(w), 1))
         rho = np.maximum(0.0, 1.0 - k / w) if w > 1.0 else np.zeros(0)
         s = 1.0 + 2.0 * rho.sum()
-        return cls(int(k.size), float(2.0 * np.sum(k * rho) / s), tuple(lines), tuple(humps),
-                   'device')
+        return cls(int(k.size), float(2.0 * np.sum(k * rho) / s))
 
 
 @dataclass
@@ -92,18 +89,15 @@ class TauRange:
     #: the other visible lines, fitted as nuisance (the sensor's): ((frequency_hz, amplitude),)
     lines: tuple = ()
 
-    #: D / S given to white noise's shape (0: none), and the correlation length, samples
+    #: D / S given to white noise's shape (0: none), samples
     filter_moment: float = 0.0
-    filter_length: int = 0
-    #: each effect not fitted, at the lower end, in standard deviations of the estimate there
-    effects: dict = field(default_factory=dict)
 
     def to_json(self):
         """JSON-ready ``[lo, hi]`` (report.json ``axes.<axis>.fit.tau_range_s``)."""
         return [float(self.lo), float(self.hi)]
 
 
-def choose(processing, tau, avar, edf, rate_hz, kappa=KAPPA):
+def choose(processing, tau, avar, edf, rate_hz):
     """
     Return the fit's span of averaging times for one axis (a :class:`TauRange`).
 
@@ -117,21 +111,21 @@ def choose(processing, tau, avar, edf, rate_hz, kappa=KAPPA):
     if processing is None:
         return TauRange(float(tau[0]), float(tau[-1]))
     sd = np.sqrt(2.0 / np.asarray(edf, dtype=float))
-    visible = _visible_lines(processing, tau, avar, sd, kappa)
+    visible = _visible_lines(processing, tau, avar, sd, KAPPA)
     line, others = (visible[0], tuple(visible[1:])) if visible else (None, ())
     moment = max(processing.filter_moment, 0.0)
     start, limited_by = 0, None
     if moment > 0.0:
         start = int(np.searchsorted(tau * rate_hz, processing.filter_length + 1 - 1e-9))
         limited_by = 'filter' if start else None
-    if processing.humps:  # cut where a resonance shifts the estimate by more than kappa sd
+    if processing.humps:  # cut where a resonance shifts the estimate by more than KAPPA sd
         size = sum(p * band_shape(tau, lo, hi) for lo, hi, p in processing.humps) / avar
-        over = np.flatnonzero(size > kappa * sd)
+        over = np.flatnonzero(size > KAPPA * sd)
         if over.size and over[-1] + 1 > start:
             start, limited_by = int(over[-1]) + 1, 'resonance'
     start = min(start, max(tau.size - MIN_POINTS, 0))
     return TauRange(float(tau[start]), float(tau[-1]), limited_by if start else None, line,
-                    others, moment, processing.filter_length)
+                    others, moment)
 
 
 def _visible_lines(processing, tau, avar, sd, kappa):

@@ -50,7 +50,7 @@ import math
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .spectrum import find_lines, FIT_LOW_FRACTION, fit_white, Hump, Line, Welch  # noqa: F401
+from .spectrum import find_lines, FIT_LOW_FRACTION, fit_white, Welch
 from ..fit.tau_range import Processing
 from ..units import AXES, sample_unit
 
@@ -248,12 +248,13 @@ class SensorReport:
         measured one (a float-output device, where nothing else correlates the samples).
         """
         out = {}
+        device = (Processing.moving_average(filter_window_s * self.rate_hz) if filter_window_s
+                  else None)
         for name, ax in self.axes.items():
             proc = ax.processing()
-            if filter_window_s:
-                device = Processing.moving_average(filter_window_s * self.rate_hz)
+            if device is not None:
                 proc = dataclasses.replace(proc, filter_length=device.filter_length,
-                                           filter_moment=device.filter_moment, source='device')
+                                           filter_moment=device.filter_moment)
             out[name] = proc
         return out
 
@@ -453,16 +454,14 @@ class _ValueStats:
             return
         finite = np.isfinite(x)
         all_finite = bool(finite.all())
+        same = x[1:] == x[:-1]
+        valid = None if all_finite else finite[1:] & finite[:-1]
         if segment is None:
-            same = x[1:] == x[:-1]
-            valid = None if all_finite else finite[1:] & finite[:-1]
             joins = np.array([], dtype=np.int64)
             self.pairs += int(self.last == self.last and finite[0])
             self.repeats += int(self.last == x[0])
             self.last = x[-1]
         else:
-            same = x[1:] == x[:-1]
-            valid = None if all_finite else finite[1:] & finite[:-1]
             joins = np.arange(segment - 1, x.size - 1, segment)   # pairs across segments
         if valid is None:
             self.pairs += same.size - joins.size
