@@ -26,9 +26,8 @@ def fit_json(fitted, axis):
         out['tau_range_s'] = span.to_json()
         out['tau_range_limited_by'] = span.limited_by
         out['filter_moment'] = float(span.filter_moment)  # measured (or the device's)
-    white = fit.coef.get('white_noise')
-    if fit.filter_deficit and white:
-        out['filter_moment_fitted'] = float(fit.filter_deficit / (1.5 * white))
+    if fit.filter_moment_fitted is not None:
+        out['filter_moment_fitted'] = float(fit.filter_moment_fitted)
     out['lines'] = [{'frequency_hz': float(f), 'amplitude': float(a)}
                     for f, a in sorted(fit.lines.items())]
     return out

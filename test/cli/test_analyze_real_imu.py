@@ -98,3 +98,28 @@ def test_real_records_read_as_an_expert_reads_them(record_csv, online):
         assert rms < 0.15, (axis, rms)
         assert abs(model.min() / adev[span].min() - 1.0) < 0.20, (axis, model.min(),
                                                                   adev[span].min())
+
+
+@pytest.mark.slow
+def test_hadamard_check_on_a_real_record_leaves_the_sensor_shapes_to_the_allan_fit(record_csv):
+    """
+    ``--estimators oadev,ohdev`` on the real runs: the OHDEV curve is reported and the fit ends.
+
+    The Hadamard check of K against R knows the IEEE terms' shapes only; on an axis whose
+    Allan fit holds a sinusoid, a line or a Gauss-Markov it is not applied (it stopped the
+    command with a traceback before), so such an axis is never 'oadev+ohdev'.
+    """
+    proc = run_command('analyze', record_csv, '--json', '--estimators', 'oadev,ohdev',
+                       timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    shaped = 0
+    for axis in AXES:
+        entry = report['axes'][axis]
+        assert len(entry['deviations']['ohdev']['dev']) > 5, axis
+        fit = entry['fit']
+        if set(entry['terms']) - {'quantization', 'white_noise', 'bias_instability',
+                                  'rate_random_walk', 'rate_ramp'} or fit['lines']:
+            shaped += 1
+            assert fit.get('decided_by') != 'oadev+ohdev', axis
+    assert shaped >= 3  # the accelerometers' line at least

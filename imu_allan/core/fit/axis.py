@@ -88,6 +88,12 @@ class AxisFit:
         """Return the averaging times fitted, and why: the problem's span (a TauRange) or None."""
         return None if self.problem is None else self.problem.span
 
+    @property
+    def filter_moment_fitted(self):
+        """Return the moment D/S the fitted filter deficit implies (c = 1.5 (D/S) N^2), or None."""
+        white = self.coef.get('white_noise')
+        return self.filter_deficit / (1.5 * white) if self.filter_deficit and white else None
+
 
 class FitError(ValueError):
     """The curve cannot be fitted (no usable averaging times)."""

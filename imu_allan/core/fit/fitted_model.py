@@ -232,7 +232,8 @@ def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=N
         span = _span(tau, avar, edf, result.rate_hz, proc, tau_range)
         fit = fit_axis(tau, avar, edf, alpha, result.rate_hz, terms, duration, span)
         ohdev = (deviations or {}).get('ohdev')
-        if terms is None and ohdev is not None and axis in ohdev.axes and fit.terms:
+        if (terms is None and ohdev is not None and axis in ohdev.axes and fit.terms
+                and hadamard_check.applies(fit)):
             hadamard = hadamard_check.hadamard_problem(ohdev, axis, fit.coef, span.lo)
             if hadamard is not None:
                 fit = hadamard_check.decide(fit, fit.problem, hadamard)

@@ -114,6 +114,17 @@ def hadamard_problem(ohdev, axis, coef=None, tau_min=None):
     return problem if problem.tau.size >= 4 else None
 
 
+def applies(fit):
+    """
+    Return whether the check can judge an Allan fit: IEEE terms only, no fitted line.
+
+    The Hadamard shapes are the IEEE terms' (:func:`~imu_allan.core.terms.hadamard_shape`); a
+    sinusoid, a line or a Gauss-Markov bends the OHVAR curve in ways its fit cannot follow,
+    so K against R is then left to the Allan fit (its alternatives stay open).
+    """
+    return set(fit.coef) <= set(ID_ALPHA) and not fit.lines
+
+
 def open_sets(candidates, margin=ALTERNATIVE_MARGIN):
     """Return the term sets (tuples) within ``margin`` of the best criterion, best first."""
     if not candidates:
