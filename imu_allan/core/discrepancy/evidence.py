@@ -189,11 +189,15 @@ def _q_with_fixed(prob, names, term, amplitude, fit, fixed):
     return refit.q
 
 
-def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_target):
-    """Largest amplitude factor (of the stated one) whose Q stays below ``q_target``."""
+def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated, q_target):
+    """
+    Largest amplitude factor (of the stated one) whose Q stays below ``q_target``.
+
+    ``q_stated`` is the Q with the amplitude held at ``stated_amp`` (:func:`_q_with_fixed`).
+    """
     lo = math.log(max(_amp(fit.terms[term], term), stated_amp * 1e-6))
     hi = math.log(stated_amp)
-    if _q_with_fixed(prob, names, term, stated_amp, fit, fixed) <= q_target:
+    if q_stated <= q_target:
         return 1.0
     for _ in range(18):  # bisection in log amplitude: 18 halvings of a <= 14-e-fold span
         mid = 0.5 * (lo + hi)
@@ -218,9 +222,9 @@ def _absent(prob, fit, names, term, fixed, stated_amp, z_crit):
     p_stated = float(2.0 * norm.sf(math.sqrt(max(q_stated - fit.q, 0.0) / scale)))
     out = {'p_stated': p_stated, 'upper68': 1.0, 'upper_crit': 1.0}
     if p_stated < REJECTED_P:  # the stated size does not fit: how large could it be?
-        out['upper68'] = _upper_limit(prob, names, term, fit, fixed, stated_amp,
+        out['upper68'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
                                       fit.q + scale)
-        out['upper_crit'] = _upper_limit(prob, names, term, fit, fixed, stated_amp,
+        out['upper_crit'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
                                          fit.q + scale * z_crit ** 2)
     return out
 
