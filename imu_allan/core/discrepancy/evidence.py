@@ -26,9 +26,9 @@ import math
 
 import numpy as np
 
-from .band import ALPHA, measure_gap, measured_band, model_band
-from .logfit import fit_terms, FitProblem, improvement_test
-from .workflow import evaluate_candidates
+from .band import ALPHA, measure_gap, model_band
+from .logfit import fit_terms, improvement_test
+from .workflow import evaluate_candidates, two_pass_fit
 from ..allan.estimate import allan_deviation
 from ..terms import TERMS
 
@@ -149,16 +149,6 @@ def _amp(params, term):
 
 def _positions(terms):
     return {t: TERMS[t].unpack(p)[1] for t, p in terms.items() if TERMS[t].position}
-
-
-def _refit(y, measured, j, names, init, fixed, ranges=None):
-    """Fit ``names`` twice: against the measured curve's own band, then the fitted model's."""
-    tau, rate = measured.tau, measured.rate_hz
-    first = fit_terms(FitProblem(y, tau, rate, measured_band(measured, j)), names, init=init,
-                      fixed_positions=fixed, ranges=ranges)
-    band = model_band(first.terms, tau, measured.m, measured.n_samples, rate)
-    prob = FitProblem(y, tau, rate, band)
-    return prob, fit_terms(prob, names, init=first.terms, fixed_positions=fixed, ranges=ranges)
 
 
 def _drop_test(prob, fit, names, term, fixed):
@@ -286,7 +276,7 @@ def _wide(measured):
 def _free_position(y, measured, j, names, fit, fixed):
     """Fit the stated Gauss-Markov with its tau_c free; return the fit and the p-value."""
     others = {t: p for t, p in fixed.items() if t != 'gauss_markov'}
-    prob, free = _refit(y, measured, j, names, fit.terms, others, _wide(measured))
+    prob, free = two_pass_fit(y, measured, j, names, fit.terms, others, _wide(measured))
     pos = [free.names.index(('gauss_markov', 'pos'))]
     rest = [i for i in range(free.jac.shape[1]) if i not in pos]
     q_fixed = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
@@ -307,7 +297,7 @@ def _bounded_walk(y, measured, j, names, fit, fixed, rate):
     k_stated = fit.terms['rate_random_walk']['value']
     init = {t: fit.terms[t] for t in alt if t in fit.terms}
     init['gauss_markov'] = {'sigma': k_stated * math.sqrt(t_max / 2.0), 'tau_c': t_max}
-    prob, bounded = _refit(y, measured, j, alt, init, fixed, _wide(measured))
+    prob, bounded = two_pass_fit(y, measured, j, alt, init, fixed, _wide(measured))
     pos = [bounded.names.index(('gauss_markov', 'pos'))]
     rest = [i for i in range(bounded.jac.shape[1]) if i not in pos]
     walk_q = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
@@ -433,7 +423,7 @@ def _free_gauss_markov(y, measured, j, names, fit, fixed):
     if p >= ADOPT_P:
         return fixed, fit, (free, p)
     adopted = dict(fixed, gauss_markov=free.terms['gauss_markov']['tau_c'])
-    return adopted, _refit(y, measured, j, names, free.terms, adopted)[1], (free, p)
+    return adopted, two_pass_fit(y, measured, j, names, free.terms, adopted)[1], (free, p)
 
 
 def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
@@ -443,7 +433,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
     fixed = _positions(stated)
     ev.gap_stated = measure_gap(y, model_band(stated, tau, measured.m, measured.n_samples,
                                               rate), alpha).value
-    first = _refit(y, measured, j, names, stated, fixed)
+    first = two_pass_fit(y, measured, j, names, stated, fixed)
     held, fit, freed = _free_gauss_markov(y, measured, j, names, first[1], fixed)
     replaced = None
     if 'rate_random_walk' in stated and 'gauss_markov' not in stated:
@@ -459,7 +449,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
                 fixed = dict(fixed, gauss_markov=bounded.terms['gauss_markov']['tau_c'])
                 held = dict(fixed)
                 fit = bounded
-                first = _refit(y, measured, j, names, bounded.terms, fixed)
+                first = two_pass_fit(y, measured, j, names, bounded.terms, fixed)
     # effects the stated terms lack: only when the refitted stated terms leave the band
     for _ in range(MAX_MISSING):
         band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
@@ -480,7 +470,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
             fixed[added] = held[added] = position
         init = dict(fit.terms)
         init[added] = winner.fit.terms[added]
-        fit = _refit(y, measured, j, names, init, held)[1]
+        fit = two_pass_fit(y, measured, j, names, init, held)[1]
     band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
     gap = measure_gap(y, band, alpha)
     ev.gap_fitted, ev.consistent_fitted = gap.value, gap.consistent
@@ -488,7 +478,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
     ev.mean_noise_var = _mean_noise(fit.terms, rate, ev.duration_s)
     # the factors: amplitudes with the stated positions (and any added effect's)
     if ev.missing:
-        prob, fit = _refit(y, measured, j, names, fit.terms, fixed)
+        prob, fit = two_pass_fit(y, measured, j, names, fit.terms, fixed)
         freed = None  # the freed tau_c is tried again beside the added effects
     else:
         prob, fit = first
