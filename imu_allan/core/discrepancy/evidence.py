@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from .band import ALPHA, measure_gap, model_band
-from .logfit import fit_terms, improvement_test
+from .logfit import fit_terms, improvement_test, satterthwaite
 from .workflow import evaluate_candidates, two_pass_fit
 from ..allan.estimate import allan_deviation
 from ..terms import TERMS
@@ -227,17 +227,9 @@ def _q_scale(prob, fit, term):
     the projection P on its Jacobian column; 1 for independent averaging times).
     """
     i = fit.names.index((term, 'amp'))
-    x = fit.jac[:, [i]]
     others = [k for k in range(fit.jac.shape[1]) if k != i]
-    if others:
-        nuis = fit.jac[:, others]
-        x = x - nuis @ (np.linalg.pinv(nuis) @ x)
-    if not np.any(np.abs(x) > 0):
-        return 1.0
-    proj = x @ np.linalg.pinv(x)
-    pr = proj @ prob.corr
-    e = float(np.trace(pr))
-    return float(np.sum(pr * pr.T)) / e if e > 0 else 1.0
+    match = satterthwaite(fit.jac[:, others], fit.jac[:, [i]], prob.corr)
+    return 1.0 if match is None else match[0]
 
 
 def _position_p(delta_q, fit, rest, cols, prob):
