@@ -232,15 +232,19 @@ def _q_scale(prob, fit, term):
     return 1.0 if match is None else match[0]
 
 
-def _position_p(delta_q, fit, rest, cols, prob):
+def _position_p(prob, free, names, fit, fixed):
     """
-    p-value of freeing a hump's position, with the look-elsewhere factor T_eff.
+    p-value of a Gauss-Markov's freed tau_c, with the look-elsewhere factor T_eff.
 
-    The freed position was searched over the whole span, where about T_eff distinguishable
-    places exist: as for a hump candidate (:func:`.workflow.evaluate_candidates`) the
-    Satterthwaite p-value is multiplied by T_eff.
+    ``free`` (the Gauss-Markov's tau_c free) is compared with ``names`` refitted on ``prob``
+    from ``fit`` with the positions ``fixed``.  The freed position was searched over the whole
+    span, where about T_eff distinguishable places exist: as for a hump candidate
+    (:func:`.workflow.evaluate_candidates`) the Satterthwaite p-value is multiplied by T_eff.
     """
-    p, _ = improvement_test(delta_q, fit.jac[:, rest], fit.jac[:, cols], prob.corr)
+    pos = [free.names.index(('gauss_markov', 'pos'))]
+    rest = [i for i in range(free.jac.shape[1]) if i not in pos]
+    q_fixed = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
+    p, _ = improvement_test(q_fixed - free.q, free.jac[:, rest], free.jac[:, pos], prob.corr)
     return min(1.0, p * max(prob.t_eff, 1.0))
 
 
@@ -269,10 +273,7 @@ def _free_position(y, measured, j, names, fit, fixed):
     """Fit the stated Gauss-Markov with its tau_c free; return the fit and the p-value."""
     others = {t: p for t, p in fixed.items() if t != 'gauss_markov'}
     prob, free = two_pass_fit(y, measured, j, names, fit.terms, others, _wide(measured))
-    pos = [free.names.index(('gauss_markov', 'pos'))]
-    rest = [i for i in range(free.jac.shape[1]) if i not in pos]
-    q_fixed = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
-    return free, _position_p(q_fixed - free.q, free, rest, pos, prob)
+    return free, _position_p(prob, free, names, fit, fixed)
 
 
 def _bounded_walk(y, measured, j, names, fit, fixed, rate):
@@ -290,10 +291,7 @@ def _bounded_walk(y, measured, j, names, fit, fixed, rate):
     init = {t: fit.terms[t] for t in alt if t in fit.terms}
     init['gauss_markov'] = {'sigma': k_stated * math.sqrt(t_max / 2.0), 'tau_c': t_max}
     prob, bounded = two_pass_fit(y, measured, j, alt, init, fixed, _wide(measured))
-    pos = [bounded.names.index(('gauss_markov', 'pos'))]
-    rest = [i for i in range(bounded.jac.shape[1]) if i not in pos]
-    walk_q = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
-    p = _position_p(walk_q - bounded.q, bounded, rest, pos, prob)
+    p = _position_p(prob, bounded, names, fit, fixed)
     tau_fit = bounded.terms['gauss_markov']['tau_c']
     if bounded.at_bound['gauss_markov']['tau_c'] or \
             tau_fit * TERMS['gauss_markov'].peak_ratio >= t_max:
