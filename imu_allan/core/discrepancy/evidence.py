@@ -72,6 +72,10 @@ class Recording:
     ``data`` (n, A) SI samples, ``rate_hz`` their rate, ``axes`` the column names, ``source``
     a name for the report, ``stated_variance`` the per-sample variance per axis that the
     recording's message metadata state (Imu covariance diagonals; None when unknown).
+    ``measured`` is the Allan deviation of exactly these data, rate and axes on the analysis's
+    averaging-time grid, when already computed (e.g. ``DiscrepancyResult.measured`` with the
+    same ``points_per_decade`` and ``min_clusters``); None: :func:`measure_recording`
+    computes it.
     """
 
     data: np.ndarray
@@ -79,6 +83,7 @@ class Recording:
     axes: tuple
     source: str = ''
     stated_variance: dict = None
+    measured: object = None
 
     @property
     def duration_s(self):
@@ -376,8 +381,10 @@ def measure_recording(recording, model, z_crit=3.0, alpha=ALPHA, points_per_deca
     if data.ndim == 1:
         data = data[:, None]
     rate = float(recording.rate_hz)
-    measured = allan_deviation(data, rate, points_per_decade=points_per_decade,
-                               min_clusters=min_clusters, axes=tuple(recording.axes))
+    measured = recording.measured
+    if measured is None:
+        measured = allan_deviation(data, rate, points_per_decade=points_per_decade,
+                                   min_clusters=min_clusters, axes=tuple(recording.axes))
     if measured.tau.size < 6:
         raise ValueError(f'only {measured.tau.size} averaging times: the record is too short '
                          'for a discrepancy analysis')
