@@ -30,6 +30,7 @@ from .band import ALPHA, measure_gap, model_band
 from .logfit import fit_terms, improvement_test, satterthwaite
 from .workflow import evaluate_candidates, two_pass_fit
 from ..allan.estimate import allan_deviation
+from ..simulation.gauss_markov import driving_density, stationary_sigma
 from ..terms import TERMS
 
 #: Share of the record whose mean stands for the turn-on bias (first tenth) and for the end.
@@ -148,7 +149,8 @@ def _log_sd(fit, term, kind):
     return math.sqrt(v) if np.isfinite(v) and v > 0 else math.inf
 
 
-def _amp(params, term):
+def amplitude(params, term):
+    """Return the amplitude of one term's parameters (its first one: N, B, K, sigma ...)."""
     return TERMS[term].unpack(params)[0]
 
 
@@ -169,10 +171,10 @@ def _drop_test(prob, fit, names, term, fixed):
     return p
 
 
-def _q_with_fixed(prob, names, term, amplitude, fit, fixed):
-    """Q of the fit with ``term``'s amplitude held at ``amplitude`` (the others refitted)."""
+def _q_with_fixed(prob, names, term, amp, fit, fixed):
+    """Q of the fit with ``term``'s amplitude held at ``amp`` (the others refitted)."""
     spec = TERMS[term]
-    held = spec.pack(amplitude, fixed.get(term))
+    held = spec.pack(amp, fixed.get(term))
     offset = np.maximum(spec.avar(held, prob.tau, prob.rate_hz), 0.0)
     rest = [t for t in names if t != term]
     if not rest:
@@ -190,7 +192,7 @@ def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated, q_target):
 
     ``q_stated`` is the Q with the amplitude held at ``stated_amp`` (:func:`_q_with_fixed`).
     """
-    lo = math.log(max(_amp(fit.terms[term], term), stated_amp * 1e-6))
+    lo = math.log(max(amplitude(fit.terms[term], term), stated_amp * 1e-6))
     hi = math.log(stated_amp)
     if q_stated <= q_target:
         return 1.0
@@ -265,7 +267,7 @@ def _log_drive(fit):
     c = fit.cov
     var = c[i, i] + 0.25 * c[k, k] - c[i, k]
     se = math.sqrt(var) if np.isfinite(var) and var > 0 else math.inf
-    return math.log(sigma * math.sqrt(2.0 / tau_c)), se
+    return math.log(driving_density(sigma, tau_c)), se
 
 
 def _wide(measured):
@@ -294,7 +296,7 @@ def _bounded_walk(y, measured, j, names, fit, fixed, rate):
     alt = [t for t in names if t != 'rate_random_walk'] + ['gauss_markov']
     k_stated = fit.terms['rate_random_walk']['value']
     init = {t: fit.terms[t] for t in alt if t in fit.terms}
-    init['gauss_markov'] = {'sigma': k_stated * math.sqrt(t_max / 2.0), 'tau_c': t_max}
+    init['gauss_markov'] = {'sigma': stationary_sigma(k_stated, t_max), 'tau_c': t_max}
     prob, bounded = two_pass_fit(y, measured, j, alt, init, fixed, _wide(measured))
     p = _position_p(prob, bounded, names, fit, fixed)
     tau_fit = bounded.terms['gauss_markov']['tau_c']
@@ -331,16 +333,16 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
         if not free.at_bound['gauss_markov']['tau_c'] and se < MAX_POSITION_SE:
             positions['gauss_markov'] = LogEstimate(math.log(tau_fit / tau_stated), se, rate)
             free_scales['gauss_markov'] = LogEstimate(
-                math.log(_amp(free.terms['gauss_markov'], 'gauss_markov')
-                         / _amp(stated['gauss_markov'], 'gauss_markov')),
+                math.log(amplitude(free.terms['gauss_markov'], 'gauss_markov')
+                         / amplitude(stated['gauss_markov'], 'gauss_markov')),
                 _log_sd(free, 'gauss_markov', 'amp') * POSITION_SE_INFLATION, rate)
         # the data keep rising where the stated Gauss-Markov would have levelled off
         if (tau_fit > t_max or at_top) and spec.peak_ratio * tau_stated < 0.5 * t_max:
             log_k, se_k = _log_drive(free)
             s0 = stated['gauss_markov']['sigma']
             process = {'term': 'gauss_markov', 'kind': 'walk', 'p_value': p,
-                       'estimate': LogEstimate(log_k - math.log(s0 * math.sqrt(
-                           2.0 / tau_stated)), se_k, rate), 'tau_c_fit': tau_fit}
+                       'estimate': LogEstimate(log_k - math.log(driving_density(
+                           s0, tau_stated)), se_k, rate), 'tau_c_fit': tau_fit}
     return positions, position_p, free_scales, process
 
 
@@ -483,7 +485,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
     for term, params in stated.items():
         if term == replaced:
             continue
-        a0 = _amp(params, term)
+        a0 = amplitude(params, term)
         p_drop = _drop_test(prob, fit, names, term, fixed) if len(names) > 1 else 0.0
         if p_drop > NOT_NEEDED_P:
             # the data do not need the term: its fitted size is no measurement
@@ -492,7 +494,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
         if p_drop > NEEDED_P:
             continue  # seen, but not clearly enough to be measured
         needed.add(term)
-        ev.scales[term] = LogEstimate(math.log(_amp(fit.terms[term], term) / a0),
+        ev.scales[term] = LogEstimate(math.log(amplitude(fit.terms[term], term) / a0),
                                       _log_sd(fit, term, 'amp') * AMPLITUDE_SE_INFLATION,
                                       rate)
     positions, position_p, free_scales, process = _process_tests(
