@@ -68,10 +68,9 @@ class FitProblem:
         a tenth of the measured where the held term alone overshoots: a lower floor made the
         other terms' bounds (30 x the smallest level asked for) too tight to fit them.
         """
-        other = copy.copy(self)
+        other = copy.copy(self)  # shares the cache of fixed shapes
         other.offset = self.offset + np.asarray(avar, dtype=float)
         other.target = np.maximum(self.target - avar, 0.1 * self.target)
-        other._shapes = self._shapes
         return other
 
     def shape(self, term, position=None):
