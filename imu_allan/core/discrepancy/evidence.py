@@ -15,8 +15,8 @@ with a standard error in log space from the sandwich covariance.  Around that:
 * when the refitted model still leaves the band, the effects the model lacks compete as in the
   single-recording workflow (:func:`.workflow.evaluate_candidates`), up to two per axis;
 * the raw numbers the run-to-run, drive and metadata evidence need: the means of the first and
-  last tenth of the record and of all of it, the least-squares slope, and the per-sample white
-  variance (the Allan variance at the shortest averaging time).
+  last tenth of the record, the least-squares slope, and the per-sample white variance (the
+  Allan variance at the shortest averaging time).
 
 SI units throughout; factors are measured / stated.  ROS-free.
 """
@@ -176,10 +176,8 @@ def _q_with_fixed(prob, names, term, amp, fit, fixed):
     spec = TERMS[term]
     held = spec.pack(amp, fixed.get(term))
     offset = np.maximum(spec.avar(held, prob.tau, prob.rate_hz), 0.0)
+    # never empty: a lone term is needed (_drop_test gives it p = 0), so it is never absent
     rest = [t for t in names if t != term]
-    if not rest:
-        z = prob.residual(offset)
-        return float(z @ z)
     sub = prob.with_offset(offset)
     refit = fit_terms(sub, rest, init={t: fit.terms[t] for t in rest},
                       fixed_positions={t: p for t, p in fixed.items() if t != term})
@@ -324,7 +322,6 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
         free, p = freed or _free_position(y, measured, j, names, fit, fixed)
         tau_fit = free.terms['gauss_markov']['tau_c']
         tau_stated = stated['gauss_markov']['tau_c']
-        at_top = free.at_bound['gauss_markov']['tau_c'] and tau_fit > t_max
         se = _log_sd(free, 'gauss_markov', 'pos') * POSITION_SE_INFLATION
         position_p['gauss_markov'] = p
         # only a resolved bend is a measurement: an unresolved tau_c wanders along the
@@ -337,7 +334,7 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
                          / amplitude(stated['gauss_markov'], 'gauss_markov')),
                 _log_sd(free, 'gauss_markov', 'amp') * POSITION_SE_INFLATION, rate)
         # the data keep rising where the stated Gauss-Markov would have levelled off
-        if (tau_fit > t_max or at_top) and spec.peak_ratio * tau_stated < 0.5 * t_max:
+        if tau_fit > t_max and spec.peak_ratio * tau_stated < 0.5 * t_max:
             log_k, se_k = _log_drive(free)
             s0 = stated['gauss_markov']['sigma']
             process = {'term': 'gauss_markov', 'kind': 'walk', 'p_value': p,
@@ -347,27 +344,25 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
 
 
 def _raw_statistics(x, rate_hz):
-    """Means of the first and last tenth and of all of the record, and the LS slope (per s)."""
+    """Means of the first and last tenth of the record, and the LS slope (per s)."""
     n = x.size
     k = max(1, int(round(SEGMENT * n)))
     t = np.arange(n) / rate_hz
     tc = t - t.mean()
     slope = float(np.dot(tc, x - x.mean()) / np.dot(tc, tc)) if n > 1 else math.nan
-    return {'first': float(np.mean(x[:k])), 'last': float(np.mean(x[-k:])),
-            'all': float(np.mean(x))}, slope
+    return {'first': float(np.mean(x[:k])), 'last': float(np.mean(x[-k:]))}, slope
 
 
 def _mean_noise(terms, rate_hz, duration_s):
     """
-    Variance of the record's mean (and of a tenth's mean) from the noise within the run.
+    Variance of the first tenth's mean from the noise within the run.
 
     The Allan variance at averaging time T is the variance of the mean over T for white noise
     and, for a walk started at zero, K^2 T / 3, the variance of its mean: it stands for both.
     """
     from ..terms import model_avar
-    tau = np.array([duration_s * SEGMENT, duration_s])
-    avar = model_avar(terms, tau, rate_hz)
-    return {'first': float(avar[0]), 'last': float(avar[0]), 'all': float(avar[1])}
+    avar = model_avar(terms, np.array([duration_s * SEGMENT]), rate_hz)
+    return {'first': float(avar[0])}
 
 
 def measure_recording(recording, model, z_crit=3.0, alpha=ALPHA, points_per_decade=10,
@@ -486,7 +481,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
         if term == replaced:
             continue
         a0 = amplitude(params, term)
-        p_drop = _drop_test(prob, fit, names, term, fixed) if len(names) > 1 else 0.0
+        p_drop = _drop_test(prob, fit, names, term, fixed)
         if p_drop > NOT_NEEDED_P:
             # the data do not need the term: its fitted size is no measurement
             ev.absent[term] = _absent(prob, fit, names, term, fixed, a0, z_crit)
