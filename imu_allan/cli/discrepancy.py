@@ -105,19 +105,19 @@ def _moving(samples, rate_hz):
 
 def _one(args, model, sim, terms):
     """One recording: the single-recording workflow, plus findings against a stated model."""
-    from ..core.discrepancy import find_discrepancies, Recording, run_samples
+    from ..core.discrepancy import find_discrepancies, Recording, run_discrepancy
     from ..report.discrepancy_report import report_dict, single_summary_text, write_plots
     path = args.inputs[0]
     samples, rate, stated, cov_notes = _read(path, args)
-    start_model = sim.noise_model(rate)[0] if sim is not None else model
+    start_model, sim_notes = sim.noise_model(rate) if sim is not None else (model, [])
     try:
-        result = run_samples(samples, model=start_model, terms=terms, n_sims=args.sims,
-                             seed=args.seed, max_steps=args.max_steps)
+        result = run_discrepancy(samples.data, rate, axes=samples.axes, model=start_model,
+                                 terms=terms, n_sims=args.sims, seed=args.seed,
+                                 max_steps=args.max_steps)
     except ValueError as exc:  # data the workflow cannot use (too short, constant ...)
         raise InputError(path, str(exc)) from None
     source = samples.source or path
-    if sim is not None:
-        result.notes[:0] = sim.noise_model(rate)[1]
+    result.notes[:0] = sim_notes
     result.notes.extend(samples.warnings + cov_notes)
     moving = _moving(samples, result.measured.rate_hz)
     if moving:  # effects found on a moving IMU describe the motion
@@ -126,8 +126,9 @@ def _one(args, model, sim, terms):
     findings = None
     if model is not None or sim is not None:
         stated_model, note = _stated_model(model, sim, rate)
+        # the workflow's measured curve: the same data, rate, axes and averaging times
         findings = find_discrepancies([Recording(samples.data, rate, samples.axes, source,
-                                                 stated)], stated_model)
+                                                 stated, result.measured)], stated_model)
         if note:
             findings.notes.insert(0, note)
         if sim is not None:

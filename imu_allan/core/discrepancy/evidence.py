@@ -15,8 +15,8 @@ with a standard error in log space from the sandwich covariance.  Around that:
 * when the refitted model still leaves the band, the effects the model lacks compete as in the
   single-recording workflow (:func:`.workflow.evaluate_candidates`), up to two per axis;
 * the raw numbers the run-to-run, drive and metadata evidence need: the means of the first and
-  last tenth of the record and of all of it, the least-squares slope, and the per-sample white
-  variance (the Allan variance at the shortest averaging time).
+  last tenth of the record, the least-squares slope, and the per-sample white variance (the
+  Allan variance at the shortest averaging time).
 
 SI units throughout; factors are measured / stated.  ROS-free.
 """
@@ -26,10 +26,11 @@ import math
 
 import numpy as np
 
-from .band import ALPHA, measure_gap, measured_band, model_band
-from .logfit import fit_terms, FitProblem, improvement_test
-from .workflow import evaluate_candidates
+from .band import ALPHA, measure_gap, model_band
+from .logfit import fit_terms, improvement_test, satterthwaite
+from .workflow import evaluate_candidates, two_pass_fit
 from ..allan.estimate import allan_deviation
+from ..simulation.gauss_markov import driving_density, stationary_sigma
 from ..terms import TERMS
 
 #: Share of the record whose mean stands for the turn-on bias (first tenth) and for the end.
@@ -72,6 +73,10 @@ class Recording:
     ``data`` (n, A) SI samples, ``rate_hz`` their rate, ``axes`` the column names, ``source``
     a name for the report, ``stated_variance`` the per-sample variance per axis that the
     recording's message metadata state (Imu covariance diagonals; None when unknown).
+    ``measured`` is the Allan deviation of exactly these data, rate and axes on the analysis's
+    averaging-time grid, when already computed (e.g. ``DiscrepancyResult.measured`` with the
+    same ``points_per_decade`` and ``min_clusters``); None: :func:`measure_recording`
+    computes it.
     """
 
     data: np.ndarray
@@ -79,6 +84,7 @@ class Recording:
     axes: tuple
     source: str = ''
     stated_variance: dict = None
+    measured: object = None
 
     @property
     def duration_s(self):
@@ -143,22 +149,13 @@ def _log_sd(fit, term, kind):
     return math.sqrt(v) if np.isfinite(v) and v > 0 else math.inf
 
 
-def _amp(params, term):
+def amplitude(params, term):
+    """Return the amplitude of one term's parameters (its first one: N, B, K, sigma ...)."""
     return TERMS[term].unpack(params)[0]
 
 
 def _positions(terms):
     return {t: TERMS[t].unpack(p)[1] for t, p in terms.items() if TERMS[t].position}
-
-
-def _refit(y, measured, j, names, init, fixed, ranges=None):
-    """Fit ``names`` twice: against the measured curve's own band, then the fitted model's."""
-    tau, rate = measured.tau, measured.rate_hz
-    first = fit_terms(FitProblem(y, tau, rate, measured_band(measured, j)), names, init=init,
-                      fixed_positions=fixed, ranges=ranges)
-    band = model_band(first.terms, tau, measured.m, measured.n_samples, rate)
-    prob = FitProblem(y, tau, rate, band)
-    return prob, fit_terms(prob, names, init=first.terms, fixed_positions=fixed, ranges=ranges)
 
 
 def _drop_test(prob, fit, names, term, fixed):
@@ -174,26 +171,28 @@ def _drop_test(prob, fit, names, term, fixed):
     return p
 
 
-def _q_with_fixed(prob, names, term, amplitude, fit, fixed):
-    """Q of the fit with ``term``'s amplitude held at ``amplitude`` (the others refitted)."""
+def _q_with_fixed(prob, names, term, amp, fit, fixed):
+    """Q of the fit with ``term``'s amplitude held at ``amp`` (the others refitted)."""
     spec = TERMS[term]
-    held = spec.pack(amplitude, fixed.get(term))
+    held = spec.pack(amp, fixed.get(term))
     offset = np.maximum(spec.avar(held, prob.tau, prob.rate_hz), 0.0)
+    # never empty: a lone term is needed (_drop_test gives it p = 0), so it is never absent
     rest = [t for t in names if t != term]
-    if not rest:
-        z = prob.residual(offset)
-        return float(z @ z)
     sub = prob.with_offset(offset)
     refit = fit_terms(sub, rest, init={t: fit.terms[t] for t in rest},
                       fixed_positions={t: p for t, p in fixed.items() if t != term})
     return refit.q
 
 
-def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_target):
-    """Largest amplitude factor (of the stated one) whose Q stays below ``q_target``."""
-    lo = math.log(max(_amp(fit.terms[term], term), stated_amp * 1e-6))
+def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated, q_target):
+    """
+    Largest amplitude factor (of the stated one) whose Q stays below ``q_target``.
+
+    ``q_stated`` is the Q with the amplitude held at ``stated_amp`` (:func:`_q_with_fixed`).
+    """
+    lo = math.log(max(amplitude(fit.terms[term], term), stated_amp * 1e-6))
     hi = math.log(stated_amp)
-    if _q_with_fixed(prob, names, term, stated_amp, fit, fixed) <= q_target:
+    if q_stated <= q_target:
         return 1.0
     for _ in range(18):  # bisection in log amplitude: 18 halvings of a <= 14-e-fold span
         mid = 0.5 * (lo + hi)
@@ -218,9 +217,9 @@ def _absent(prob, fit, names, term, fixed, stated_amp, z_crit):
     p_stated = float(2.0 * norm.sf(math.sqrt(max(q_stated - fit.q, 0.0) / scale)))
     out = {'p_stated': p_stated, 'upper68': 1.0, 'upper_crit': 1.0}
     if p_stated < REJECTED_P:  # the stated size does not fit: how large could it be?
-        out['upper68'] = _upper_limit(prob, names, term, fit, fixed, stated_amp,
+        out['upper68'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
                                       fit.q + scale)
-        out['upper_crit'] = _upper_limit(prob, names, term, fit, fixed, stated_amp,
+        out['upper_crit'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
                                          fit.q + scale * z_crit ** 2)
     return out
 
@@ -233,28 +232,24 @@ def _q_scale(prob, fit, term):
     the projection P on its Jacobian column; 1 for independent averaging times).
     """
     i = fit.names.index((term, 'amp'))
-    x = fit.jac[:, [i]]
     others = [k for k in range(fit.jac.shape[1]) if k != i]
-    if others:
-        nuis = fit.jac[:, others]
-        x = x - nuis @ (np.linalg.pinv(nuis) @ x)
-    if not np.any(np.abs(x) > 0):
-        return 1.0
-    proj = x @ np.linalg.pinv(x)
-    pr = proj @ prob.corr
-    e = float(np.trace(pr))
-    return float(np.sum(pr * pr.T)) / e if e > 0 else 1.0
+    match = satterthwaite(fit.jac[:, others], fit.jac[:, [i]], prob.corr)
+    return 1.0 if match is None else match[0]
 
 
-def _position_p(delta_q, fit, rest, cols, prob):
+def _position_p(prob, free, names, fit, fixed):
     """
-    p-value of freeing a hump's position, with the look-elsewhere factor T_eff.
+    p-value of a Gauss-Markov's freed tau_c, with the look-elsewhere factor T_eff.
 
-    The freed position was searched over the whole span, where about T_eff distinguishable
-    places exist: as for a hump candidate (:func:`.workflow.evaluate_candidates`) the
-    Satterthwaite p-value is multiplied by T_eff.
+    ``free`` (the Gauss-Markov's tau_c free) is compared with ``names`` refitted on ``prob``
+    from ``fit`` with the positions ``fixed``.  The freed position was searched over the whole
+    span, where about T_eff distinguishable places exist: as for a hump candidate
+    (:func:`.workflow.evaluate_candidates`) the Satterthwaite p-value is multiplied by T_eff.
     """
-    p, _ = improvement_test(delta_q, fit.jac[:, rest], fit.jac[:, cols], prob.corr)
+    pos = [free.names.index(('gauss_markov', 'pos'))]
+    rest = [i for i in range(free.jac.shape[1]) if i not in pos]
+    q_fixed = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
+    p, _ = improvement_test(q_fixed - free.q, free.jac[:, rest], free.jac[:, pos], prob.corr)
     return min(1.0, p * max(prob.t_eff, 1.0))
 
 
@@ -270,7 +265,7 @@ def _log_drive(fit):
     c = fit.cov
     var = c[i, i] + 0.25 * c[k, k] - c[i, k]
     se = math.sqrt(var) if np.isfinite(var) and var > 0 else math.inf
-    return math.log(sigma * math.sqrt(2.0 / tau_c)), se
+    return math.log(driving_density(sigma, tau_c)), se
 
 
 def _wide(measured):
@@ -282,11 +277,8 @@ def _wide(measured):
 def _free_position(y, measured, j, names, fit, fixed):
     """Fit the stated Gauss-Markov with its tau_c free; return the fit and the p-value."""
     others = {t: p for t, p in fixed.items() if t != 'gauss_markov'}
-    prob, free = _refit(y, measured, j, names, fit.terms, others, _wide(measured))
-    pos = [free.names.index(('gauss_markov', 'pos'))]
-    rest = [i for i in range(free.jac.shape[1]) if i not in pos]
-    q_fixed = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
-    return free, _position_p(q_fixed - free.q, free, rest, pos, prob)
+    prob, free = two_pass_fit(y, measured, j, names, fit.terms, others, _wide(measured))
+    return free, _position_p(prob, free, names, fit, fixed)
 
 
 def _bounded_walk(y, measured, j, names, fit, fixed, rate):
@@ -302,12 +294,9 @@ def _bounded_walk(y, measured, j, names, fit, fixed, rate):
     alt = [t for t in names if t != 'rate_random_walk'] + ['gauss_markov']
     k_stated = fit.terms['rate_random_walk']['value']
     init = {t: fit.terms[t] for t in alt if t in fit.terms}
-    init['gauss_markov'] = {'sigma': k_stated * math.sqrt(t_max / 2.0), 'tau_c': t_max}
-    prob, bounded = _refit(y, measured, j, alt, init, fixed, _wide(measured))
-    pos = [bounded.names.index(('gauss_markov', 'pos'))]
-    rest = [i for i in range(bounded.jac.shape[1]) if i not in pos]
-    walk_q = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
-    p = _position_p(walk_q - bounded.q, bounded, rest, pos, prob)
+    init['gauss_markov'] = {'sigma': stationary_sigma(k_stated, t_max), 'tau_c': t_max}
+    prob, bounded = two_pass_fit(y, measured, j, alt, init, fixed, _wide(measured))
+    p = _position_p(prob, bounded, names, fit, fixed)
     tau_fit = bounded.terms['gauss_markov']['tau_c']
     if bounded.at_bound['gauss_markov']['tau_c'] or \
             tau_fit * TERMS['gauss_markov'].peak_ratio >= t_max:
@@ -333,7 +322,6 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
         free, p = freed or _free_position(y, measured, j, names, fit, fixed)
         tau_fit = free.terms['gauss_markov']['tau_c']
         tau_stated = stated['gauss_markov']['tau_c']
-        at_top = free.at_bound['gauss_markov']['tau_c'] and tau_fit > t_max
         se = _log_sd(free, 'gauss_markov', 'pos') * POSITION_SE_INFLATION
         position_p['gauss_markov'] = p
         # only a resolved bend is a measurement: an unresolved tau_c wanders along the
@@ -342,41 +330,39 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
         if not free.at_bound['gauss_markov']['tau_c'] and se < MAX_POSITION_SE:
             positions['gauss_markov'] = LogEstimate(math.log(tau_fit / tau_stated), se, rate)
             free_scales['gauss_markov'] = LogEstimate(
-                math.log(_amp(free.terms['gauss_markov'], 'gauss_markov')
-                         / _amp(stated['gauss_markov'], 'gauss_markov')),
+                math.log(amplitude(free.terms['gauss_markov'], 'gauss_markov')
+                         / amplitude(stated['gauss_markov'], 'gauss_markov')),
                 _log_sd(free, 'gauss_markov', 'amp') * POSITION_SE_INFLATION, rate)
         # the data keep rising where the stated Gauss-Markov would have levelled off
-        if (tau_fit > t_max or at_top) and spec.peak_ratio * tau_stated < 0.5 * t_max:
+        if tau_fit > t_max and spec.peak_ratio * tau_stated < 0.5 * t_max:
             log_k, se_k = _log_drive(free)
             s0 = stated['gauss_markov']['sigma']
             process = {'term': 'gauss_markov', 'kind': 'walk', 'p_value': p,
-                       'estimate': LogEstimate(log_k - math.log(s0 * math.sqrt(
-                           2.0 / tau_stated)), se_k, rate), 'tau_c_fit': tau_fit}
+                       'estimate': LogEstimate(log_k - math.log(driving_density(
+                           s0, tau_stated)), se_k, rate), 'tau_c_fit': tau_fit}
     return positions, position_p, free_scales, process
 
 
 def _raw_statistics(x, rate_hz):
-    """Means of the first and last tenth and of all of the record, and the LS slope (per s)."""
+    """Means of the first and last tenth of the record, and the LS slope (per s)."""
     n = x.size
     k = max(1, int(round(SEGMENT * n)))
     t = np.arange(n) / rate_hz
     tc = t - t.mean()
     slope = float(np.dot(tc, x - x.mean()) / np.dot(tc, tc)) if n > 1 else math.nan
-    return {'first': float(np.mean(x[:k])), 'last': float(np.mean(x[-k:])),
-            'all': float(np.mean(x))}, slope
+    return {'first': float(np.mean(x[:k])), 'last': float(np.mean(x[-k:]))}, slope
 
 
 def _mean_noise(terms, rate_hz, duration_s):
     """
-    Variance of the record's mean (and of a tenth's mean) from the noise within the run.
+    Variance of the first tenth's mean from the noise within the run.
 
     The Allan variance at averaging time T is the variance of the mean over T for white noise
     and, for a walk started at zero, K^2 T / 3, the variance of its mean: it stands for both.
     """
     from ..terms import model_avar
-    tau = np.array([duration_s * SEGMENT, duration_s])
-    avar = model_avar(terms, tau, rate_hz)
-    return {'first': float(avar[0]), 'last': float(avar[0]), 'all': float(avar[1])}
+    avar = model_avar(terms, np.array([duration_s * SEGMENT]), rate_hz)
+    return {'first': float(avar[0])}
 
 
 def measure_recording(recording, model, z_crit=3.0, alpha=ALPHA, points_per_decade=10,
@@ -392,8 +378,10 @@ def measure_recording(recording, model, z_crit=3.0, alpha=ALPHA, points_per_deca
     if data.ndim == 1:
         data = data[:, None]
     rate = float(recording.rate_hz)
-    measured = allan_deviation(data, rate, points_per_decade=points_per_decade,
-                               min_clusters=min_clusters, axes=tuple(recording.axes))
+    measured = recording.measured
+    if measured is None:
+        measured = allan_deviation(data, rate, points_per_decade=points_per_decade,
+                                   min_clusters=min_clusters, axes=tuple(recording.axes))
     if measured.tau.size < 6:
         raise ValueError(f'only {measured.tau.size} averaging times: the record is too short '
                          'for a discrepancy analysis')
@@ -429,7 +417,7 @@ def _free_gauss_markov(y, measured, j, names, fit, fixed):
     if p >= ADOPT_P:
         return fixed, fit, (free, p)
     adopted = dict(fixed, gauss_markov=free.terms['gauss_markov']['tau_c'])
-    return adopted, _refit(y, measured, j, names, free.terms, adopted)[1], (free, p)
+    return adopted, two_pass_fit(y, measured, j, names, free.terms, adopted)[1], (free, p)
 
 
 def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
@@ -439,7 +427,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
     fixed = _positions(stated)
     ev.gap_stated = measure_gap(y, model_band(stated, tau, measured.m, measured.n_samples,
                                               rate), alpha).value
-    first = _refit(y, measured, j, names, stated, fixed)
+    first = two_pass_fit(y, measured, j, names, stated, fixed)
     held, fit, freed = _free_gauss_markov(y, measured, j, names, first[1], fixed)
     replaced = None
     if 'rate_random_walk' in stated and 'gauss_markov' not in stated:
@@ -455,7 +443,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
                 fixed = dict(fixed, gauss_markov=bounded.terms['gauss_markov']['tau_c'])
                 held = dict(fixed)
                 fit = bounded
-                first = _refit(y, measured, j, names, bounded.terms, fixed)
+                first = two_pass_fit(y, measured, j, names, bounded.terms, fixed)
     # effects the stated terms lack: only when the refitted stated terms leave the band
     for _ in range(MAX_MISSING):
         band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
@@ -476,7 +464,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
             fixed[added] = held[added] = position
         init = dict(fit.terms)
         init[added] = winner.fit.terms[added]
-        fit = _refit(y, measured, j, names, init, held)[1]
+        fit = two_pass_fit(y, measured, j, names, init, held)[1]
     band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
     gap = measure_gap(y, band, alpha)
     ev.gap_fitted, ev.consistent_fitted = gap.value, gap.consistent
@@ -484,7 +472,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
     ev.mean_noise_var = _mean_noise(fit.terms, rate, ev.duration_s)
     # the factors: amplitudes with the stated positions (and any added effect's)
     if ev.missing:
-        prob, fit = _refit(y, measured, j, names, fit.terms, fixed)
+        prob, fit = two_pass_fit(y, measured, j, names, fit.terms, fixed)
         freed = None  # the freed tau_c is tried again beside the added effects
     else:
         prob, fit = first
@@ -492,8 +480,8 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
     for term, params in stated.items():
         if term == replaced:
             continue
-        a0 = _amp(params, term)
-        p_drop = _drop_test(prob, fit, names, term, fixed) if len(names) > 1 else 0.0
+        a0 = amplitude(params, term)
+        p_drop = _drop_test(prob, fit, names, term, fixed)
         if p_drop > NOT_NEEDED_P:
             # the data do not need the term: its fitted size is no measurement
             ev.absent[term] = _absent(prob, fit, names, term, fixed, a0, z_crit)
@@ -501,7 +489,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
         if p_drop > NEEDED_P:
             continue  # seen, but not clearly enough to be measured
         needed.add(term)
-        ev.scales[term] = LogEstimate(math.log(_amp(fit.terms[term], term) / a0),
+        ev.scales[term] = LogEstimate(math.log(amplitude(fit.terms[term], term) / a0),
                                       _log_sd(fit, term, 'amp') * AMPLITUDE_SE_INFLATION,
                                       rate)
     positions, position_p, free_scales, process = _process_tests(

@@ -37,9 +37,9 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from .band import ALPHA
-from .evidence import LogEstimate, measure_recording
-from .pooling import pool, Z95, z_critical
+from .band import ALPHA, Z95
+from .evidence import amplitude, LogEstimate, measure_recording
+from .pooling import pool, z_critical
 from .runs import drive_test, MIN_RUNS, turn_on_tests
 from ..terms import TERMS
 from ..units import sensor_of
@@ -136,10 +136,6 @@ def _significant(pooled, z_crit):
                                    (pooled.scaled and pooled.z_exponent > z_crit))
 
 
-def _stated_value(params, term):
-    return TERMS[term].unpack(params)[0]
-
-
 def _axis_findings(axis, evs, z_crit, p_crit):
     """Return the findings of the Allan-variance evidence of one axis over its recordings."""
     out = []
@@ -196,7 +192,7 @@ def _axis_findings(axis, evs, z_crit, p_crit):
                                          'recordings': len(fitted)}))
             continue
         if _significant(pooled, z_crit):
-            value = _stated_value(params, term)
+            value = amplitude(params, term)
             out.append(_pooled_finding(_scale_class(term), axis, term, pooled, {
                 'stated': value, 'unit': unit[term],
                 'measured_at_1hz' if pooled.scaled else 'measured': value * pooled.factor()}))

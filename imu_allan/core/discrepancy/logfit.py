@@ -68,10 +68,9 @@ class FitProblem:
         a tenth of the measured where the held term alone overshoots: a lower floor made the
         other terms' bounds (30 x the smallest level asked for) too tight to fit them.
         """
-        other = copy.copy(self)
+        other = copy.copy(self)  # shares the cache of fixed shapes
         other.offset = self.offset + np.asarray(avar, dtype=float)
         other.target = np.maximum(self.target - avar, 0.1 * self.target)
-        other._shapes = self._shapes
         return other
 
     def shape(self, term, position=None):
@@ -227,27 +226,40 @@ def _sandwich(jac, corr):
         return inv @ (jac.T @ corr @ jac) @ inv
 
 
-def improvement_test(delta_q, jac_nuisance, jac_added, corr):
+def satterthwaite(jac_nuisance, jac_added, corr):
     """
-    p-value of a drop ``delta_q`` in sum z^2 when columns ``jac_added`` are added.
+    Satterthwaite match c chi-square(h) of the drop in sum z^2 when ``jac_added`` is added.
 
-    Under the null (the smaller model is complete) z ~ N(0, R) and the drop is the quadratic
-    form z' P z with P the projection on the added directions orthogonal to the nuisance ones;
-    its distribution is matched by c chi-square(h) (Satterthwaite) with c = tr(PRPR)/tr(PR),
-    h = tr(PR)^2 / tr(PRPR).  Returns ``(p, h)``.
+    Under the null z ~ N(0, R), the drop is z' P z with P the projection on the added
+    directions orthogonal to the nuisance ones (``jac_nuisance``: None or no columns for
+    none); c = tr(PRPR) / tr(PR), h = tr(PR)^2 / tr(PRPR).  Returns ``(c, h)``, or None when
+    the added directions vanish or a trace is not positive.
     """
-    if delta_q <= 0:
-        return 1.0, 0.0
     x = jac_added
     if jac_nuisance is not None and jac_nuisance.size:
         x = x - jac_nuisance @ (np.linalg.pinv(jac_nuisance) @ x)
     if not np.any(np.abs(x) > 0):
-        return 1.0, 0.0
+        return None
     proj = x @ np.linalg.pinv(x)
     pr = proj @ corr
     e = float(np.trace(pr))
     v = float(np.sum(pr * pr.T))
     if e <= 0 or v <= 0:
+        return None
+    return v / e, e * e / v
+
+
+def improvement_test(delta_q, jac_nuisance, jac_added, corr):
+    """
+    p-value of a drop ``delta_q`` in sum z^2 when columns ``jac_added`` are added.
+
+    Under the null (the smaller model is complete) the drop is matched by c chi-square(h)
+    (:func:`satterthwaite`).  Returns ``(p, h)``.
+    """
+    if delta_q <= 0:
         return 1.0, 0.0
-    c, h = v / e, e * e / v
+    match = satterthwaite(jac_nuisance, jac_added, corr)
+    if match is None:
+        return 1.0, 0.0
+    c, h = match
     return float(chi2.sf(delta_q / c, h)), h

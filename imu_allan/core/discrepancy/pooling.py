@@ -18,7 +18,6 @@ import math
 import numpy as np
 from scipy.stats import norm
 
-Z95 = 1.959964
 #: Rates closer than this ratio count as one rate.
 SAME_RATE = 1.02
 

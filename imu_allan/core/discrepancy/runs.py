@@ -35,7 +35,9 @@ import numpy as np
 from scipy.stats import binom, chi2, norm
 from scipy.stats import t as student
 
+from .band import Z95
 from ..terms import TERMS
+from ..units import discrete_random_walk_step
 
 #: An accelerometer axis whose run means exceed this (m/s^2) carries gravity.
 GRAVITY_LEVEL = 1.0
@@ -100,7 +102,7 @@ def _bimodal(first, noise, mean, sigma):
     p = float(binom.sf(flips - 1, r, p0)) if flips else 1.0
     share = flips / r
     return _finding('bimodal', 1.0 - 2.0 * share, _agreement(share, r, 1.0),
-                    _agreement(share, r, 1.959964), p,
+                    _agreement(share, r, Z95), p,
                     {'opposite_sign_runs': flips, 'runs': r, 'stated_share': p0})
 
 
@@ -192,7 +194,8 @@ def _ramp_gain(tau_c, duration_s):
 def _drive(stated_terms, rate_hz):
     """(per-step std of the stated drive, its tau_c or None) or None without a drive term."""
     if 'rate_random_walk' in stated_terms:
-        return stated_terms['rate_random_walk']['value'] / math.sqrt(rate_hz), None
+        return discrete_random_walk_step(stated_terms['rate_random_walk']['value'],
+                                         rate_hz), None
     if 'gauss_markov' in stated_terms:
         sigma, tau_c = TERMS['gauss_markov'].unpack(stated_terms['gauss_markov'])
         return sigma * math.sqrt(-math.expm1(-2.0 / (rate_hz * tau_c))), tau_c

@@ -252,20 +252,30 @@ def _bands(current, axes, measured, n_sims, rng, previous=None):
     return bands
 
 
+def two_pass_fit(y, measured, j, names, init=None, fixed=None, ranges=None):
+    """
+    Fit ``names`` to column ``j``'s ln(adev) ``y`` twice; return ``(problem, fit)``.
+
+    First against the measured curve's own band, then against the band the first fit's model
+    implies (the problem returned).  ``init``, ``fixed`` and ``ranges`` are
+    :func:`.logfit.fit_terms`'s ``init``, ``fixed_positions`` and ``ranges``; the second pass
+    starts from the first.
+    """
+    tau, rate = measured.tau, measured.rate_hz
+    first = fit_terms(FitProblem(y, tau, rate, measured_band(measured, j)), names, init=init,
+                      fixed_positions=fixed, ranges=ranges)
+    band = model_band(first.terms, tau, measured.m, measured.n_samples, rate)
+    prob = FitProblem(y, tau, rate, band)
+    return prob, fit_terms(prob, names, init=first.terms, fixed_positions=fixed, ranges=ranges)
+
+
 def start_model(measured, axes, terms, alpha=ALPHA):
     """Fit only ``terms`` to every axis (the ``--terms`` start), in the gap's own metric."""
     out = {}
     for axis in axes:
         j = list(measured.axes).index(axis)
         y = np.log(measured.adev[:, j])
-        band = measured_band(measured, j)
-        fit = fit_terms(FitProblem(y, measured.tau, measured.rate_hz, band), list(terms))
-        # second pass with the spread the fitted model itself implies
-        band = model_band(fit.terms, measured.tau, measured.m, measured.n_samples,
-                          measured.rate_hz)
-        fit = fit_terms(FitProblem(y, measured.tau, measured.rate_hz, band), list(terms),
-                        init=fit.terms)
-        out[axis] = fit.terms
+        out[axis] = two_pass_fit(y, measured, j, list(terms))[1].terms
     return NoiseModel(out, measured.rate_hz)
 
 
