@@ -101,6 +101,24 @@ def test_real_records_read_as_an_expert_reads_them(record_csv, online):
 
 
 @pytest.mark.slow
+def test_named_terms_with_a_sinusoid_give_advice_on_a_real_record(record_csv):
+    """
+    ``--terms`` with a sinusoid beside flicker: the advice forecasts the Gauss-Markov swap.
+
+    That swap has two positions to place (the line's frequency, tau_c) where the advice's
+    forecast profiled one and left the other unset: a traceback on the real runs before.
+    """
+    proc = run_command('analyze', record_csv, '--json', '--terms',
+                       'white_noise,sinusoid,bias_instability,rate_random_walk', timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    assert all('sinusoid' in report['axes'][a]['terms'] for a in AXES)
+    swaps = [u for u in report['advice']['unresolved']
+             if set(u['terms']) == {'gauss_markov', 'bias_instability'}]
+    assert swaps, report['advice']['unresolved']
+
+
+@pytest.mark.slow
 def test_hadamard_check_on_a_real_record_leaves_the_sensor_shapes_to_the_allan_fit(record_csv):
     """
     ``--estimators oadev,ohdev`` on the real runs: the OHDEV curve is reported and the fit ends.

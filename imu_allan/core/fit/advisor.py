@@ -283,7 +283,9 @@ def _best_chi2(problem, names, start):
     Smallest GLS chi^2 of ``names`` (one nonlinear parameter profiled near ``start``).
 
     A position the problem fixes (a line's frequency) stays fixed; the problem's nuisance
-    lines are fitted alongside, as in the fit.
+    lines are fitted alongside, as in the fit.  With two free positions (a named sinusoid
+    beside a Gauss-Markov) the first one ``start`` lacks is profiled, the other held at its
+    start.
     """
     fixed = {t: p for t, p in problem.fixed.items() if t in names}
     nonlinear = [t for t in names if len(TERM_PARAMETERS[t]) > 1 and t not in fixed]
@@ -293,7 +295,8 @@ def _best_chi2(problem, names, start):
                              deterministic=deterministic_index(names))[1]
     if not nonlinear:
         return solve(fixed)
-    name = nonlinear[0]
+    name = next((t for t in nonlinear if not start.get(t)), nonlinear[0])
+    fixed.update({t: start[t] for t in nonlinear if t != name and start.get(t)})
     centre = math.log(start.get(name) or math.sqrt(problem.tau[0] * problem.tau[-1]))
 
     def chi2(log_p):
