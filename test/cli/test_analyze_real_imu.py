@@ -103,10 +103,11 @@ def test_real_records_read_as_an_expert_reads_them(record_csv, online):
 @pytest.mark.slow
 def test_named_terms_with_a_sinusoid_give_advice_on_a_real_record(record_csv):
     """
-    ``--terms`` with a sinusoid beside flicker: the advice forecasts the Gauss-Markov swap.
+    ``--terms`` with a sinusoid beside flicker or a Gauss-Markov: the advice is given.
 
-    That swap has two positions to place (the line's frequency, tau_c) where the advice's
-    forecast profiled one and left the other unset: a traceback on the real runs before.
+    The Gauss-Markov swap of flicker, and the terms left out beside a named Gauss-Markov,
+    have two positions to place (the line's frequency, tau_c) where the advice's forecast
+    profiled one and left the other unset: a traceback on the real runs before.
     """
     proc = run_command('analyze', record_csv, '--json', '--terms',
                        'white_noise,sinusoid,bias_instability,rate_random_walk', timeout=600)
@@ -116,6 +117,11 @@ def test_named_terms_with_a_sinusoid_give_advice_on_a_real_record(record_csv):
     swaps = [u for u in report['advice']['unresolved']
              if set(u['terms']) == {'gauss_markov', 'bias_instability'}]
     assert swaps, report['advice']['unresolved']
+    proc = run_command('analyze', record_csv, '--json', '--terms',
+                       'white_noise,sinusoid,gauss_markov', timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    advice = json.loads(proc.stdout)['advice']
+    assert {u['term'] for u in advice['undetected']} >= {'bias_instability', 'rate_random_walk'}
 
 
 @pytest.mark.slow

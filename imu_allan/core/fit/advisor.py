@@ -273,19 +273,20 @@ class _Forecast:
             if problem is None:
                 return 0.0
             penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
-            self._gaps[memo] = (_best_chi2(problem, other_names, start or {})
+            self._gaps[memo] = (_best_chi2(problem, other_names, start or {},
+                                           _nonlinear(truth))
                                 + (_n_params(other_names) - _n_params(truth)) * penalty)
         return self._gaps[memo]
 
 
-def _best_chi2(problem, names, start):
+def _best_chi2(problem, names, start, hold=None):
     """
     Smallest GLS chi^2 of ``names`` (one nonlinear parameter profiled near ``start``).
 
     A position the problem fixes (a line's frequency) stays fixed; the problem's nuisance
     lines are fitted alongside, as in the fit.  With two free positions (a named sinusoid
-    beside a Gauss-Markov) the first one ``start`` lacks is profiled, the other held at its
-    start.
+    beside a Gauss-Markov) the first one ``start`` lacks is profiled and the other held: at
+    its start, else at ``hold`` (the truth curve's positions), else mid-span.
     """
     fixed = {t: p for t, p in problem.fixed.items() if t in names}
     nonlinear = [t for t in names if len(TERM_PARAMETERS[t]) > 1 and t not in fixed]
@@ -296,8 +297,12 @@ def _best_chi2(problem, names, start):
     if not nonlinear:
         return solve(fixed)
     name = next((t for t in nonlinear if not start.get(t)), nonlinear[0])
-    fixed.update({t: start[t] for t in nonlinear if t != name and start.get(t)})
-    centre = math.log(start.get(name) or math.sqrt(problem.tau[0] * problem.tau[-1]))
+    middle = math.sqrt(problem.tau[0] * problem.tau[-1])  # s; a frequency: 1 / middle
+    for t in nonlinear:
+        if t != name:
+            fixed[t] = (start.get(t) or (hold or {}).get(t)
+                        or (1.0 / middle if t == 'sinusoid' else middle))
+    centre = math.log(start.get(name) or middle)
 
     def chi2(log_p):
         return solve({**fixed, name: math.exp(log_p)})
