@@ -11,8 +11,9 @@ import math
 
 from core import calibration_cases as cc
 from imu_allan.core.allan.estimate import AllanResult, avar_fast, tau_grid
+from imu_allan.core.allan.log_chi2 import trigamma
 from imu_allan.core.fit import ADEQUACY_LEVEL, fit_noise_model
-from imu_allan.core.fit.adequacy import misfit_runs, trigamma
+from imu_allan.core.fit.adequacy import misfit_runs
 from imu_allan.core.units import AXES
 import numpy as np
 import pytest

@@ -37,10 +37,10 @@ import math
 
 import numpy as np
 
+from ..allan.log_chi2 import log_bias, log_sd
 from ..scipy_compiled import function
 
 _gammaincc = function('special', '_special_ufuncs', 'gammaincc')
-_digamma = function('special', '_special_ufuncs', 'psi')
 
 #: p below this: the model does not describe the curve (a metrologist's 3.3-sigma).
 ADEQUACY_LEVEL = 1e-3
@@ -57,27 +57,6 @@ RUN_Z = 2.0
 PEAK_Z = 3.5
 
 
-def trigamma(x):
-    """
-    psi'(x) for x > 0 (array): the variance of ln(chi^2_nu / nu) at x = nu / 2.
-
-    Recurrence psi'(x) = psi'(x + 1) + 1 / x^2 up to x >= 10, then the asymptotic series
-    1/x + 1/(2x^2) + 1/(6x^3) - 1/(30x^5) + 1/(42x^7) - 1/(30x^9) (Abramowitz & Stegun 6.4.12;
-    within 1e-11 of scipy's polygamma(1, x), whose module costs 0.3 s to import).
-    """
-    x = np.array(x, dtype=float)
-    out = np.zeros_like(x)
-    small = x < 10.0
-    while np.any(small):
-        out[small] += 1.0 / x[small] ** 2
-        x[small] += 1.0
-        small = x < 10.0
-    w = 1.0 / x
-    w2 = w * w
-    return out + w + w2 / 2.0 + w * w2 * (1.0 / 6.0 - w2 * (1.0 / 30.0 - w2 * (
-        1.0 / 42.0 - w2 / 30.0)))
-
-
 def log_residuals(avar, model, edf, noise_share=1.0):
     """
     Return (r, sd): unbiased log residuals ln(avar / model) and their standard deviations.
@@ -86,9 +65,8 @@ def log_residuals(avar, model, edf, noise_share=1.0):
     share, per tau): only that part scatters (chi-square with ``edf``), so the log's bias and
     spread scale with it (first order in the share).
     """
-    half = 0.5 * np.asarray(edf, dtype=float)
-    r = np.log(avar / model) - noise_share * (_digamma(half) - np.log(half))
-    return r, noise_share * np.sqrt(trigamma(half))
+    r = np.log(avar / model) - noise_share * log_bias(edf)
+    return r, noise_share * log_sd(edf)
 
 
 @dataclass

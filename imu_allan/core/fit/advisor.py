@@ -232,7 +232,8 @@ class _Forecast:
         avar = _terms.model_avar(axis_terms, tau, self.rate_hz)
         alpha = identify_noise(tau, avar[:, None])[:, 0]
         edf = np.array([edf_oadev(int(a), int(m), int(n) + 1) for a, m in zip(alpha, ms)])
-        problem = Problem(tau, avar, edf, alpha, self.rate_hz, n / self.rate_hz, self.span)
+        problem = Problem(tau, avar, edf, alpha, self.rate_hz, n / self.rate_hz, self.span,
+                          expected=True)
         self._cache[(n, key)] = problem
         return problem
 

@@ -36,6 +36,7 @@ from .bisection import guided, log_ratio, run
 from .bounded_min import bounded_minimum
 from .nnls import nnls_scaled
 from ..allan.edf import _gammainccinv, CI_LEVEL
+from ..allan.log_chi2 import log_bias, log_sd
 from ..terms import sinusoid_shape, TERMS
 from ..units import ALL_TERMS, IEEE_TERMS
 
@@ -49,7 +50,11 @@ _MIN_EDF = 1.0
 #: 16 simulated 2-h records x 6 axes (thesis and ADIS16448-like models): 1 -> 91 of 96 axes get
 #: exactly the true terms (4 spurious random walks from flicker drift), 2 -> 95 of 96.
 SELECTION_PENALTY = 2.0
-_IRLS_ITERATIONS = 6
+#: Gauss-Newton steps of a fit at most, the relative chi^2 change that ends them, and the
+#: smallest step fraction tried before a step is given up.
+_GN_ITERATIONS = 8
+_GN_TOLERANCE = 1e-6
+_MIN_STEP = 1.0 / 16.0
 #: A term set whose criterion exceeds the best one's by less than this is an alternative the
 #: data cannot reject (Kass & Raftery 1995: a BIC difference of 6-10 is strong evidence).
 ALTERNATIVE_MARGIN = 6.0
@@ -72,6 +77,11 @@ class AxisFit:
     cov: np.ndarray = None
     #: (criterion, term names) of every candidate term set, best first (automatic selection)
     candidates: list = field(default_factory=list)
+    #: the fit of every candidate set, by its terms (frozenset): the model averaging's
+    #: (:mod:`.averaging`)
+    candidate_fits: dict = field(default_factory=dict)
+    #: the criterion's charge per term of that selection (chi^2 units)
+    selection_penalty: float = 0.0
     #: what another curve said about the open term sets (:func:`.hadamard_check.check`)
     evidence: list = field(default_factory=list)
     #: does the model describe the curve (:class:`.adequacy.Adequacy`; set by fit_noise_model)
@@ -121,19 +131,29 @@ def correlation_matrix(tau, alpha, widths=None, tails=None):
 
 class Problem:
     """
-    The data of one axis, whitened on demand for a given model curve.
+    The data of one axis in the log domain, whitened on demand for a given model curve.
 
-    The covariance of the AVAR estimates for a model curve a(tau) is S C S with C the
-    correlation matrix and S = diag(sqrt(2 / EDF) a).  Its Cholesky factor is S L with L the
-    factor of C, so whitening by any model curve is L^-1 S^-1: L^-1 is computed once per
-    problem, and each IRLS step is one small matrix product instead of a factorisation.
+    Each AVAR estimate is AVAR chi^2_nu / nu, so y_i = ln(estimate_i) - (psi(nu/2) - ln(nu/2))
+    has mean ln AVAR_i and a spread s_i = sqrt(psi'(nu/2)) that does not depend on the model
+    (:mod:`..allan.log_chi2`); the estimates correlate as C (:func:`correlation_matrix`).  The
+    fit minimises chi^2 = r' (S C S)^-1 r over the log residuals r = y - ln a(tau) of a model
+    curve a: a Gaussian likelihood whose covariance is the same for every model, so criteria of
+    different term sets compare fairly.  (The relative residual (estimate - a) / a that an
+    AVAR-domain fit with model weights minimises is bounded by 1 where a model overshoots and
+    unbounded where it undershoots: it favours terms that lift the curve where the few-EDF
+    estimates at long averaging times scatter, and gave a spurious bias instability, random
+    walk or ramp on 2-17 % of simulated axes from 10 s to 30 min.)  L^-1, the inverse Cholesky
+    factor of C, is computed once per problem; each Gauss-Newton step is one small matrix
+    product.  ``expected=True``: ``avar`` is an expected curve (the advisor's noise-free
+    forecasts), taken without the log's bias correction.
     """
 
     #: correlation widths and long-range shares of the estimates (:func:`correlation_matrix`)
     correlation_widths = CORRELATION_WIDTH
     correlation_tails = CORRELATION_TAIL
 
-    def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None, span=None):
+    def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None, span=None,
+                 expected=False):
         """
         Keep the usable averaging times of one axis (s, AVAR in SI units squared, EDF).
 
@@ -170,8 +190,11 @@ class Problem:
         self.corr = correlation_matrix(self.tau, self.alpha, self.correlation_widths,
                                        self.correlation_tails) + 1e-9 * np.eye(ok.sum())
         self._l_inv = np.tril(np.linalg.inv(np.linalg.cholesky(self.corr)))
-        self._rel_sd = np.sqrt(2.0 / self.edf)
-        self._floor = 1e-3 * self.avar  # the smallest noise AVAR a weight uses (whiten)
+        self._rel_sd = log_sd(self.edf)
+        #: ln AVAR the estimates stand for (mean-unbiased) and its level, SI^2
+        self.log_level = np.log(self.avar) - (0.0 if expected else log_bias(self.edf))
+        self.level = np.exp(self.log_level)
+        self._floor = 1e-3 * self.level  # the smallest model AVAR a weight or log uses
         self._columns = {}
 
     def column(self, name, position=None):
@@ -186,44 +209,75 @@ class Problem:
         """``columns`` (term shapes, one column each) followed by the nuisance lines' shapes."""
         return columns if self.nuisance is None else np.column_stack([columns, self.nuisance])
 
-    def whiten(self, model, columns, deterministic=0.0):
+    def whiten(self, model, columns, deterministic=0.0, spread=0.0):
         """
         Return ``columns`` (AVAR per tau, one column each) whitened for ``model`` AVAR.
 
-        ``deterministic`` is the part of ``model`` from a deterministic signal (a rate ramp):
-        it adds to the expected AVAR but not to the scatter of its estimate, whose chi-square
-        variance 2 AVAR^2 / EDF belongs to the noise part alone.
+        A column g is a direction of the model curve: its log-domain sensitivity g / model
+        over the log residuals' covariance, L^-1 (g / (s noise)).  ``deterministic`` is the
+        part of ``model`` from a deterministic signal (a rate ramp): it adds to the expected
+        AVAR but not to the scatter of its estimate, which belongs to the noise part alone, so
+        a log residual there spreads as s noise / model.  ``spread`` (AVAR units per tau)
+        adds scatter beyond the chi-square one: a ramp's cross term with the noise's drift
+        (:func:`ramp_cross_sd`).
         """
         # (x - 0.0 is x: the subtraction is skipped without a ramp; whiten runs in every step)
         noise = np.maximum(model if isinstance(deterministic, float) and deterministic == 0.0
                            else model - deterministic, self._floor)
-        return self._l_inv @ (columns / (self._rel_sd * noise)[:, None])
+        sd = self._rel_sd * noise
+        if not (isinstance(spread, float) and spread == 0.0):
+            sd = np.hypot(sd, spread)
+        return self._l_inv @ (columns / sd[:, None])
 
-    def solve(self, shapes, iterations=_IRLS_ITERATIONS, offset=0.0, deterministic=None,
-              offset_deterministic=False):
-        """
-        IRLS GLS-NNLS; return (coefficients, chi2, whitened design).
+    def chi2(self, model, deterministic=0.0, spread=0.0):
+        """Return the log-domain chi^2 of a model curve (AVAR per tau; see the class)."""
+        model = np.maximum(model, self._floor)
+        resid = self.whiten(model, (model * (self.log_level - np.log(model)))[:, None],
+                            deterministic, spread)[:, 0]
+        return float(resid @ resid)
 
-        ``offset`` is a fixed model part (AVAR per tau) added to ``shapes @ coef``;
-        ``deterministic`` the column index of a deterministic term (rate ramp) in ``shapes``,
-        ``offset_deterministic`` whether the offset is one (see :meth:`whiten`).
+    def solve(self, shapes, iterations=_GN_ITERATIONS, offset=0.0, deterministic=None,
+              offset_deterministic=False, spread=None):
         """
-        model = self.avar
-        det = 0.0
-        coef = np.zeros(shapes.shape[1])
-        design = np.column_stack([shapes, self.avar - offset])
+        Gauss-Newton NNLS in the log domain; return (coefficients, chi2, whitened design).
+
+        Each step fits the linearised ln(shapes @ c + offset) about the current curve a0
+        (non-negative least squares on the whitened working response a0 (1 + y - ln a0) -
+        offset), halving the step while the exact chi^2 grows; the first step starts from the
+        measured level.  ``offset`` is a fixed model part (AVAR per tau) added to
+        ``shapes @ coef``; ``deterministic`` the column index of a deterministic term (rate
+        ramp) in ``shapes``, ``offset_deterministic`` whether the offset is one (see
+        :meth:`whiten`); ``spread(coef)`` the extra scatter of the estimates a set of
+        coefficients implies (:meth:`whiten`).  The whitened design is the Jacobian at the
+        solution: its normal matrix inverted is the coefficients' covariance.
+        """
         fixed = offset if offset_deterministic else 0.0
-        for _ in range(iterations):
-            low = self.whiten(model, design, det)
-            coef = nnls_scaled(low[:, :-1], low[:, -1])
-            # keep weights finite where the model vanishes (e.g. a term pinned at zero)
-            model = np.maximum(shapes @ coef + offset, 1e-3 * self.avar)
+
+        def curve(coef):
+            model = np.maximum(shapes @ coef + offset, self._floor)
             det = fixed + (0.0 if deterministic is None
                            else shapes[:, deterministic] * coef[deterministic])
-        low = self.whiten(model, design, det)
-        g, y = low[:, :-1], low[:, -1]
-        resid = y - g @ coef
-        return coef, float(resid @ resid), g
+            return model, det, 0.0 if spread is None else spread(coef)
+        model, det, extra = self.level, fixed, 0.0
+        coef, chi2 = None, math.inf
+        for _ in range(iterations):
+            work = model * (1.0 + self.log_level - np.log(model)) - offset
+            low = self.whiten(model, np.column_stack([shapes, work]), det, extra)
+            new = nnls_scaled(low[:, :-1], low[:, -1])
+            step = 1.0
+            while True:
+                trial = new if coef is None else coef + step * (new - coef)
+                trial_curve = curve(trial)
+                trial_chi2 = self.chi2(*trial_curve)
+                if trial_chi2 <= chi2 or step < _MIN_STEP:
+                    break
+                step *= 0.5
+            done = chi2 - trial_chi2 < _GN_TOLERANCE * (1.0 + trial_chi2)
+            if trial_chi2 <= chi2 or coef is None:
+                coef, chi2, (model, det, extra) = trial, trial_chi2, trial_curve
+            if done:
+                break
+        return coef, chi2, self.whiten(model, shapes, det, extra)
 
 
 def shape_columns(problem, names, nonlinear):
@@ -256,6 +310,27 @@ def ramp_drift_variance(problem, coef):
     w = float(problem.tau[-1])
     span = max(t_rec - 2.0 * w, w)
     return 4.0 * coef['rate_ramp'] * drift_structure(coef, t_rec, w) / span ** 2
+
+
+def ramp_cross_sd(problem, coef):
+    """
+    Standard deviation (AVAR units, per tau) of a ramp's cross term with the noise's drift.
+
+    The estimator's cross term R tau^2 D / (T - 2 tau) (:func:`ramp_drift_variance`) moves
+    every estimate with one D; its shape is the ramp's tau^2 only while tau << T, so beyond
+    what R absorbs it scatters the estimates by sqrt(R^2) tau^2 / (T - 2 tau) sd(D), D the
+    noise's drift at windows tau (:func:`drift_structure`).  Taken as independent scatter (as
+    the adequacy test takes it): where a ramp dominates, the chi-square scatter of the noise
+    part alone is tiny, and the cross term's bend near T / 10 passed for a random walk on 13
+    of 24 simulated 24-h records.  ``coef``: squared coefficients by term.
+    """
+    r2 = coef.get('rate_ramp', 0.0)
+    t_rec = problem.duration_s
+    if not (r2 > 0 and t_rec):
+        return 0.0
+    tau = problem.tau
+    drift = tau * tau / np.maximum(t_rec - 2.0 * tau, tau)
+    return math.sqrt(r2) * drift * np.sqrt(drift_structure(coef, t_rec, tau))
 
 
 def drift_structure(coef, t_rec, w):
@@ -298,9 +373,14 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
 
     ramp = deterministic_index(names)
 
+    spread = None
+    if ramp is not None and problem.duration_s:
+        def spread(coef):
+            return ramp_cross_sd(problem, dict(zip(names, coef[:len(names)])))
+
     def evaluate(nonlinear):
         return problem.solve(problem.with_nuisance(shape_columns(problem, names, nonlinear)),
-                             deterministic=ramp)
+                             deterministic=ramp, spread=spread)
 
     profiles = {}
     for name in nl_names:  # profile each nonlinear parameter with the others held
@@ -395,28 +475,35 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
         if unknown:
             raise ValueError(f'unknown noise term(s): {", ".join(unknown)}')
         return fit_terms(problem, terms)
-    base = tuple(problem.fixed)
-    candidates = list(IEEE_TERMS) if problem.tau.size >= 4 else ['white_noise']
-    if problem.filtered or (span is not None and span.limited_by == 'resonance'):
+    # White noise is in every set: a rate sensor always has it, and a set without it (a flat
+    # bias instability alone, quantization alone) fits a filtered 10-s record's flattened
+    # short end and is then reported instead of the white noise it hides.
+    base = tuple(problem.fixed) + ('white_noise',)
+    candidates = [t for t in IEEE_TERMS if t != 'white_noise'] if problem.tau.size >= 4 else []
+    if candidates and (problem.filtered or (span is not None
+                                            and span.limited_by == 'resonance')):
         # a filter's deficit, and beyond its cut a resonance's tail, have quantization's
         # shape (1/tau^2): quantization cannot be told from them (a resonance's rest passed
         # for it and took 10 % off N on a real gyro)
         candidates.remove('quantization')
     best, best_bic = None, math.inf
     penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
-    scored = []
-    for k in range(1, len(candidates) + 1):
+    scored, fits = [], {}
+    for k in range(0, len(candidates) + 1):
         for subset in combinations(candidates, k):
             fit = fit_terms(problem, base + subset)
             if not set(subset) <= set(fit.terms):  # a term pinned at zero: a smaller set has it
                 continue
             bic = fit.chi2 + len(fit.terms) * penalty
             scored.append((bic, base + subset))
+            fits[frozenset(base + subset)] = fit
             if bic < best_bic:
                 best, best_bic = fit, bic
     if best is None:
         return AxisFit(n_points=problem.tau.size, problem=problem)
     best.candidates = sorted(scored, key=lambda item: item[0])
+    best.candidate_fits = fits
+    best.selection_penalty = penalty
     return best
 
 
@@ -509,20 +596,38 @@ def coefficient_interval(c, var, level=CI_LEVEL, deterministic=False):
     """
     if not (var > 0 and c > 0):
         return (math.sqrt(max(c, 0.0)),) * 2
-    p = 0.5 * (1.0 - level)
-    nu = 2.0 * c * c / var
-    # chi-square quantiles with upper tail q: 2 Q^-1(nu / 2, q) (scipy's chdtri(nu, q))
-    low_q = 2.0 * float(_gammainccinv(0.5 * nu, p))
-    high_q = 2.0 * float(_gammainccinv(0.5 * nu, 1.0 - p))
     c, var = float(c), float(var)
-    # A term with sd >> c (nu well below 1) has a chi-square so skewed that its upper quantile
-    # can lie below nu (the interval would exclude c), its lower one underflow or the upper
-    # bound overflow: there the normal interval is the honest statement.
-    if deterministic or not (low_q > nu and high_q > 0.0 and c * nu / high_q < 1e300):
+    if deterministic or not chi_square_applies(c, var, level):
         z = two_sided_z(level)
         sd = math.sqrt(var)
         return math.sqrt(max(c - z * sd, 0.0)), math.sqrt(c + z * sd)
+    low_q, high_q = _chi2_quantiles(2.0 * c * c / var, level)
+    nu = 2.0 * c * c / var
     return math.sqrt(c * nu / low_q), math.sqrt(c * nu / high_q)
+
+
+def _chi2_quantiles(nu, level):
+    """Chi-square(nu) quantiles with upper tails p and 1 - p, p = (1 - level) / 2."""
+    p = 0.5 * (1.0 - level)
+    # quantile with upper tail q: 2 Q^-1(nu / 2, q) (scipy's chdtri(nu, q))
+    return (2.0 * float(_gammainccinv(0.5 * nu, p)),
+            2.0 * float(_gammainccinv(0.5 * nu, 1.0 - p)))
+
+
+def chi_square_applies(c, var, level):
+    """
+    Return whether c nu / chi^2_nu gives a usable ``level`` interval (c > 0, var > 0).
+
+    A term with sd >> c (nu below 1) has a chi-square so skewed that its upper quantile
+    can lie below nu (the interval would exclude c), its lower one underflow or the upper
+    bound reach 10^15 c (a random walk the Hadamard fit barely sees, nu = 0.1): there the
+    normal interval is the honest statement.
+    """
+    nu = 2.0 * c * c / var
+    if nu < 1.0:
+        return False
+    low_q, high_q = _chi2_quantiles(nu, level)
+    return bool(low_q > nu and high_q > 0.0 and c * nu / high_q < 1e300)
 
 
 def two_sided_z(level):

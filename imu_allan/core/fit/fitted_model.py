@@ -16,13 +16,14 @@ import numpy as np
 
 from . import hadamard_check
 from .adequacy import assess, STATISTIC_SCALE
+from .averaging import averaged_interval, selection_gain, weights
 from .axis import (
     ALTERNATIVE_MARGIN,
     coefficient_interval,
-    drift_structure,
     fit_axis,
     fit_terms,
     problem_upper_limit,
+    ramp_cross_sd,
     two_sided_z,
     widen,
 )
@@ -34,15 +35,32 @@ from ..terms import sinusoid_shape, TERMS
 from ..units import conventional, si_unit
 
 
+#: Open term sets an upper limit is computed in, the best first (each costs a profile).
+LIMIT_SETS = 4
+
+
 class FittedModel:
     """Result of :func:`fit_noise_model`: a :class:`NoiseModel` plus intervals per term."""
 
     def __init__(self, fits, rate_hz, result=None):
-        """Wrap per-axis :class:`AxisFit` objects."""
+        """
+        Wrap per-axis :class:`AxisFit` objects.
+
+        :attr:`model` holds the resolved terms only (:meth:`resolved`): what the data show,
+        with the values of the selected set's fit; the others are upper limits.
+        """
         self.fits = fits
         self.rate_hz = rate_hz
         self.result = result
-        self.model = NoiseModel({a: f.terms for a, f in fits.items()}, rate_hz)
+        self.model = NoiseModel({a: {t: p for t, p in f.terms.items() if t in self.resolved(a)}
+                                 for a, f in fits.items()}, rate_hz)
+        self._weights = {}
+        for axis, fit in fits.items():  # the stored 68.3 % intervals carry the choice of terms
+            for term in self.model.terms[axis]:
+                if term in fit.coef and fit.candidates:
+                    fit.intervals[term] = TERMS[term].pack(
+                        self._averaged(axis, term, CI_LEVEL),
+                        TERMS[term].unpack(fit.intervals[term])[1])
         self.intervals = {a: f.intervals for a, f in fits.items()}
         self.chi2 = {a: f.chi2 for a, f in fits.items()}
         self.dof = {a: f.dof for a, f in fits.items()}
@@ -77,12 +95,33 @@ class FittedModel:
         fit = self.fits[axis]
         value = self.model.value(axis, term, param)
         if param == TERMS[term].params[0] and term in fit.coef:
-            j = list(fit.coef).index(term)
-            return coefficient_interval(fit.coef[term], max(fit.cov[j, j], 0.0), level,
-                                        term == 'rate_ramp')
+            return self._averaged(axis, term, level)
         z = two_sided_z(level)
         lo, hi = stored
         return (value * (lo / value) ** z, value * (hi / value) ** z)
+
+    def set_weights(self, axis):
+        """
+        ``[(weight, AxisFit), ...]``: the candidate term sets of ``axis`` and their weights.
+
+        Schwarz weights exp(-delta criterion / 2) over every set the selection fitted and no
+        other curve rejected (:func:`.averaging.weights`); the intervals average over them.
+        """
+        if axis not in self._weights:
+            fit = self.fits[axis]
+            rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
+            self._weights[axis] = weights(fit, rejected)
+        return self._weights[axis]
+
+    def _averaged(self, axis, term, level):
+        """A term's main-parameter interval at ``level`` averaged over the term sets."""
+        fit = self.fits[axis]
+        scale = fit.adequacy.scale if fit.adequacy is not None else 1.0
+        rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
+        selection = (None if term == 'white_noise' or not fit.candidate_fits else
+                     selection_gain(fit, term, ALTERNATIVE_MARGIN, fit.selection_penalty,
+                                    rejected))
+        return averaged_interval(self.set_weights(axis), term, level, fit, scale, selection)
 
     def alternatives(self, axis):
         """
@@ -105,6 +144,24 @@ class FittedModel:
                     and frozenset(names) not in rejected):
                 out.append(list(names))
         return out
+
+    def resolved(self, axis):
+        """
+        The terms of ``axis`` the record resolves: those every open term set holds.
+
+        A term is reported only when each term set the data cannot reject
+        (:meth:`alternatives`) contains it; one that some open sets hold and others do not is
+        not resolved (its value depends on a choice the data cannot make) and is reported as
+        an upper limit (:meth:`upper_limit`).  Named terms (``fit_noise_model(terms=...)``)
+        are all resolved: they were asked for.
+        """
+        sets = self.alternatives(axis)
+        return set.intersection(*(set(s) for s in sets)) if sets else set()
+
+    def unresolved(self, axis):
+        """The selected set's terms of ``axis`` that are not resolved (:meth:`resolved`)."""
+        fit = self.fits.get(axis)
+        return [] if fit is None else [t for t in fit.terms if t not in self.resolved(axis)]
 
     def rejected(self, axis):
         """
@@ -137,19 +194,26 @@ class FittedModel:
 
     def upper_limit(self, axis, term):
         """
-        95 % upper limit of a term the fit of ``axis`` did not select (SI, cached).
+        95 % upper limit of a term the record does not resolve on ``axis`` (SI, cached).
 
-        NaN if the term was selected, nothing was, or the data do not bound it (see
-        :func:`upper_limit`).  Exporters write it where a consumer needs a number.
+        The profile limit (:func:`upper_limit`) with the other terms refitted, in each open
+        term set (:meth:`alternatives`; the term added where a set lacks it), the largest of
+        them: the limit holds whichever open set is the sensor's (a rate random walk in one
+        set takes up what a ramp would in another).  NaN if the term is resolved, nothing
+        was fitted, or the data do not bound it.  Exporters write it where a consumer needs a
+        number.
         """
         key = (axis, term)
         if key not in self._upper_limits:
-            selected = list(self.model.terms.get(axis, {}))
-            value = math.nan
-            problem = self.fits[axis].problem if axis in self.fits else None
-            if problem is not None and selected and term not in selected:
-                value = float(problem_upper_limit(problem, selected + [term], term))
-            self._upper_limits[key] = value
+            fit = self.fits.get(axis)
+            limits = []
+            if (fit is not None and fit.problem is not None and fit.terms
+                    and term not in self.resolved(axis)):
+                for names in self.alternatives(axis)[:LIMIT_SETS]:
+                    names = list(names) + ([] if term in names else [term])
+                    limits.append(float(problem_upper_limit(fit.problem, names, term)))
+            self._upper_limits[key] = (max(limits) if limits and all(
+                math.isfinite(v) for v in limits) else math.nan)
         return self._upper_limits[key]
 
     def adequacy(self, axis):
@@ -163,10 +227,16 @@ class FittedModel:
         return None if fit is None else fit.tau_range
 
     def model_avar(self, axis, tau):
-        """Return the AVAR of an axis's fitted curve at ``tau`` (s): noise model and lines."""
+        """
+        Return the AVAR of an axis's fitted curve at ``tau`` (s): the selected set and lines.
+
+        The curve the fit drew through the data, unresolved terms included.
+        """
         fit = self.fits.get(axis)
-        return (_terms.model_avar(self.model.terms.get(axis, {}), tau, self.rate_hz)
-                + sum(_nuisance_avar(fit, tau) if fit is not None else [], 0.0))
+        if fit is None:
+            return _terms.model_avar({}, tau, self.rate_hz)
+        return _terms.model_avar(fit.terms, tau, self.rate_hz) + sum(_nuisance_avar(fit, tau),
+                                                                      0.0)
 
     def term_report(self, axis):
         """JSON-ready ``{term: {value, ci, unit, time, conventional}}`` for one axis."""
@@ -278,8 +348,7 @@ def _assess(fit, rate_hz, processing):
         t_rec = problem.duration_s
         if t_rec:  # the estimator's cross term R tau^2 D / (T - 2 tau), D the noise's drift
             drift = tau * tau / np.maximum(t_rec - 2.0 * tau, tau)
-            drift_sd = (math.sqrt(fit.coef['rate_ramp']) * drift
-                        * np.sqrt(drift_structure(fit.coef, t_rec, tau)) / model)
+            drift_sd = ramp_cross_sd(problem, fit.coef) / model
     fit.adequacy = assess(tau, problem.avar, problem.edf, problem.corr, model, columns,
                           _namer(processing, tau), ramp, drift, drift_sd)
     widen(fit, fit.adequacy.scale)

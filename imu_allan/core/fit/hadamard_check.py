@@ -209,6 +209,8 @@ def decide(fit, allan, hadamard, margin=ALTERNATIVE_MARGIN):
     if set(kept[0]['terms']) != set(fit.terms):
         new = fit_terms(allan, kept[0]['terms'])
         new.candidates = fit.candidates
+        new.candidate_fits = fit.candidate_fits
+        new.selection_penalty = fit.selection_penalty
         fit = new
     fit.evidence = evidence
     return fit

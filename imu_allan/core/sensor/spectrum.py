@@ -37,8 +37,13 @@ FIRST_BIN = LINE_HALF_WIDTH + LINE_GAP + 3
 LINE_MASK = 4
 #: The cosine series alone is fitted above fs / this; about this many bands of bins.
 FIT_LOW_FRACTION, BANDS = 100.0, 256
-#: Most lags fitted; significance of a lag (standard errors).
-MAX_LAGS, LAG_SIGNIFICANCE = 16, 4.5
+#: Most lags fitted; significance of a lag (standard errors), and of the first: lower, as a
+#: filter missed costs more than one found in error.  A missed lag-1 correlation bends the
+#: shortest averaging times the fit takes for white noise (from 10 s at 100 Hz, a rho_1 of
+#: 0.1-0.2 left N 5-10 % low and passed for a bias instability); a false one costs the fit
+#: only its first averaging time and a fitted deficit.  Lags beyond the first need a
+#: correlation at lag 1 anyway.
+MAX_LAGS, LAG_SIGNIFICANCE, FIRST_LAG_SIGNIFICANCE = 16, 4.5, 3.0
 #: Lags of the fits that find the bands to leave out, tried in turn (few first).
 MASK_LAGS_TRIED = (2, 3, 4, 6, 8, 12, 16)
 #: Band z above which a band is left out of the fit; largest mean z^2 of the bands kept.
@@ -482,7 +487,8 @@ def _forward(bands, mask, lags):
     Lags kept by forward selection; (filter_length, use_low, standard errors of rho_k).
 
     Lag k joins when its coefficient in the fit with k lags is more than
-    :data:`LAG_SIGNIFICANCE` standard errors from 0 (from the band errors alone: a fit with
+    :data:`LAG_SIGNIFICANCE` standard errors from 0 (:data:`FIRST_LAG_SIGNIFICANCE` for the
+    first) (from the band errors alone: a fit with
     too few lags misses the data, and scaling the errors by that would hide the lag that
     mends it); two misses in a row stop.  The standard error of rho_k is that of the k-lag
     fit (misfit included), for k up to max(filter_length, 8) (:func:`fit_white` puts the
@@ -496,7 +502,8 @@ def _forward(bands, mask, lags):
         rho_se.append(fit.rho_se(k))
         se = math.sqrt(max(fit.stat_cov[k, k], 0.0))
         if misses < 2:
-            if se > 0 and abs(fit.coef[k]) > LAG_SIGNIFICANCE * se:
+            level = FIRST_LAG_SIGNIFICANCE if k == 1 else LAG_SIGNIFICANCE
+            if se > 0 and abs(fit.coef[k]) > level * se:
                 filter_length, use_low, misses = k, fit.use_low, 0
             else:
                 misses += 1
