@@ -7,7 +7,6 @@ Several inputs (and folders, scanned for bags) are analysed as Dask tasks and su
 one table, optionally recorded in a DuckDB history (:mod:`imu_allan.cli.batch`).
 """
 
-import json
 import sys
 
 from .common import (
@@ -25,6 +24,7 @@ from .progress import Progress
 from ..core.units import ALL_TERMS, IEEE_TERMS
 from ..errors import InputError
 from ..formats import FORMATS
+from ..report import strict_json
 
 
 def build_parser():
@@ -164,6 +164,6 @@ def main(argv=None):
             report, text = run_one(args.inputs[0], args, options, progress)
         finally:
             progress.close()
-        emit(json.dumps(report) if args.json else text)
+        emit(strict_json.dumps(report) if args.json else text)
         return 0
     return run_batch(args, options)

@@ -17,7 +17,6 @@ exactly once (one future per input, read once).
 
 from collections import Counter
 import contextlib
-import json
 import logging
 import os
 from pathlib import Path
@@ -26,6 +25,7 @@ import sys
 from .common import emit, EXIT_BAD_INPUT
 from .progress import RunProgress
 from ..errors import InputError
+from ..report import strict_json
 
 #: Worker deaths a task may be part of before it is given up (Dask's scheduler setting
 #: ``distributed.scheduler.allowed-failures``; its default is 3).  A bag that crashes the
@@ -307,7 +307,7 @@ def run_batch(args, options):
     for o in failed:
         sys.stderr.write(f'analyze: {o["error"]}\n')
     if args.json:
-        emit(json.dumps({'reports': [o['report'] for o in results if o['ok']],
+        emit(strict_json.dumps({'reports': [o['report'] for o in results if o['ok']],
                          'errors': [o['error'] for o in failed], 'skipped': skipped}))
     else:
         for o in results:

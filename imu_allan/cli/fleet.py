@@ -8,12 +8,12 @@ the IMUs and one line per flag (``--json``: the JSON instead).  The flags are de
 """
 
 from datetime import datetime
-import json
 from pathlib import Path
 import re
 
 from .common import ArgumentParser, guarded
 from ..errors import InputError
+from ..report import strict_json
 
 
 def build_parser():
@@ -87,7 +87,7 @@ def fleet_report(db, out_dir, since=None):
     report = {'db': str(db), 'since': since.isoformat() if since else None,
               'units': 'SI; noise coefficients are continuous-time; intervals 68.3 %',
               'not_static_records_left_out': moving, 'imus': entries, 'flags': flags}
-    (out / 'fleet.json').write_text(json.dumps(report, indent=1) + '\n', encoding='utf-8')
+    (out / 'fleet.json').write_text(strict_json.dumps(report, indent=1) + '\n', encoding='utf-8')
     from ..report.html import write_fleet_page
     write_fleet_page(out, report, imus)
     return report
@@ -128,5 +128,5 @@ def main(argv=None):
     """Entry point of ``fleet``."""
     args = build_parser().parse_args(argv)
     report = fleet_report(args.db, args.out, _since(args.since))
-    print(json.dumps(report) if args.json else console_text(report))
+    print(strict_json.dumps(report) if args.json else console_text(report))
     return 0

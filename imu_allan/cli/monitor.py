@@ -3,14 +3,15 @@ monitor: the live view of a running allan node, for an operator standing next to
 
 Subscribes ``imu/allan_coeffs``, ``imu/allan_deviation`` (relative names: ``--namespace`` or
 ROS remapping after ``--ros-args`` move them) and ``/diagnostics``, and shows per axis the
-white noise N and bias instability B (and any other detected term) with their 68.3 % intervals
-in conventional units, the health of the IMU stream and the recording advice, when the node
-publishes one.  On a terminal the table is redrawn in place; otherwise each new estimate is
+white noise N and bias instability B (and any other term it resolves) with their 68.3 %
+intervals in conventional units, or the 95 % upper limit of a term not resolved yet, the
+health of the IMU stream and the recording advice, when the node publishes one.  On a terminal the table is redrawn in place; otherwise each new estimate is
 printed as plain lines.  ``--once`` prints one snapshot and exits (status 1, one line on
 stderr, if no coefficients arrive within ``--timeout``); ``--json`` prints the decoded snapshot
-(one JSON object per line without ``--once``).  The recording advice is said in words (as
-``analyze``'s summary says it); ``--verbose`` adds the raw ``key=value`` lists of the stream
-and advice statuses, which ``--json`` always carries.
+(one JSON object per line without ``--once``).  The recording advice is the node's own
+sentences (the words ``analyze`` and its page use, :mod:`imu_allan.report.advice`);
+``--verbose`` adds the raw ``key=value`` lists of the stream and advice statuses, which
+``--json`` always carries.
 
 Diagnostic statuses are read generically: every status named ``<node>: ...`` (``--node``,
 default ``allan``) is shown; ``<node>: IMU stream`` and ``<node>: recording advice`` get their
@@ -30,14 +31,14 @@ import time
 from .common import ArgumentParser, guarded
 from ..core.fit.adequacy import ADEQUACY_LEVEL
 from ..core.live.health import LEVEL_NAMES
-from ..core.units import ALL_TERMS, AXES, conventional, IEEE_TERMS
+from ..core.units import AXES, conventional, IEEE_TERMS
 from ..errors import InputError
-from ..report.advice import format_duration, term_words
 from ..report.coeffs_layout import (
     coefficient_terms,
     decode_adequacy,
     decode_coefficients,
     decode_deviation,
+    decode_limits,
 )
 
 #: Terminal control: cursor home, then clear to the end of the screen (redraw in place).
@@ -99,6 +100,7 @@ class MonitorState:
         self.prefix = f'{node_name}: '
         self.coeffs = None
         self.adequacy = None  # each axis's adequacy p, from the coefficients' trailing block
+        self.limits = None  # (axis, term) 95 % upper limits of the terms not resolved
         self.deviation = None
         self.statuses = {}
         self.received = {'coeffs': 0, 'deviation': 0, 'diagnostics': 0}
@@ -108,10 +110,10 @@ class MonitorState:
     def on_coeffs(self, msg):
         """``imu/allan_coeffs`` callback; a bad layout becomes an ERROR line, not a crash."""
         self._store('coeffs', decode_coefficients, msg)
-        try:
-            self.adequacy = decode_adequacy(msg)  # None from a publisher without the block
+        try:  # None from a publisher without these blocks
+            self.adequacy, self.limits = decode_adequacy(msg), decode_limits(msg)
         except InputError:
-            self.adequacy = None
+            self.adequacy = self.limits = None
 
     def on_deviation(self, msg):
         """``imu/allan_deviation`` callback."""
@@ -158,7 +160,11 @@ class MonitorState:
                'axes': {} if self.coeffs is None else coefficient_terms(self.coeffs),
                'deviation': None, 'status': dict(self.statuses),
                'adequacy_p': (None if self.adequacy is None else
-                              {a: _finite(p) for a, p in zip(AXES, self.adequacy)})}
+                              {a: _finite(p) for a, p in zip(AXES, self.adequacy)}),
+               'upper_limits': (None if self.limits is None else
+                                {a: {t: _finite(v) for t, v in zip(IEEE_TERMS, row)
+                                     if math.isfinite(v)}
+                                 for a, row in zip(AXES, self.limits)})}
         if self.deviation is not None:
             tau, adev = self.deviation
             out['deviation'] = {'tau': [_finite(v) for v in tau],
@@ -183,11 +189,12 @@ def format_interval(axis, term, stats):
     return f'{v:.{digits}g} [{lo:.{digits}g}, {hi:.{digits}g}] {unit}'
 
 
-def _status_line(label, status):
-    """``label  LEVEL  message`` of a kept status."""
+def _status_line(label, status, width=None):
+    """``label  LEVEL  message`` of a kept status (wrapped to ``width`` columns if given)."""
     if status is None:
         return [f'{label:9}(none yet)']
-    return [f'{label:9}{status["level"]:6}{status["message"]}']
+    line = f'{label:9}{status["level"]:6}{status["message"]}'
+    return textwrap.wrap(line, width, subsequent_indent=' ' * 15) if width else [line]
 
 
 def _key_values(values, width, indent=15):
@@ -204,88 +211,6 @@ def _key_values(values, width, indent=15):
     return lines
 
 
-def _seconds(text):
-    """Return a diagnostic value (text) as a finite float, or None ('nan': no prediction)."""
-    try:
-        value = float(text)
-    except (TypeError, ValueError):
-        return None
-    return value if math.isfinite(value) else None
-
-
-def _split_terms(text):
-    """Split ``'rate_random_walk_rate_ramp'`` into known term names; None if it is not that."""
-    terms = []
-    while text:
-        term = next((t for t in ALL_TERMS if text == t or text.startswith(t + '_')), None)
-        if term is None:
-            return None
-        terms.append(term)
-        text = text[len(term) + 1:]
-    return terms
-
-
-def _axes_text(axes):
-    return 'all axes' if len(axes) == len(AXES) else ', '.join(axes)
-
-
-def advice_words(values):
-    """
-    Return the recording advice's key-values (the allan node's status) as sentences.
-
-    The node sends, per detected term, ``<axis>.<term>.more_s`` (s more to reach the precision
-    target; 0: met; nan: not reachable) and ``.rel_halfwidth``, and per pair of terms the data
-    cannot tell apart yet ``<axis>.<a>_vs_<b>.more_s`` (``maybe_<term>``: the term or none).
-    Said here per term and per alternative, axes grouped, durations rounded for people as in
-    ``analyze``'s summary; keys of any other form are listed as ``key=value``.
-    """
-    terms, alternatives, others = {}, {}, {}
-    for key, text in values.items():
-        axis, _, rest = key.partition('.')
-        what, _, field = rest.rpartition('.')
-        if what.startswith('maybe_'):  # the term or none (several: which of them)
-            options = _split_terms(what[len('maybe_'):])
-            options = options and options + (['none'] if len(options) == 1 else [])
-        else:
-            options = _split_terms(what.replace('_vs_', '_')) if '_vs_' in what else None
-        if key in ('record_more_s', 'recorded_s'):
-            continue
-        if axis in AXES and what in ALL_TERMS and field in ('more_s', 'rel_halfwidth'):
-            terms.setdefault(what, {}).setdefault(axis, {})[field] = _seconds(text)
-        elif axis in AXES and options and field == 'more_s':
-            more = _seconds(text)
-            words = ' or '.join(map(term_words, options))
-            alternatives.setdefault((more is None, words), []).append((axis, more))
-        else:
-            others[key] = text
-    out = []
-    recorded = _seconds(values.get('recorded_s'))
-    if recorded is not None:
-        out.append(f'Recorded {format_duration(recorded).removeprefix("about ")} so far.')
-    for term, axes in terms.items():
-        rels = [e['rel_halfwidth'] for e in axes.values() if e.get('rel_halfwidth') is not None]
-        spread = f'±{100 * min(rels):.2g} %' + (
-            f' to ±{100 * max(rels):.2g} %' if max(rels) > 1.05 * min(rels) else '')
-        met = [a for a, e in axes.items() if e.get('more_s') == 0]
-        late = [(a, e['more_s']) for a, e in axes.items() if e.get('more_s')]
-        never = [a for a, e in axes.items() if e.get('more_s') is None]
-        parts = [f'target met on {_axes_text(met)}'] if met else []
-        parts += [', '.join(f'{a} {format_duration(m)} more' for a, m in late)] if late else []
-        parts += [f'target out of reach on {_axes_text(never)}'] if never else []
-        out.append(f'{term_words(term)}' + (f' (known to {spread})' if rels else '')
-                   + f': {"; ".join(parts)}.')
-    later = [f'{words}: ' + ', '.join(f'{a} {format_duration(m)} more' for a, m in entries)
-             for (unknown, words), entries in alternatives.items() if not unknown]
-    if later:
-        out.append('To tell apart: ' + '; '.join(later) + '.')
-    never = [f'{words} ({", ".join(a for a, _ in entries)})'
-             for (unknown, words), entries in alternatives.items() if unknown]
-    if never:
-        out.append('Cannot tell, and no record length within reach will: ' + '; '.join(never)
-                   + '.')
-    return out + [f'{k}={v}' for k, v in others.items()]
-
-
 def _wrapped(sentences, width, indent=9):
     """Each sentence wrapped to ``width`` columns under the label column."""
     pad = ' ' * indent
@@ -297,7 +222,9 @@ def render(state, topics, width=99, verbose=False):
     """
     Return the table as a list of text lines wrapped at ``width`` columns.
 
-    The recording advice in words (:func:`advice_words`); ``verbose`` adds the raw key-value
+    A term the node resolves shows its value and 68.3 % interval, one it does not its 95 %
+    upper limit ("< x"); the recording advice is the node's own sentences (the record's, then
+    each axis's: the words ``analyze`` and its page use); ``verbose`` adds the raw key-value
     lists of the stream and advice statuses.
     """
     now = time.monotonic()
@@ -310,12 +237,12 @@ def render(state, topics, width=99, verbose=False):
     else:
         shown = [t for t in IEEE_TERMS if t in ('white_noise', 'bias_instability')
                  or any(math.isfinite(v) for v in state.coeffs[:, IEEE_TERMS.index(t), 0])]
-        rows = [[axis] + [format_interval(axis, t, state.coeffs[i, IEEE_TERMS.index(t)])
-                          for t in shown] + [_verdict(state.adequacy, i)]
-                for i, axis in enumerate(AXES)]
+        rows = [[axis] + [_cell(state, i, axis, t) for t in shown]
+                + [_verdict(state.adequacy, i)] for i, axis in enumerate(AXES)]
         rows.insert(0, ['axis'] + [t.replace('_', ' ') for t in shown] + ['model'])
         widths = [max(len(row[k]) for row in rows) + 2 for k in range(len(rows[0]))]
-        lines.append('continuous-time coefficients, value [68.3 % interval], conventional units')
+        lines.append('continuous-time coefficients in conventional units: value [68.3 % '
+                     'interval] where resolved, < 95 % upper limit where not yet')
         lines += [''.join(f'{c:{w}}' for c, w in zip(row, widths)).rstrip() for row in rows]
     if state.deviation is not None and state.deviation[0].size:
         tau = state.deviation[0]
@@ -328,13 +255,15 @@ def render(state, topics, width=99, verbose=False):
                 'out_of_order_total', 'excluded_share', 'silence_s')
         lines += _key_values(v if verbose else {k: v[k] for k in keep if k in v}, width)
     advice = state.status('recording advice')
-    lines += _status_line('advice', advice)
+    lines += _status_line('advice', advice, width)
     if advice is not None:
-        lines += _wrapped(advice_words(advice['values']), width)
+        axis_advice = [state.status(f'{axis} advice') for axis in AXES]
+        lines += _wrapped([f'{axis}: {s["message"]}' for axis, s in zip(AXES, axis_advice)
+                           if s is not None], width)
         if verbose:
             lines += _key_values(advice['values'], width)
     others = {name[len(state.prefix):]: s for name, s in state.statuses.items()
-              if not name.endswith(('IMU stream', 'recording advice'))}
+              if not name.endswith(('IMU stream', 'advice'))}
     if others:
         counts = {}
         for s in others.values():
@@ -345,11 +274,25 @@ def render(state, topics, width=99, verbose=False):
     return lines
 
 
-def _verdict(adequacy, i):
-    """Return the adequacy of axis ``i`` in a word: fits, DOES NOT FIT, or - (unknown)."""
-    p = None if adequacy is None else float(adequacy[i])
-    if p is None or not math.isfinite(p):
+def _cell(state, i, axis, term):
+    """A table cell: the resolved value with its interval, else the upper limit, else -."""
+    stats = state.coeffs[i, IEEE_TERMS.index(term)]
+    if math.isfinite(stats[0]) or state.limits is None:
+        return format_interval(axis, term, stats)
+    limit = state.limits[i, IEEE_TERMS.index(term)]
+    if not math.isfinite(limit):
         return '-'
+    value, unit = conventional(axis, term, limit)
+    return f'< {value:.3g} {unit}'
+
+
+def _verdict(adequacy, i):
+    """Return the adequacy of axis ``i`` in a word: fits, DOES NOT FIT, not tested, or -."""
+    if adequacy is None:
+        return '-'
+    p = float(adequacy[i])
+    if not math.isfinite(p):
+        return 'not tested'
     return 'fits' if p >= ADEQUACY_LEVEL else 'DOES NOT FIT'
 
 

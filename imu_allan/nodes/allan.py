@@ -57,7 +57,7 @@ from .common import (
     take_batch,
     validate_on_set,
 )
-from ..core.fit.advisor import advice_health, factor_grid_of, parse_targets, StagedAdvice
+from ..core.fit.advisor import factor_grid_of, parse_targets, StagedAdvice
 from ..core.live import health as hm
 from ..core.live.change_monitor import ChangeMonitor
 from ..core.live.online import check_rate_options, OnlineAllan, StagedEstimate
@@ -67,12 +67,14 @@ from ..core.temperature import TemperatureRange
 from ..core.units import AXES, discrete_white_std, IEEE_TERMS, TERM_PARAMETERS
 from ..errors import InputError
 from ..formats.imu_cdr import cdr_to_arrays, set_covariance_diagonals
+from ..report.advice import advice_statuses
 from ..report.coeffs_layout import (
     adequacy_values,
     COEFF_LABELS,
     coefficient_table,
     DEVIATION_LABELS,
     deviation_table,
+    limit_values,
 )
 from ..report.fit_quality import adequacy_health
 
@@ -287,12 +289,13 @@ class AllanNode(Node):
             qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
             if self.params['covariance_topic'] else None
         self._cov_variance = None  # per-sample N^2 f per axis, once estimated
+        self._limits = None  # the latest upper limits (axis, term) of the terms not resolved
         self._change = None  # the change test (core.live.change_monitor), once the rate is known
         self._plot = PlotPublisher(self)
         self._last_arrival = None
         self._cycle = None
         self._advice, self._advice_due = None, 0.0
-        self._advice_status = advice_health(None, f'{self.get_name()}: recording advice')
+        self._advice_statuses = advice_statuses(None, self._advice_name())
         self.last_cycle = {'cycle_total_s': math.nan, 'cycle_max_step_s': math.nan,
                            'cycle_wall_s': math.nan}
         self._step_budget = STEP_SHARE * drain_period(self.params)
@@ -431,7 +434,10 @@ class AllanNode(Node):
             table = coefficient_table(fitted, AXES) if fitted is not None else None
             if table is not None:
                 msg = multiarray(table, COEFF_LABELS)
-                msg.data.extend(adequacy_values(fitted, AXES).tolist())  # after the table
+                limits = limit_values(fitted, AXES)
+                # after the table: each axis's adequacy p, then the upper limits
+                msg.data.extend(adequacy_values(fitted, AXES).tolist() + limits.tolist())
+                self._limits = limits.reshape(len(AXES), -1)
                 self._pub_coeffs.publish(msg)
                 # robot_localization reads per-message variances: N^2 f (NaN: keep the driver's)
                 white = table[:, IEEE_TERMS.index('white_noise'), 0]
@@ -465,12 +471,12 @@ class AllanNode(Node):
             return
         self._advice_due = now + self.params['advice_period']
         if self.params['window_s'] > 0:  # a sliding window does not grow with recording
-            self._advice_status = hm.Health(self._advice_status.name, hm.OK,
-                                            'no advice with a sliding window (window_s > 0)')
+            self._advice_statuses = [hm.Health(self._advice_name(), hm.OK,
+                                               'no advice with a sliding window (window_s > 0)')]
             return
         est = self.pipeline.estimator
         self._advice = StagedAdvice(result, fitted, parse_targets(self.params['targets']),
-                                    factor_grid_of(est.ms, est.min_clusters), undetected=False)
+                                    factor_grid_of(est.ms, est.min_clusters))
 
     def _advance_advice(self):
         """Advice steps for up to a step budget; its status is ready when they are done."""
@@ -478,8 +484,12 @@ class AllanNode(Node):
         while not self._advice.step() and time.perf_counter() - start < self._step_budget:
             pass
         if self._advice.done:
-            self._advice_status = advice_health(self._advice.advice, self._advice_status.name)
+            self._advice_statuses = advice_statuses(self._advice.advice, self._advice_name(),
+                                                    f'{self.get_name()}: ')
             self._advice = None
+
+    def _advice_name(self):
+        return f'{self.get_name()}: recording advice'
 
     def _load_model(self):
         """Return the reference noise model for the discrepancy check (validated on set)."""
@@ -510,9 +520,10 @@ class AllanNode(Node):
         if p.estimator is not None:  # per axis where values were rejected (NaN, inf, ...)
             stream.values.update({f'samples_used.{a}': int(n) for a, n, r in zip(
                 p.axes, p.estimator.n_used_axes, p.rejected_total) if r})
-        records = [stream] + hm.budget_health(table, self.budget, AXES, prefix)
+        records = [stream] + hm.budget_health(table, self.budget, AXES, prefix,
+                                              self._limits if table is not None else None)
         records += adequacy_health(fitted, AXES, prefix)
-        records.append(self._advice_status)
+        records += self._advice_statuses
         if self._change is not None:
             records += self._change.health(prefix)
         if self.model is not None:  # the discrepancy check: gap and effect per axis

@@ -1,27 +1,52 @@
 """
-The recording advice of ``analyze``: the ``advice`` JSON block and the closing sentence.
+The recording advice in words and in JSON: the one renderer of the console, page and node.
 
-The advice itself is computed with the rest of the record
-(:func:`imu_allan.core.record.record_advice`); this module renders it.
+The advice is computed in core (:mod:`imu_allan.core.fit.advisor`): per axis the precision of
+each resolved term, the open term sets and when they are told apart, the upper limit of each
+term not resolved and when it would be.  :func:`advice_to_json` makes it data (report.json's
+``advice`` block); everything a person reads is rendered from that data here, once: the
+console's closing sentence (:func:`advice_sentence`), the page's headline and lines
+(:func:`advice_lines`), the allan node's ``/diagnostics`` statuses, whose messages the
+``monitor`` shows as they are (:func:`advice_statuses`).
 
 JSON (design.md section 6, key ``advice``)::
 
     {"targets": {"white_noise": 0.02, ...},
      "axes": {"gyro_x": {"white_noise": {"rel_halfwidth": x, "more_s": s}, ...}, ...},
      "unresolved": [{"axis": "accel_x", "terms": ["bias_instability", "rate_random_walk"],
-                     "more_s": s}],
+                     "sets": [["white_noise", "bias_instability"], ...], "more_s": s}],
      "record_more_s": s,
-     "undetected": [{"axis": ..., "term": ..., "upper_limit": u, "unit": ..., "more_s": s}]}
+     "undetected": [{"axis": ..., "term": ..., "upper_limit": u, "unit": ..., "open": bool,
+                     "more_s": s}]}
 
-``more_s`` (s of additional recording at the same rate and conditions) is 0 when a target is
-met and null only when no prediction is possible, with a ``reason`` beside it.  ``undetected``
-(an extension) lists terms not detected: their 95 % upper limit (SI, continuous-time) and the
-time after which a term that large would be detected.
+``axes`` holds the resolved terms; ``unresolved`` one entry per axis whose open term sets
+differ (``terms``: the terms they differ in, ``sets``: the sets, the selected one first;
+``more_s``: until they are told apart); ``undetected`` every IEEE term not resolved: its 95 %
+upper limit (SI, continuous-time) and the time until it is resolved (``open``: an open set
+holds it).  ``more_s`` (s of additional recording at the same rate and conditions) is 0 when
+a target is met and null only when no prediction is possible, with a ``reason`` beside it.
 """
 
 import math
 
-from ..core.units import si_unit
+from ..core.units import conventional, si_unit
+
+#: Why two terms are hard to tell apart, in words (either order).
+_WHY = {
+    frozenset(('bias_instability', 'rate_random_walk')): 'both lift the longest averaging times',
+    frozenset(('rate_random_walk', 'rate_ramp')): 'both rise at the longest averaging times, '
+                                                  'a half-decade slope apart',
+    frozenset(('bias_instability', 'rate_ramp')): 'both lift the longest averaging times',
+    frozenset(('gauss_markov', 'bias_instability')): 'a hump and a floor look alike over '
+                                                     'one decade',
+}
+#: Why a term may or may not be there, in words.
+_MAYBE = {'quantization': 'the shortest averaging times do not yet show it apart from white '
+                          'noise',
+          'bias_instability': 'the curve has not yet flattened clearly',
+          'rate_random_walk': 'the curve does not yet rise clearly at its end',
+          'rate_ramp': 'the curve does not yet rise clearly at its end',
+          'gauss_markov': 'the curve does not yet show a clear hump'}
 
 
 def _num(value):
@@ -36,25 +61,21 @@ def _time_entry(entry, **extra):
 
 
 def advice_to_json(advice):
-    """Return the ``advice`` block (JSON-ready)."""
-    axes, undetected = {}, []
-    for axis, terms in advice.axes.items():
-        axes[axis] = {}
-        for term, entry in terms.items():
-            if entry.detected:
-                axes[axis][term] = _time_entry(entry, rel_halfwidth=_num(entry.rel_halfwidth))
-            else:
-                undetected.append(_time_entry(entry, axis=axis, term=term,
-                                              upper_limit=_num(entry.upper_limit),
-                                              unit=si_unit(axis, term)))
-    return {'targets': dict(advice.targets), 'axes': axes,
+    """Return the ``advice`` block (JSON-ready, strict: no NaN)."""
+    undetected = [_time_entry(lim, axis=axis, term=term, upper_limit=_num(lim.upper_limit),
+                              unit=si_unit(axis, term), open=bool(lim.open))
+                  for axis, limits in advice.limits.items() for term, lim in limits.items()]
+    return {'targets': dict(advice.targets),
+            'axes': {axis: {term: _time_entry(e, rel_halfwidth=_num(e.rel_halfwidth))
+                            for term, e in terms.items()}
+                     for axis, terms in advice.axes.items()},
             'unresolved': [_time_entry(u, axis=u.axis, terms=list(u.terms),
-                                       **({} if u.alternative is None else
-                                          {'alternative': list(u.alternative)}))
+                                       sets=[list(s) for s in u.sets])
                            for u in advice.unresolved],
             'record_more_s': _num(advice.record_more_s),
             'undetected': undetected,
-            'inadequate': list(advice.inadequate)}
+            'inadequate': list(advice.inadequate),
+            'moving': list(advice.moving)}
 
 
 def format_duration(seconds):
@@ -77,66 +98,181 @@ def _percent(rel):
     return f'{100 * rel:.3g} %'
 
 
-def alternative_words(u):
-    """
-    One unresolved alternative in words, with the time until the data decide.
+def _when(entry, what='decides'):
+    """'about 3 h more decides', or why no record length within reach does."""
+    more = entry.get('more_s')
+    if more:
+        return f'{format_duration(more)} more {what}'
+    if more == 0:
+        return 'decided'
+    return f'no record within reach {what} ({entry["reason"]})' if entry.get('reason') else \
+        'a longer record is needed'
 
-    'gyro_x: rate random walk or rate ramp: cannot tell yet; record about 4 h more'.
+
+def open_sets_words(entry):
     """
-    if len(u.terms) == 2:
-        what = f'{term_words(u.terms[0])} or {term_words(u.terms[1])}'
-    elif len(u.terms) == 1:
-        what = f'{term_words(u.terms[0])} or none'
+    An axis's open term sets in one sentence: which terms, why they stay apart, how long.
+
+    'cannot tell yet whether bias instability or rate random walk is there (both lift the
+    longest averaging times); about 3 h more decides'.
+    """
+    sets = [set(s) for s in entry.get('sets') or []]
+    differ = list(entry['terms'])
+    common = set.intersection(*sets) if sets else set()
+    pairs = [frozenset(p) for p in _WHY if p <= set(differ)]
+    if len(differ) == 2 and pairs:
+        what = f'{term_words(differ[0])} or {term_words(differ[1])}'
+        why = _WHY[pairs[0]]
+    elif len(differ) == 1:
+        what = f'{term_words(differ[0])} or none'
+        why = _MAYBE.get(differ[0], 'the curve does not yet tell')
     else:
-        what = 'which of ' + ', '.join(term_words(t) for t in u.terms)
-    if u.more_s:
-        when = f'record {format_duration(u.more_s)} more'
-    else:
-        when = f'no record length within reach will tell ({u.reason})' if u.reason else \
-            'record longer'
-    return f'{u.axis}: {what}: cannot tell yet; {when}'
+        what = 'which of ' + ', '.join(term_words(t) for t in differ)
+        why = '; '.join(_WHY[p] for p in pairs) if pairs else 'the curve does not yet tell'
+    beside = (' beside ' + ', '.join(term_words(t) for t in sorted(common))) if common else ''
+    return f'cannot tell yet {what}{beside} ({why}); {_when(entry)}'
 
 
-def advice_sentence(advice):
+def axis_lines(doc):
     """
-    One sentence a person can act on: how much longer to record, and why.
+    ``{axis: sentence}``: each axis's advice in one sentence, from the JSON ``advice`` block.
 
-    Never "no need to record longer" while an alternative term set remains open
-    (``advice.unresolved``), the record was moving (``advice.moving``) or a model does not
-    describe its curve (``advice.inadequate``: its precision is not precision).
+    The precision of every resolved term against its target, the open term sets once, and
+    each term not resolved as its upper limit with the time until it is.
     """
-    moving = getattr(advice, 'moving', None)
+    targets = doc.get('targets', {})
+    out = {}
+    unresolved = {u['axis']: u for u in doc.get('unresolved', [])}
+    limits = {}
+    for entry in doc.get('undetected', []):
+        limits.setdefault(entry['axis'], []).append(entry)
+    for axis in sorted(set(doc.get('axes', {})) | set(unresolved) | set(limits),
+                       key=_axis_order(doc)):
+        clauses = []
+        for term, e in doc.get('axes', {}).get(axis, {}).items():
+            rel = e.get('rel_halfwidth')
+            head = term_words(term) + (f' ±{_percent(rel)}' if rel is not None else '')
+            target = targets.get(term)
+            if e.get('more_s') == 0:
+                clauses.append(head + (f' (target {_percent(target)} met)' if target else ''))
+            else:
+                clauses.append(f'{head} (target {_percent(target)}: '
+                               f'{_when(e, "reaches it")})' if target else head)
+        if axis in unresolved:
+            clauses.append(open_sets_words(unresolved[axis]))
+        for entry in limits.get(axis, []):
+            clauses.append(_limit_words(axis, entry))
+        out[axis] = f'{axis}: ' + '; '.join(clauses)
+    return out
+
+
+def _axis_order(doc):
+    axes = list(doc.get('axes', {}))
+    return lambda a: (axes.index(a) if a in axes else len(axes), a)
+
+
+def _limit_words(axis, entry):
+    """'bias instability < 40 deg/h (95 %), resolved after about 20 min more if that large'."""
+    limit = entry.get('upper_limit')
+    name = term_words(entry['term'])
+    if limit is None:
+        return f'{name}: not bounded by these data'
+    value, unit = conventional(axis, entry['term'], limit)
+    head = f'{name} < {value:.3g} {unit} (95 %)'
+    if entry.get('open'):  # the open sets decide it: said once with them
+        return head
+    more = entry.get('more_s')
+    if more:
+        return f'{head}, resolved after {format_duration(more)} more if that large'
+    return head if more == 0 else f'{head}, {_when(entry, "resolves it")}'
+
+
+def advice_sentence(doc):
+    """
+    The console's closing sentence: how much longer to record, and why.
+
+    Never "no need to record longer" while a term set remains open, the record was moving or
+    a model does not describe its curve (its precision is not precision).
+    """
+    headline = advice_headline(doc)
+    lines = list(axis_lines(doc).values())
+    return 'advice: ' + headline + (' ' + ' '.join(line + '.' for line in lines)
+                                    if lines and doc.get('moving') in (None, []) else '')
+
+
+def advice_headline(doc, alternatives=False):
+    """
+    One sentence for the whole record, from the JSON ``advice`` block.
+
+    ``alternatives``: the fit lists term sets the advice did not (an older report).
+    """
+    moving = doc.get('moving') or []
     if moving:
-        return (f'advice: the IMU moved during the record ({", ".join(moving)}): the curve '
-                f'measures the motion, not the sensor noise; record again at rest (on a '
-                f'still, vibration-free support) for the noise coefficients.')
-    detected = [(axis, term, e) for axis, terms in advice.axes.items()
-                for term, e in terms.items() if e.detected]
-    record = advice.record_more_s
-    clauses = []
-    limiting = max(((e.more_s, term) for _, term, e in detected if e.more_s), default=None)
-    pair_max = max((u.more_s for u in advice.unresolved if u.more_s), default=0.0)
-    if limiting is not None and limiting[0] >= pair_max:
-        term = limiting[1]
-        axes = [a for a, t, _ in detected if t == term]  # package axis order
-        where = 'on all axes' if len(axes) == len(advice.axes) else 'on ' + ', '.join(axes)
-        clauses.append(f'record {format_duration(record)} more to pin {term_words(term)} to '
-                       f'{_percent(advice.targets[term])} {where}')
-    elif record > 0:
-        clauses.append(f'record {format_duration(record)} more to tell the unresolved terms '
-                       f'apart')
-    clauses += [alternative_words(u) for u in advice.unresolved]
-    inadequate = list(advice.inadequate)
+        return (f'the IMU moved during the record ({", ".join(moving)}): the curve measures '
+                'the motion, not the sensor noise; record again at rest (on a still, '
+                'vibration-free support) for the noise coefficients.')
+    inadequate = doc.get('inadequate') or []
+    more = doc.get('record_more_s')
+    unmet = [(a, t) for a, terms in doc.get('axes', {}).items() for t, e in terms.items()
+             if e.get('more_s') is None]
+    open_sets = bool(doc.get('unresolved')) or alternatives
     if inadequate:
-        clauses.append(f'the noise model does not describe {", ".join(inadequate)}: their '
-                       'precision figures are not meaningful (see the model check); a longer '
-                       'record does not mend a model')
-    for axis, term, e in detected:
-        if e.more_s is None:
-            clauses.append(f'{axis} {term_words(term)} will not reach '
-                           f'{_percent(advice.targets[term])} ({e.reason})')
-    if not clauses and not advice.unresolved and not inadequate:
-        met = sorted({t for _, t, _ in detected})
-        targets = ', '.join(f'{term_words(t)} {_percent(advice.targets[t])}' for t in met)
-        return f'advice: every precision target is met ({targets}): no need to record longer.'
-    return 'advice: ' + '; '.join(clauses) + '.'
+        tail = (f'the noise model does not describe {", ".join(inadequate)}: their precision '
+                'figures are not meaningful (see the model check); a longer record does not '
+                'mend a model.')
+        return (f'record {format_duration(more)} more; ' if more else '') + tail
+    if more:
+        goal = ('meet every precision target and tell the open term sets apart'
+                if open_sets else 'meet every precision target')
+        return f'record {format_duration(more)} more (same rate and conditions) to {goal}.'
+    if unmet:
+        return 'some targets are out of reach of a longer record (below).'
+    if open_sets:
+        return ('every precision target is met, but the data cannot yet tell some term sets '
+                'apart (below).')
+    met = sorted({t for terms in doc.get('axes', {}).values() for t in terms})
+    targets = ', '.join(f'{term_words(t)} {_percent(doc["targets"][t])}' for t in met
+                        if t in doc.get('targets', {}))
+    return f'every precision target is met ({targets}): no need to record longer.'
+
+
+def advice_statuses(advice, name, prefix=''):
+    """
+    The allan node's ``/diagnostics`` statuses of the advice: the record's, then each axis's.
+
+    ``advice``: an :class:`~imu_allan.core.fit.advisor.Advice` or None (STALE: no estimate
+    yet); ``name``: the record status's name; per axis ``<prefix><axis> advice`` with its
+    sentence (:func:`axis_lines`).  OK when every target is met and nothing is open, WARN
+    otherwise.  Key-values: ``record_more_s``, ``recorded_s``; per axis ``more_s`` and
+    ``<term>.rel_halfwidth`` of the resolved terms, ``<term>.upper_limit`` and
+    ``<term>.resolve_s`` of the others (s; NaN: no prediction).
+    """
+    from ..core.live.health import Health, OK, STALE, WARN
+    if advice is None:
+        return [Health(name, STALE, 'no estimate yet (collecting still samples)', {})]
+    doc = advice_to_json(advice)
+    more = doc['record_more_s']
+    headline = advice_headline(doc)
+    settled = not more and not doc['unresolved'] and not doc['inadequate'] and not any(
+        e.get('more_s') is None for terms in doc['axes'].values() for e in terms.values())
+    out = [Health(name, OK if settled else WARN, headline,
+                  {'record_more_s': _nan(more), 'recorded_s': advice.duration_s})]
+    lines = axis_lines(doc)
+    for axis, line in lines.items():
+        values = {f'{t}.rel_halfwidth': _nan(e.get('rel_halfwidth'))
+                  for t, e in doc['axes'].get(axis, {}).items()}
+        values.update({f'{t}.more_s': _nan(e.get('more_s'))
+                       for t, e in doc['axes'].get(axis, {}).items()})
+        for entry in doc['undetected']:
+            if entry['axis'] == axis:
+                values[f'{entry["term"]}.upper_limit'] = _nan(entry['upper_limit'])
+                values[f'{entry["term"]}.resolve_s'] = _nan(entry['more_s'])
+        open_axis = any(u['axis'] == axis for u in doc['unresolved'])
+        level = WARN if open_axis or any(e.get('more_s') != 0 for e in
+                                         doc['axes'].get(axis, {}).values()) else OK
+        out.append(Health(f'{prefix}{axis} advice', level, line[len(axis) + 2:], values))
+    return out
+
+
+def _nan(value):
+    return math.nan if value is None else value

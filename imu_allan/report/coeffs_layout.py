@@ -6,9 +6,12 @@ x ``stat`` (3: value, ci_low, ci_high; 68.3 %), row-major, ``data_offset`` 0, SI
 continuous-time coefficients, NaN where a term is not detected.  After those 90 numbers, which
 the dims describe, come 6 more (:data:`ADEQUACY_VALUES`): each axis's adequacy p
 (:mod:`imu_allan.core.fit.adequacy`; the model describes the curve when p >= 0.001; NaN: not
-fitted).  Readers that index by the dims or by fixed offsets are unaffected (the table's place
-and strides did not change); :func:`decode_adequacy` reads the trailing block, and a publisher
-without it (older releases) gives None.  ``imu/allan_deviation``: dims
+fitted).  Then 30 more (:data:`LIMIT_VALUES`, axis x term in the table's order): the 95 %
+upper limit of each term the record does not resolve (SI; NaN where the term is resolved, or
+not bounded), so a term is either a value with its interval or a limit, never both.  Readers
+that index by the dims or by fixed offsets are unaffected (the table's place and strides did
+not change); :func:`decode_adequacy` and :func:`decode_limits` read the trailing blocks, and a
+publisher without them (older releases) gives None.  ``imu/allan_deviation``: dims
 ``row`` (7: tau, then the six axes) x ``tau``; ``imu/allan_deviation/<kind>`` (mdev, ohdev) the
 same with that deviation.  The node encodes with these functions; users
 and tools (``monitor``) decode with :func:`decode_coefficients` and :func:`decode_deviation`,
@@ -23,8 +26,10 @@ from ..core.units import AXES, conventional, IEEE_TERMS, si_unit
 from ..errors import InputError
 
 COEFF_LABELS = ('axis', 'term', 'stat')
-#: Values after the coefficient table: the adequacy p of each axis (module docstring).
+#: Values after the coefficient table: the adequacy p of each axis, then the upper limits
+#: (module docstring).
 ADEQUACY_VALUES = len(AXES)
+LIMIT_VALUES = len(AXES) * len(IEEE_TERMS)
 DEVIATION_LABELS = ('row', 'tau')
 STATS = ('value', 'ci_low', 'ci_high')
 
@@ -59,6 +64,29 @@ def adequacy_values(fitted, axes=AXES):
         if adequacy is not None and math.isfinite(adequacy.p):
             out[i] = adequacy.p
     return out
+
+
+def limit_values(fitted, axes=AXES):
+    """Return the last block of ``imu/allan_coeffs``: (axis, term) 95 % upper limits, flat."""
+    out = np.full((len(axes), len(IEEE_TERMS)), np.nan)
+    for i, axis in enumerate(axes if fitted is not None else ()):
+        for term, limit in fitted.limits(axis).items():
+            out[i, IEEE_TERMS.index(term)] = limit
+    return out.ravel()
+
+
+def decode_limits(source, dims=None):
+    """
+    Return the (6, 5) 95 % upper limits of ``imu/allan_coeffs`` (SI; NaN: resolved or none).
+
+    None when the message has no limit block (an older publisher).
+    """
+    data, dims = _layout(source, dims, 'imu/allan_coeffs')
+    values = np.asarray(data, dtype=float)
+    start = int(np.prod([size for _, size in dims])) + ADEQUACY_VALUES
+    if values.size < start + LIMIT_VALUES:
+        return None
+    return values[start:start + LIMIT_VALUES].reshape(len(AXES), len(IEEE_TERMS))
 
 
 def decode_adequacy(source, dims=None):
@@ -101,13 +129,15 @@ def decode_table(data, dims, trailing=0):
 
     Raises ValueError when the sizes do not match the data (``data_offset`` must be 0);
     ``trailing`` values after the table are allowed (the adequacy block of
-    ``imu/allan_coeffs``).
+    ``imu/allan_coeffs``), and after those the limit block.
     """
     sizes = tuple(int(size) for _, size in dims)
     values = np.asarray(data, dtype=float)
-    if values.size not in {int(np.prod(sizes)), int(np.prod(sizes)) + trailing}:
+    table = int(np.prod(sizes))
+    allowed = {table, table + trailing} | ({table + trailing + LIMIT_VALUES} if trailing else set())
+    if values.size not in allowed:
         raise ValueError(f'layout {sizes} does not match {values.size} values')
-    return values[:int(np.prod(sizes))].reshape(sizes)
+    return values[:table].reshape(sizes)
 
 
 def _layout(source, dims, topic):

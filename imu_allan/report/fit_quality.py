@@ -33,10 +33,15 @@ def fit_json(fitted, axis):
     return out
 
 
+#: What an untested adequacy says (too few averaging times for the test).
+NOT_TESTED = 'adequacy not tested: too few averaging times yet'
+
+
 def inadequate(fitted, axis):
     """Return the adequacy of ``axis`` when the test rejects its model, else None."""
     adequacy = fitted.adequacy(axis) if fitted is not None else None
-    return adequacy if adequacy is not None and not adequacy.adequate else None
+    return adequacy if adequacy is not None and adequacy.tested and not adequacy.adequate \
+        else None
 
 
 def misfit_sentence(axis, adequacy):
@@ -87,7 +92,9 @@ def adequacy_health(fitted, axes, prefix=''):
         if span is not None:
             values.update({'tau_lo_s': span.lo, 'tau_hi_s': span.hi,
                            'limited_by': span.limited_by or 'none'})
-        if adequacy.adequate:
+        if not adequacy.tested:
+            out.append(Health(f'{prefix}{axis} model', OK, NOT_TESTED, values))
+        elif adequacy.adequate:
             out.append(Health(f'{prefix}{axis} model', OK,
                               f'the noise model describes the curve (p = {adequacy.p:.2g})',
                               values))

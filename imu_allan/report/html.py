@@ -29,7 +29,7 @@ import tempfile
 import jinja2
 from markupsafe import Markup
 
-from .advice import format_duration
+from .advice import advice_headline, axis_lines, format_duration
 from .fit_quality import misfit_sentence
 from ..core.units import conventional, si_unit
 
@@ -212,58 +212,18 @@ def _limits(report):
 
 def advice_words(advice, moving=(), alternatives=False):
     """
-    Return the recording advice (the report's ``advice`` block) as sentences to act on.
+    Return the recording advice (report.json's ``advice`` block) as a headline and lines.
 
-    Like the console's (:func:`imu_allan.report.advice.advice_sentence`), never "no need to
-    record longer" for a ``moving`` record (its moving axes) or while term sets remain that
-    the data cannot reject (``alternatives``, or an ``unresolved`` entry of the advice).
+    The console's and the node's words (:mod:`.advice`): the headline for the record, a line
+    per axis.  ``moving`` (axes) and ``alternatives`` (term sets the fit leaves open) come
+    from the rest of the report, for an advice block that lacks them.
     """
-    if moving:
-        return {'headline': 'The IMU moved during the record: record again at rest (on a still, '
-                            'vibration-free support) for the noise coefficients.', 'lines': []}
-    if not advice:
+    if not advice and not moving:
         return {'headline': None, 'lines': []}
-    targets = advice.get('targets', {})
-    items = []
-    for axis, terms in advice.get('axes', {}).items():
-        for term, e in terms.items():
-            target = targets.get(term)
-            rel = e.get('rel_halfwidth')
-            precision = (f'{axis} {_words(term)}: known to ±{fmt(100 * rel, 3)} %'
-                         if rel is not None else f'{axis} {_words(term)}')
-            goal = f' (target {fmt(100 * target, 3)} %)' if target is not None else ''
-            if e.get('more_s') is None:
-                items.append(f'{precision}{goal}: will not reach the target'
-                             + (f' ({e["reason"]})' if e.get('reason') else '') + '.')
-            elif e['more_s'] > 0:
-                items.append(f'{precision}{goal}: record {format_duration(e["more_s"])} more.')
-    for u in advice.get('unresolved', []):
-        more = u.get('more_s')
-        items.append(f'{u["axis"]} cannot tell yet {_words(u["terms"][0])} from '
-                     + ' or '.join(_words(t) for t in u['terms'][1:])
-                     + (f': record {format_duration(more)} more to tell them apart.'
-                        if more else '.'))
-    inadequate = advice.get('inadequate') or []
-    if inadequate:
-        items.insert(0, f'The noise model does not describe {", ".join(inadequate)}: the '
-                        'precision of its numbers is not meaningful there (see "Does the model '
-                        'describe the data?"); a longer record does not mend a model.')
-    more = advice.get('record_more_s')
-    if more is None:
-        headline = 'No prediction of a recording length is possible (see below).'
-    elif more > 0:
-        goal = ('meet every precision target and tell the terms apart'
-                if advice.get('unresolved') else 'meet every precision target')
-        headline = f'Record {format_duration(more)} more (same rate and conditions) to {goal}.'
-    elif inadequate:
-        headline = ('The noise model does not describe every axis: see below before trusting '
-                    'the precision of its numbers.')
-    elif advice.get('unresolved') or alternatives:
-        headline = ('Every precision target is met, but the data cannot yet tell some term '
-                    'sets apart (below).')
-    else:
-        headline = 'Every precision target is met: no need to record longer.'
-    return {'headline': headline, 'lines': items}
+    doc = dict(advice or {}, moving=list(moving) or (advice or {}).get('moving') or [])
+    headline = advice_headline(doc, alternatives)
+    lines = [] if doc['moving'] else [line + '.' for line in axis_lines(doc).values()]
+    return {'headline': headline[0].upper() + headline[1:], 'lines': lines}
 
 
 def _file_list(folder):
@@ -319,11 +279,14 @@ def _quality(report):
         if adequacy is None:
             continue
         span = fit.get('tau_range_s') or [None, None]
-        rows.append({'axis': axis, 'adequate': adequacy['adequate'], 'p': fmt(adequacy['p'], 2),
+        tested = adequacy.get('tested', True)
+        rows.append({'axis': axis, 'adequate': adequacy['adequate'] or not tested,
+                     'tested': tested, 'p': fmt(adequacy['p'], 2),
                      'chi2': fmt(adequacy['chi2'], 3), 'dof': adequacy['dof'],
                      'span': [fmt(span[0], 3), fmt(span[1], 4)],
                      'limited_by': fit.get('tau_range_limited_by'),
-                     'words': None if adequacy['adequate'] else misfit_sentence(axis, adequacy),
+                     'words': (None if adequacy['adequate'] or not tested
+                               else misfit_sentence(axis, adequacy)),
                      'lines': [f'{fmt(ln["frequency_hz"], 3)} Hz' for ln in fit.get('lines', [])]})
     return rows
 

@@ -55,7 +55,9 @@ def analysis_to_json(analysis, samples=None):
                      'ci_low': _floats(res.ci_low[:, j]), 'ci_high': _floats(res.ci_high[:, j]),
                      'edf': _floats(res.edf[:, j])},
             'terms': analysis.fit.term_report(axis),
+            'limits': analysis.fit.limit_report(axis),
             'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis]),
+                    'selected': list(analysis.fit.fits[axis].terms),
                     'alternatives': analysis.fit.alternatives(axis),
                     'rejected': analysis.fit.rejected(axis),
                     'decided_by': analysis.fit.decided_by(axis),
@@ -118,7 +120,7 @@ def console_summary(analysis):
     for axis in analysis.axes:
         report = analysis.fit.term_report(axis)
         if not report:
-            lines.append(f'  {axis:8} (no term detected)')
+            lines.append(f'  {axis:8} (no term resolved)')
         for term, entry in report.items():
             lo, hi = entry['ci']
             conv = entry['conventional']
@@ -132,6 +134,13 @@ def console_summary(analysis):
                     lines.append(f'  {"":8} {"  " + extra:17} {_fmt(e["value"]):>11} '
                                  f'[{_fmt(e["ci"][0]):>10}, {_fmt(e["ci"][1]):>10}] '
                                  f'{e["unit"]:>17}')
+        for term, entry in analysis.fit.limit_report(axis).items():
+            if entry['upper_limit'] is None or moved:
+                continue
+            conv = entry['conventional']
+            lines.append(f'  {axis:8} {term:17} {"< " + _fmt(entry["upper_limit"]):>11} '
+                         f'{"(95 % upper limit)":>24} {entry["unit"]:>17}'
+                         f'  {"< " + _fmt(conv["upper_limit"]):>11} {conv["unit"]}')
     lines += [line for line in (span_line(analysis.fit), line_sentence(analysis.fit)) if line]
     lines += adequacy_lines(analysis.fit)
     kalibr, per_axis = kalibr_values(analysis)
@@ -172,7 +181,7 @@ BLOCKS = (('sensor', 'sensor', sensor_json),
 
 #: Console lines of a record's parts after the summary, in order: (field, renderer).
 LINES = (('sensor', sensor_sentence),
-         ('advice', advice_sentence),
+         ('advice', lambda advice: advice_sentence(advice_to_json(advice))),
          ('temperature', temperature_sentence),
          ('dynamic', dynamic_sentence))
 

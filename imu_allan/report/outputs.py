@@ -11,14 +11,13 @@ succeeded, so a failed run never leaves a half-written report behind.
 """
 
 import csv
-import json
 import math
 import os
 from pathlib import Path
 import shutil
 import tempfile
 
-from . import plots
+from . import plots, strict_json
 from .json_report import OutFiles, record_to_json
 from .kalibr import write_kalibr_yaml
 from ..core.units import AXES, IEEE_TERMS, si_unit
@@ -89,7 +88,7 @@ def _write_out_dir(out_dir, record, exports, input_path, input_format, topic):
                           fits=record.overbound)
             out.overbound = overbound or None
         report = record_to_json(record, out)
-        (staging / 'report.json').write_text(json.dumps(report, indent=1), encoding='utf-8')
+        (staging / 'report.json').write_text(strict_json.dumps(report, indent=1), encoding='utf-8')
         write_kalibr_yaml(staging / 'imu.yaml', analysis, topic)
         den = denoised.analysis if denoised is not None else None
         write_results_csv(staging / 'allan_results.csv', analysis, den)

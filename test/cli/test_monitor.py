@@ -8,8 +8,8 @@ The built ``monitor`` command over real DDS: JSON snapshot, terminal redraw, tim
   prints plain lines (no escape sequences);
 * ``--once --timeout 1`` with nothing running exits 1 with one line on stderr naming the topic
   as resolved with ``--namespace`` or a ``--ros-args`` remapping; a bad argument exits 2;
-* without ROS: the recording advice the node sends as key-values is said in words, and the
-  key-values come back with ``--verbose``.
+* without ROS: the recording advice is the node's own sentences per axis (the key-values come
+  back with ``--verbose``), and a term not resolved shows its upper limit.
 
 About 60 s in all on the 2-core test machine (node and monitor start-up dominate).
 """
@@ -25,10 +25,11 @@ import time
 from types import SimpleNamespace
 
 from conftest import DOMAIN, executable, ros_env, run_command
-from imu_allan.cli.monitor import advice_words, format_interval, MonitorState, REDRAW, render
-from imu_allan.core.fit.advisor import Advice, advice_health, TermAdvice, Unresolved
+from imu_allan.cli.monitor import format_interval, MonitorState, REDRAW, render
+from imu_allan.core.fit.advisor import Advice, Limit, TermAdvice, Unresolved
 from imu_allan.core.units import AXES, conventional, IEEE_TERMS
 from imu_allan.nodes.allan import multiarray
+from imu_allan.report.advice import advice_statuses
 from imu_allan.report.coeffs_layout import COEFF_LABELS, decode_coefficients
 from nodes.allan_feed import AllanFeed
 import numpy as np
@@ -205,56 +206,58 @@ def test_bad_argument_one_line_exit_2():
     assert proc.stderr.count('\n') == 1 and '--timeout' in proc.stderr
 
 
-def _advice_values():
+def _advice_statuses():
     """
-    Return the key-values of an allan node's advice status as nodes/common.py sends them.
+    Return the allan node's advice statuses as /diagnostics carries them (rendered in report/).
 
-    Written here term by term: white noise met on gyro_x; bias instability 700 s short on
-    gyro_x and out of reach on gyro_y; a pair that 3158 s more would tell apart, a single term
-    and a set of three that no record length within reach tells.
+    White noise met on gyro_x, bias instability 700 s short there; on gyro_y the open sets
+    {N, B} and {N, GM} that 3158 s more tells apart; a rate ramp that no open set holds.
     """
     advice = Advice(targets={'white_noise': 0.02, 'bias_instability': 0.05}, duration_s=600.0)
-    advice.axes = {
-        'gyro_x': {'white_noise': TermAdvice(0.003, 0.0),
-                   'bias_instability': TermAdvice(0.15, 700.0)},
-        'gyro_y': {'bias_instability': TermAdvice(0.4, None, 'beyond the longest tau')}}
-    advice.unresolved = [
-        Unresolved('gyro_y', ('gauss_markov', 'bias_instability'), 3158.0),
-        Unresolved('gyro_z', ('quantization',), None, 'too short'),
-        Unresolved('accel_x', ('rate_random_walk', 'rate_ramp', 'gauss_markov'), None)]
-    values = advice_health(advice).values
-    return {k: f'{v:.6g}' if isinstance(v, float) else str(v) for k, v in values.items()}
+    advice.axes = {'gyro_x': {'white_noise': TermAdvice(0.003, 0.0),
+                              'bias_instability': TermAdvice(0.15, 700.0)},
+                   'gyro_y': {'white_noise': TermAdvice(0.003, 0.0)}}
+    advice.unresolved = [Unresolved('gyro_y', ('gauss_markov', 'bias_instability'), 3158.0,
+                                    sets=(('white_noise', 'bias_instability'),
+                                          ('white_noise', 'gauss_markov')))]
+    advice.limits = {'gyro_x': {'rate_ramp': Limit(1e-6, 120.0)}}
+    out = []
+    for status in advice_statuses(advice, 'allan: recording advice', 'allan: '):
+        values = [SimpleNamespace(key=k, value=f'{v:.6g}' if isinstance(v, float) else str(v))
+                  for k, v in status.values.items()]
+        out.append(SimpleNamespace(name=status.name, level=bytes([status.level]),
+                                   message=status.message, values=values))
+    return out
 
 
-def test_advice_in_words():
-    """Every key the node sends is said in words: no raw key, no 'nan', durations for people."""
-    values = _advice_values()
-    assert 'gyro_z.maybe_quantization.more_s' in values  # the form the issue saw raw
-    words = advice_words(values)
-    assert words == [
-        'Recorded 10 min so far.',
-        'white noise (known to ±0.3 %): target met on gyro_x.',
-        'bias instability (known to ±15 % to ±40 %): gyro_x about 12 min more; target out of '
-        'reach on gyro_y.',
-        'To tell apart: Gauss-Markov or bias instability: gyro_y about 53 min more.',
-        'Cannot tell, and no record length within reach will: quantization or none (gyro_z); '
-        'rate random walk or rate ramp or Gauss-Markov (accel_x).']
-
-
-def test_render_says_advice_in_words_and_verbose_keeps_key_values():
-    """The table's advice block is words; ``--verbose`` adds the node's key=value list."""
+def test_render_shows_the_nodes_advice_sentences_and_verbose_keeps_key_values():
+    """The advice block is the node's sentences, per axis, as sent; --verbose adds key=value."""
     state = MonitorState()
-    values = [SimpleNamespace(key=k, value=v) for k, v in _advice_values().items()]
-    values.append(SimpleNamespace(key='gyro_x.bias_instability_more_s', value='5400'))
-    state.on_diagnostics(SimpleNamespace(status=[SimpleNamespace(
-        name='allan: recording advice', level=b'\x01', message='record about 1 h more',
-        values=values)]))
+    statuses = _advice_statuses()
+    state.on_diagnostics(SimpleNamespace(status=statuses))
     topics = {'coeffs': '/imu/allan_coeffs'}
-    plain = '\n'.join(render(state, topics))
-    assert 'advice   WARN  record about 1 h more' in plain
-    assert 'gyro_x about 12 min more' in plain
+    plain = '\n'.join(render(state, topics, width=400))
+    assert f'advice   WARN  {statuses[0].message}' in plain
+    for status in statuses[1:]:
+        axis = status.name.removeprefix('allan: ').removesuffix(' advice')
+        assert f'{axis}: {status.message}' in plain
+    assert 'cannot tell yet Gauss-Markov or bias instability' in plain
     assert '.more_s=' not in plain and 'nan' not in plain
-    assert 'gyro_x.bias_instability_more_s=5400' in plain  # a key of no known form: kept raw
     verbose = render(state, topics, verbose=True)
-    assert 'gyro_z.maybe_quantization.more_s=nan' in '\n'.join(verbose)
+    assert 'record_more_s=3158' in '\n'.join(verbose)
     assert all(len(line) <= 99 for line in verbose)
+
+
+def test_unresolved_terms_show_their_upper_limit():
+    """A term not resolved is '< limit' in the table, from the coefficients' limit block."""
+    table = _table(1.0)
+    table[0, IEEE_TERMS.index('bias_instability')] = np.nan
+    limits = np.full((len(AXES), len(IEEE_TERMS)), np.nan)
+    limits[0, IEEE_TERMS.index('bias_instability')] = 1e-4
+    msg = multiarray(table, COEFF_LABELS)
+    msg.data.extend([0.5] * len(AXES) + limits.ravel().tolist())
+    state = MonitorState()
+    state.on_coeffs(msg)
+    text = '\n'.join(render(state, {'coeffs': '/imu/allan_coeffs'}))
+    assert f'< {conventional("gyro_x", "bias_instability", 1e-4)[0]:.3g} deg/h' in text
+    assert state.snapshot()['upper_limits']['gyro_x'] == {'bias_instability': 1e-4}

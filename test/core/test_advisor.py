@@ -1,34 +1,30 @@
 """
-The recording advisor (core/fit/advisor.py): targets, forecasts, unresolved pairs, health.
+The recording advisor (core/fit/advisor.py): targets, forecasts, open term sets, limits.
 
 Budget: about 20 s in all, most of it the statistical test (one gyro axis at 10 Hz).
 """
 
 import json
-import math
 
 from core.advisor_cases import cases, RATE_HZ, rel_halfwidth, SEEDS
 from imu_allan.core.allan.estimate import allan_deviation
 from imu_allan.core.fit import fit_noise_model
+from imu_allan.core.fit import fit_terms
 from imu_allan.core.fit.advisor import (
     _AxisAdvisor,
     _nonlinear,
-    Advice,
-    advice_health,
     advise,
     analysis_grid,
     DEFAULT_TARGETS,
     HORIZON,
     parse_targets,
-    TermAdvice,
-    Unresolved,
 )
 from imu_allan.core.fit.bisection import run
-from imu_allan.core.live import health
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulation.simulate import simulate
+from imu_allan.core.units import IEEE_TERMS
 from imu_allan.errors import InputError
-from imu_allan.report.advice import advice_sentence, advice_to_json
+from imu_allan.report.advice import advice_to_json, axis_lines
 import pytest
 
 
@@ -88,96 +84,74 @@ def test_the_prediction_comes_true():
     """
     Achieved half-width within a factor 1.5 of the target for >= 80 % of the cases.
 
-    Cases: white + B, white + K, white + B + K and white + Gauss-Markov, seeds 1 and 2 (the
-    table in docs/method.md runs three and includes white noise), each fitted term of the
-    model but white noise (the easy 1/sqrt(T) case); the target is half
-    the base record's relative half-width and the longer record has a new seed.  Why the
-    tolerance is fair: the achieved half-width is itself estimated from one record: it divides
-    by the fitted value (which scatters by the target itself, 5-15 %), and the term selection
-    of the longer record is random too; a factor 1.5 leaves room for that, while a forecast
-    off by more than ~2.3x in time (1.5^2 for a 1/sqrt(T) term) fails the case.
+    Cases: white + B, white + K, white + B + K and white + Gauss-Markov, seeds 1-3 (the
+    table of docs/method.md), each resolved term of the model (a term the base record does
+    not resolve is no case); the target is half the base record's relative half-width
+    without its post-selection part (advisor_cases.rel_halfwidth) and the longer record has a
+    new seed.  Why the tolerance is fair: the achieved half-width is itself estimated from one
+    record: it divides by the fitted value (which scatters by the target itself, 5-15 %), and
+    the term selection of the longer record is random too; a factor 1.5 leaves room for
+    that, while a forecast off by more than ~2.3x in time (1.5^2 for a 1/sqrt(T) term) fails
+    the case.  Measured: 19 of 23 (B and K sharing one span split unevenly, as before).
     """
-    rows = list(cases(seeds=SEEDS[:2], skip=('white_noise',)))
-    assert len(rows) >= 8
+    rows = list(cases(seeds=SEEDS))
+    assert len(rows) >= 20
     ok = [r for r in rows if r['ok']]
     assert len(ok) >= 0.8 * len(rows), [(r['model'], r['term'], r['ratio']) for r in rows]
     assert all(r['more_s'] > 0 for r in rows)
 
 
-def test_ten_minutes_of_white_and_b_report_the_unresolved_pair():
-    """
-    The issue's case: 10 min at 100 Hz, white + B; one gyro axis gets K instead of B.
+THESIS_GYROS = {'gyro_x': {'white_noise': 5.759587e-04, 'bias_instability': 1.502922e-04},
+                'gyro_y': {'white_noise': 5.730498e-04, 'bias_instability': 1.534920e-04},
+                'gyro_z': {'white_noise': 6.021386e-04, 'bias_instability': 1.777327e-04}}
 
-    Instead of a silent NaN for B, that axis is reported as unresolved (B vs K) with a finite
-    time until the two separate, in JSON that has no NaN, and the sentence names it.
+
+@pytest.mark.parametrize('seconds', [3.0, 60.0, 600.0])
+def test_the_advice_says_each_thing_once(seconds):
     """
-    thesis = {'gyro_x': {'white_noise': 5.759587e-04, 'bias_instability': 1.502922e-04},
-              'gyro_y': {'white_noise': 5.730498e-04, 'bias_instability': 1.534920e-04},
-              'gyro_z': {'white_noise': 6.021386e-04, 'bias_instability': 1.777327e-04}}
-    result, fitted = _record(thesis, 600.0, seed=0, rate_hz=100.0, axes=tuple(thesis))
-    swapped = [a for a in thesis if 'rate_random_walk' in fitted.model.terms[a]
-               and 'bias_instability' not in fitted.model.terms[a]]
-    assert swapped, 'seed 0 no longer shows the swap'
+    The issue's cases: the thesis gyros (white + B) for 3 s, 1 min and 10 min at 100 Hz.
+
+    Per axis one entry for all its open term sets (never one per absent term), every IEEE
+    term not resolved as an upper limit, in JSON without NaN; each axis's sentence says
+    "cannot tell" at most once; and every limit of a term no open set holds has a time until
+    it is resolved or the reason there is none.
+    """
+    result, fitted = _record(THESIS_GYROS, seconds, seed=0, rate_hz=100.0,
+                             axes=tuple(THESIS_GYROS))
     advice = advise(result, fitted)
-    for axis in swapped:
-        pair = [u for u in advice.unresolved if u.axis == axis
-                and set(u.terms) == {'bias_instability', 'rate_random_walk'}]
-        assert pair and pair[0].more_s is not None and 0 < pair[0].more_s < 1e5
+    assert len({u.axis for u in advice.unresolved}) == len(advice.unresolved)
+    for axis in THESIS_GYROS:
+        resolved = fitted.resolved(axis)
+        assert set(advice.limits[axis]) == {t for t in IEEE_TERMS if t not in resolved}
+        for lim in advice.limits[axis].values():
+            assert lim.more_s is not None or lim.reason
     doc = advice_to_json(advice)
     json.dumps(doc, allow_nan=False)
-    assert doc['record_more_s'] > 0
-    sentence = advice_sentence(advice)
-    # (the sentence now gives each alternative in words with its own time, issue 22)
-    assert f'{swapped[0]}: bias instability or rate random walk: cannot tell yet' in sentence
+    for axis, line in axis_lines(doc).items():
+        assert line.count('cannot tell') <= 1, line
 
 
-def test_a_pair_separates_when_the_later_of_its_two_directions_does():
+def test_an_open_set_separates_when_the_later_of_its_two_directions_does():
     """
-    The pair's time is the later direction's, searched on its own (_pair_time skips work).
+    An open set's time is the later direction's, searched on its own (_pair_time skips work).
 
-    Each direction (one alternative as the truth, fitted with the other) is searched alone
-    here, all the way; the pair's time must be the later of the two (None if either has
-    none), as it was before the second direction's search was cut short.
+    Each direction (one set as the truth, fitted with the other) is searched alone here, all
+    the way; the set's time must be the later of the two (None if either has none).
     """
-    thesis = {'gyro_x': {'white_noise': 5.759587e-04, 'bias_instability': 1.502922e-04},
-              'gyro_y': {'white_noise': 5.730498e-04, 'bias_instability': 1.534920e-04}}
-    result, fitted = _record(thesis, 600.0, seed=0, rate_hz=100.0, axes=tuple(thesis))
+    result, fitted = _record(THESIS_GYROS, 600.0, seed=0, rate_hz=100.0,
+                             axes=tuple(THESIS_GYROS))
     checked = 0
     for axis in fitted.axes:
         adv = _AxisAdvisor(result, fitted, axis, DEFAULT_TARGETS, analysis_grid())
         n_max = int(adv.n * HORIZON)
         chosen = list(adv.fit.terms)
-        run(adv._pairs(adv.fit.terms, n_max))
-        _, crit = adv._data_criterion(chosen)
-        for u in adv.unresolved:
-            alt_fit, alt_crit = adv._data_criterion(list(u.alternative))
+        times = run(adv._open_sets(n_max))
+        for (differ, n_sep), alt in zip(times, fitted.alternatives(axis)[1:]):
+            alt_fit = fit_terms(adv.problem, alt, profile_intervals=False)
+            gap = adv._criterion(alt_fit) - adv._criterion(adv.fit)
             start = _nonlinear(alt_fit.terms)
-            times = [run(adv._pair_time([d], alt_crit - crit, start, n_max)) for d in (
-                (adv.fit.terms, list(u.alternative), 'fit'),
-                (alt_fit.terms, chosen, '+'.join(u.alternative)))]
-            assert u.more_s == (None if None in times else adv._more_s(max(times))), (u, times)
+            alone = [run(adv._pair_time([d], gap, start, n_max)) for d in (
+                (adv.fit.terms, list(alt), 'fit'), (alt_fit.terms, chosen, '+'.join(alt)))]
+            assert n_sep == (None if None in alone else max(alone)), (alt, alone, n_sep)
             checked += 1
     assert checked >= 2
-
-
-def _advice(more_b, pair_more=None):
-    advice = Advice(dict(DEFAULT_TARGETS), 600.0)
-    advice.axes['gyro_x'] = {'white_noise': TermAdvice(0.003, 0.0),
-                             'bias_instability': TermAdvice(0.2, more_b)}
-    if pair_more is not False:
-        advice.unresolved.append(Unresolved('gyro_x', ('bias_instability', 'rate_random_walk'),
-                                            pair_more))
-    return advice
-
-
-def test_advice_health_levels_and_values():
-    assert advice_health(None).level == health.STALE
-    met = advice_health(_advice(0.0, pair_more=False))
-    assert met.level == health.OK and met.values['record_more_s'] == 0.0
-    waiting = advice_health(_advice(1800.0, pair_more=5400.0))
-    assert waiting.level == health.WARN and '5400 s' in waiting.message
-    assert waiting.values['gyro_x.bias_instability.more_s'] == 1800.0
-    assert waiting.values['gyro_x.bias_instability_vs_rate_random_walk.more_s'] == 5400.0
-    unknown = advice_health(_advice(None, pair_more=False))
-    assert unknown.level == health.WARN
-    assert math.isnan(unknown.values['gyro_x.bias_instability.more_s'])

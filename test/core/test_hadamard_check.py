@@ -68,8 +68,9 @@ def test_the_check_contradicts_a_walk_where_a_ramp_rises(seed, slow):
 
     1 h at 100 Hz, N 2e-3, B 2e-4 and a ramp of 3e-6 rad/s^2 or a walk of 3e-5 rad/s^2/sqrt(Hz)
     (each above the white noise over the last half decade of the Allan curve).  Measured on
-    seeds 1-6: with the ramp, the lower end of the walk N B K needs is 1.9-2.3x the most the
-    Hadamard curve allows (the rule rejects at 1x); with the walk, N B K is never rejected (the
+    seeds 1-3: with the ramp, the lower end of the walk N B K needs is 1.48-2.07x the most the
+    Hadamard curve allows (1.9-2.3x before the fit moved to the log domain, whose walk
+    interval is wider; the rule rejects at 1x); with the walk, N B K is never rejected (the
     Hadamard curve, half as sensitive to K and cut at T/10, rarely confirms the walk: then it
     rejects nothing, which is what the check must do when it cannot tell).
     """
@@ -86,7 +87,7 @@ def test_the_check_contradicts_a_walk_where_a_ramp_rises(seed, slow):
                hadamard_check.check(allan, hadamard, [(0.0, NBK), (1.0, NBR)])}
     if 'rate_ramp' in slow:
         assert verdict[NBK]['rejected'] and not verdict[NBR]['rejected']
-        assert verdict[NBK]['walk_min'] > 1.5 * verdict[NBK]['walk_max']
+        assert verdict[NBK]['walk_min'] > 1.3 * verdict[NBK]['walk_max']
     else:
         assert not verdict[NBK]['rejected']
 
@@ -95,8 +96,8 @@ def test_the_advice_leaves_out_a_contradicted_set():
     """
     A set the fit's evidence rejects is no unresolved pair of the recording advice.
 
-    Seed 3 of the clear ramp record leaves N K R selected and N B R open (the advisor then
-    reports the B / K swap as unresolved); with that set marked contradicted it is gone.
+    Seed 3 of the clear ramp record leaves an alternative open (the advisor then reports it
+    among the axis's open sets); with that set marked contradicted it is gone.
     """
     from imu_allan.core.fit.advisor import advise
     model = NoiseModel.from_dict({'gyro': {'white_noise': 2e-3, 'bias_instability': 2e-4,
@@ -106,9 +107,10 @@ def test_the_advice_leaves_out_a_contradicted_set():
     fitted = fit_noise_model(result)
     others = fitted.alternatives('gyro_x')[1:]
     assert others, 'the record should leave an alternative open'
-    before = {frozenset(u.alternative) for u in advise(result, fitted).unresolved}
+    before = {frozenset(s) for u in advise(result, fitted).unresolved for s in u.sets}
     assert frozenset(others[0]) in before
     fitted.fits['gyro_x'].evidence = [{'terms': others[0], 'curve': 'ohdev', 'gain': 0.0,
                                        'rejected': True}]
-    after = {frozenset(u.alternative) for u in advise(result, fitted).unresolved}
+    fitted._weights.clear()  # (the evidence is set after the fit, as decide() would)
+    after = {frozenset(s) for u in advise(result, fitted).unresolved for s in u.sets}
     assert frozenset(others[0]) not in after

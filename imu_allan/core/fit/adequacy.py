@@ -93,9 +93,19 @@ class Adequacy:
     misfit: list = field(default_factory=list)
 
     @property
+    def tested(self):
+        """Return whether the test ran: enough averaging times for a finite p."""
+        return bool(self.dof > 0 and math.isfinite(self.p))
+
+    @property
     def adequate(self):
-        """Return True unless the model is rejected at :data:`ADEQUACY_LEVEL`."""
-        return not self.p < ADEQUACY_LEVEL
+        """
+        Return True when the test ran and did not reject the model at :data:`ADEQUACY_LEVEL`.
+
+        An untested fit (fewer than 3 averaging times) is not adequate: "not tested", never
+        "describes the data".
+        """
+        return self.tested and not self.p < ADEQUACY_LEVEL
 
     @property
     def scale(self):
@@ -107,15 +117,21 @@ class Adequacy:
         with inconsistent measurements).  It does not make a biased number right; the verdict
         and the misfit spans say that.
         """
-        if self.adequate or not self.dof:
+        if self.adequate or not self.tested:
             return 1.0
         return math.sqrt(max(self.chi2 / (self.dof * STATISTIC_SCALE), 1.0))
 
     def to_json(self):
         """JSON-ready dict (report.json ``axes.<axis>.fit.adequacy``)."""
-        return {'chi2': float(self.chi2), 'dof': int(self.dof), 'p': float(self.p),
-                'adequate': self.adequate, 'interval_scale': float(self.scale),
+        return {'chi2': _finite(self.chi2), 'dof': int(self.dof), 'p': _finite(self.p),
+                'tested': self.tested, 'adequate': self.adequate if self.tested else None,
+                'interval_scale': float(self.scale),
                 'misfit': [m.to_json() for m in self.misfit]}
+
+
+def _finite(value):
+    """A float for JSON, None where it is not finite (strict JSON has no NaN)."""
+    return float(value) if math.isfinite(value) else None
 
 
 def smooth_basis(tau, modes=SMOOTH_MODES):

@@ -4,8 +4,8 @@ The recording advisor: how much longer to record until each noise term is known 
 ROS-free.  For every axis and fitted term it gives the relative precision now (68.3 %
 half-width / value) and the predicted additional recording time, under the same conditions,
 until that precision reaches a target; it names the pairs of terms the data cannot yet tell
-apart, with the time until they separate; and for a term not detected, the time after which
-a term at its current 95 % upper limit would be detected.
+apart (grouped per axis: its open term sets), with the time until they are told apart; and
+for every term not resolved its 95 % upper limit and the time until it is resolved.
 
 Method (no new data needed)
 ---------------------------
@@ -19,16 +19,16 @@ of n' samples would give.  Scaled so that at the current length it equals the fi
 half-width (they differ only by the grid and the noise identification, a few %), the smallest
 n' that meets a target is found by bisection in log n' (guided: :mod:`.bisection`).
 
-Two alternatives (term sets S and S') are told apart when the selection criterion
-chi^2 + k x penalty (fit.py) of the worse exceeds the better's by SEPARATION_MARGIN (10, "very
-strong" evidence on the BIC scale of Kass & Raftery (1995), "Bayes factors", JASA 90, 773).  A
-pair is *unresolved* when, on the data, swapping one term for the other stays within that
-margin.  The time until it separates: each alternative in turn is taken as the truth and its
-curve at n' is fitted with the other one (noise-free, so chi^2 is the non-centrality lambda of
-the criterion difference); separated when lambda - 2 sqrt(lambda) (one standard deviation of
-the noisy difference below its mean) exceeds the margin for both.  An undetected term at its
-95 % upper limit (delta chi^2 = 4 on the data) is detected once that gain, grown as the
-noise-free forecast grows, exceeds the penalty of one term.
+The open term sets (:meth:`.FittedModel.alternatives`: within the margin of the best) are
+what the record cannot decide; the terms some hold and others do not are not resolved.  An
+open set is told apart from the selected one when the criterion chi^2 + k x penalty of the
+worse exceeds the better's by that margin (the rule the selection resolves terms by): each in
+turn is taken as the truth and its curve at n' is fitted with the other one (noise-free, so
+chi^2 is the non-centrality lambda of the criterion difference); told apart when
+lambda - 2 sqrt(lambda) (one standard deviation of the noisy difference below its mean)
+exceeds the margin in both directions.  A term that no open set holds, at its 95 % upper
+limit (delta chi^2 = 4 on the data), is resolved once that gain, grown as the noise-free
+forecast grows, exceeds the penalty of one term plus the margin.
 """
 
 import dataclasses
@@ -39,6 +39,7 @@ import numpy as np
 
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
 from .axis import (
+    ALTERNATIVE_MARGIN,
     coefficient_interval,
     deterministic_index,
     fit_terms,
@@ -48,12 +49,13 @@ from .axis import (
     shape_columns,
     UPPER_LIMIT_DELTA_CHI2,
 )
+from .averaging import selection_gain
 from .bisection import bisection, guided, log_ratio
 from .bounded_min import bounded_minimum
 from .. import terms as _terms
 from ..allan.edf import CI_LEVEL, edf_oadev
 from ..allan.estimate import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
-from ..units import IEEE_TERMS, TERM_PARAMETERS
+from ..units import ALL_TERMS, IEEE_TERMS, TERM_PARAMETERS
 from ...errors import InputError
 
 #: Default targets: relative 68.3 % half-width per term (main parameter; sigma for
@@ -62,11 +64,6 @@ DEFAULT_TARGETS = {'white_noise': 0.02, 'quantization': 0.25, 'bias_instability'
                    'rate_random_walk': 0.25, 'rate_ramp': 0.25, 'gauss_markov': 0.25}
 #: Accepted range of a target (relative half-width).
 TARGET_RANGE = (0.001, 1.0)
-#: Pairs of terms a short record may not tell apart.
-PAIRS = (('bias_instability', 'rate_random_walk'), ('quantization', 'white_noise'),
-         ('gauss_markov', 'bias_instability'), ('rate_random_walk', 'rate_ramp'))
-#: Criterion difference (chi^2 units) that separates two alternatives (Kass & Raftery 1995).
-SEPARATION_MARGIN = 10.0
 #: Longest record considered, as a multiple of the current one.
 HORIZON = 1.0e4
 #: Bisection steps in log n (10 steps over a factor 1e4: 0.9 % resolution in time).
@@ -106,46 +103,64 @@ def parse_targets(text, where='--target'):
 @dataclass
 class TermAdvice:
     """
-    One term of one axis: precision now and the additional time to the target, s.
+    A resolved term of one axis: its precision now and the additional time to its target, s.
 
     ``more_s`` is 0 when the target is met and None when no prediction is possible
-    (``reason`` says why).  For an undetected term, ``rel_halfwidth`` is None, ``upper_limit``
-    the 95 % limit (SI) and ``more_s`` the time after which a term that large would be
-    detected.
+    (``reason`` says why).
     """
 
     rel_halfwidth: float
     more_s: float
     reason: str = None
-    detected: bool = True
-    upper_limit: float = None
+
+
+@dataclass
+class Limit:
+    """
+    A term the record does not resolve on one axis: its 95 % upper limit and when it would be.
+
+    ``upper_limit`` (SI, continuous-time; None: the data do not bound it); ``open``: some
+    open term set holds it (the data cannot tell whether it is there), else none does;
+    ``more_s``: additional recording after which it is resolved (an open term: when the open
+    sets that disagree on it are told apart; an absent one: when a term at its upper limit
+    would be resolved), None with a ``reason`` when no record within reach does.
+    """
+
+    upper_limit: float
+    more_s: float
+    reason: str = None
+    open: bool = False
 
 
 @dataclass
 class Unresolved:
     """
-    Two term sets the data cannot yet tell apart on an axis, and the time until they can.
+    The term sets the data of one axis cannot yet tell apart, and the time until they can.
 
-    ``terms`` are the terms in which they differ: a pair (a, b) when one set has a where the
-    other has b (a swap), one term when the sets differ by that term alone.  ``alternative``
-    is the other set (the selected one is the axis's fit).
+    ``sets``: the open sets, the selected one first (:meth:`.FittedModel.alternatives`);
+    ``terms``: the terms in which they differ; ``more_s``: additional recording until every
+    other set is told from the selected one (None: not within reach, ``reason``).
     """
 
     axis: str
     terms: tuple
     more_s: float
     reason: str = None
-    alternative: tuple = None
+    sets: tuple = ()
 
 
 @dataclass
 class Advice:
-    """Advice for a whole record: targets, per-axis terms, unresolved pairs."""
+    """Advice for a whole record: targets, resolved terms, open sets and limits per axis."""
 
     targets: dict
     duration_s: float
+    #: axis -> {term: TermAdvice}: the resolved terms
     axes: dict = field(default_factory=dict)
+    #: one entry per axis whose open term sets differ
     unresolved: list = field(default_factory=list)
+    #: axis -> {term: Limit}: the IEEE terms not resolved
+    limits: dict = field(default_factory=dict)
     #: axes the motion verdict calls moving (set by the report): no noise measurement
     moving: list = field(default_factory=list)
     #: axes whose model the adequacy test rejects (:mod:`.adequacy`): their precision
@@ -154,9 +169,9 @@ class Advice:
 
     @property
     def record_more_s(self):
-        """Longest finite additional time over the detected terms and unresolved pairs, s."""
+        """Longest finite additional time over the resolved terms and open sets, s."""
         times = [a.more_s for terms in self.axes.values() for a in terms.values()
-                 if a.detected and a.more_s is not None]
+                 if a.more_s is not None]
         times += [u.more_s for u in self.unresolved if u.more_s is not None]
         return max(times, default=0.0)
 
@@ -363,11 +378,11 @@ def _crossing_point(evaluate, n0, n_max, slope):
 
 def _separated(gap):
     """Return a noise-free criterion gap that exceeds the margin even 1 sd below its mean."""
-    return gap - 2.0 * math.sqrt(max(gap, 0.0)) >= SEPARATION_MARGIN
+    return gap - 2.0 * math.sqrt(max(gap, 0.0)) >= ALTERNATIVE_MARGIN
 
 
 #: The smallest separated gap: g - 2 sqrt(g) = margin at sqrt(g) = 1 + sqrt(1 + margin).
-_SEPARATED_GAP = (1.0 + math.sqrt(1.0 + SEPARATION_MARGIN)) ** 2
+_SEPARATED_GAP = (1.0 + math.sqrt(1.0 + ALTERNATIVE_MARGIN)) ** 2
 
 
 class _AxisAdvisor:
@@ -385,15 +400,29 @@ class _AxisAdvisor:
         self.n = int(result.n_samples)
         self.forecast = _Forecast(result.rate_hz, grid, self.fit.tau_range)
         self.terms = {}
-        self.unresolved = []
+        self.limits = {}
+        self.unresolved = None
 
     def _more_s(self, n):
         return None if n is None else max(n - self.n, 0) / self.rate_hz
 
     def steps(self):
-        """Yield one forecast evaluation per step; fills :attr:`terms`, :attr:`unresolved`."""
-        axis_terms = self.fit.terms
+        """Yield one forecast evaluation per step; fills the terms, open sets and limits."""
         n_max = int(self.n * HORIZON)
+        resolved = self.fitted.resolved(self.axis)
+        yield from self._precision({t: p for t, p in self.fit.terms.items() if t in resolved},
+                                   n_max)
+        times = yield from self._open_sets(n_max)
+        held = set().union(*(set(s) for s in self.fitted.alternatives(self.axis)))
+        for term in IEEE_TERMS:  # some open sets hold it, others do not
+            if term in held and term not in resolved:
+                n_sep = [n for sets, n in times if term in sets]
+                self.limits[term] = Limit(self._limit(term), *self._latest(n_sep), open=True)
+        if self.undetected:
+            yield from self._absent(n_max)
+
+    def _precision(self, axis_terms, n_max):
+        """Relative half-width now and the time to each resolved term's target."""
         for term, params in axis_terms.items():
             target = self.targets.get(term)
             if target is None:
@@ -406,78 +435,84 @@ class _AxisAdvisor:
                 self.terms[term] = TermAdvice(rel, 0.0)
                 continue
 
-            # Scaled so that the forecast at the current length is the fit's own half-width
-            # (they differ only by the grid and the noise identification, by a few %).
-            now = self.forecast.rel_halfwidths(self.n, axis_terms).get(term, math.nan)
-            scale = rel / now if now > 0 else 1.0
+            # Scaled so that the forecast at the current length is the fit's half-width
+            # averaged over the term sets (they differ by the grid, the noise identification
+            # and the averaging); the post-selection part of the width is the record's now,
+            # not a longer one's, where the term stands clear of its threshold.
+            now = self.forecast.rel_halfwidths(self.n, self.fit.terms).get(term, math.nan)
+            lo, hi = self.fitted.averaged_interval(self.axis, term, selective=False)
+            scale = (hi - lo) / (2.0 * value) / now if now > 0 else 1.0
 
             def evaluate(n, term=term, target=target, scale=scale):
-                rel = scale * self.forecast.rel_halfwidths(n, axis_terms).get(term, math.inf)
+                rel = scale * self.forecast.rel_halfwidths(n, self.fit.terms).get(term,
+                                                                                   math.inf)
                 return rel <= target, log_ratio(target, rel)
             # the half-width falls as n^-1/2
             n_hit = yield from _crossing(evaluate, self.n, n_max, 0.5)
+            if n_hit is not None:  # and the choice of terms must have stopped widening it
+                n_hit = max(n_hit, self._clear_of_threshold(term))
             self.terms[term] = TermAdvice(rel, self._more_s(n_hit), None if n_hit else
                                           f'not reached within {HORIZON:g} x the record')
-        yield from self._pairs(axis_terms, n_max)
-        if self.undetected:
-            yield from self._undetected(axis_terms, n_max)
 
-    def _data_criterion(self, names):
-        fit = fit_terms(self.problem, names, profile_intervals=False)
-        penalty = SELECTION_PENALTY * math.log(max(fit.n_points, 2))
-        return fit, fit.chi2 + _n_params(list(fit.terms)) * penalty
+    def _clear_of_threshold(self, term):
+        """
+        Samples after which a resolved term's interval no longer carries its selection.
 
-    def _candidates(self, chosen):
-        """``(terms differing, alternative set)``: pair swaps, then the fit's alternatives."""
-        seen = {frozenset(chosen)}
-        for a, b in PAIRS:
-            if (a in chosen) == (b in chosen):
-                continue
-            have, other = (a, b) if a in chosen else (b, a)
-            alt = [other if t == have else t for t in chosen]
-            seen.add(frozenset(alt))
-            yield (a, b), alt
-        alternatives = getattr(self.fitted, 'alternatives', None)
-        for alt in (alternatives(self.axis)[1:] if alternatives else []):
-            if frozenset(alt) in seen:
-                continue
-            seen.add(frozenset(alt))
-            diff = tuple(t for t in chosen if t not in alt) + tuple(
-                t for t in alt if t not in chosen)
-            yield diff, list(alt)
+        The post-selection lower end (:func:`.averaging.selective_lower`) matters while the
+        term's gain G is near the gain G* that resolves it; the gain grows as n, and from
+        sqrt(G) = sqrt(G*) + 2.5 on (a threshold 2.5 standard deviations below the estimate)
+        the truncation moves the interval by under 1 %.
+        """
+        rejected = {frozenset(e['terms']) for e in self.fit.evidence if e['rejected']}
+        gains = (None if term == 'white_noise' else
+                 selection_gain(self.fit, term, ALTERNATIVE_MARGIN, self.fit.selection_penalty,
+                                rejected))
+        if gains is None or not gains[0] > 0:
+            return self.n
+        gain, needed = gains
+        return int(math.ceil(self.n * max((math.sqrt(needed) + 2.5) ** 2 / gain, 1.0)))
 
-    def _pairs(self, axis_terms, n_max):
-        chosen = list(axis_terms)
-        _, crit = self._data_criterion(chosen)
-        alternatives = getattr(self.fitted, 'alternatives', None)
-        listed = {frozenset(a) for a in (alternatives(self.axis)[1:] if alternatives else [])}
-        rejected = getattr(self.fitted, 'rejected', None)  # sets another curve contradicts
-        contradicted = {frozenset(r['terms']) for r in (rejected(self.axis) if rejected else [])}
-        for pair, alt_names in self._candidates(chosen):
-            if frozenset(alt_names) in contradicted:  # decided (the Hadamard check)
-                continue
-            alt_fit, alt_crit = self._data_criterion(alt_names)
+    def _latest(self, ns):
+        """``(more_s, reason)`` of the latest of several sample counts (None: never)."""
+        if any(n is None for n in ns):
+            return None, f'not told apart within {HORIZON:g} x the record'
+        return self._more_s(max(ns, default=self.n)), None
+
+    def _open_sets(self, n_max):
+        """
+        Time until each open set is told from the selected one; fills :attr:`unresolved`.
+
+        Returns ``[(terms in which the two differ, n or None), ...]``.  Each alternative in
+        turn is taken as the truth and its curve at n is fitted with the selected set, and
+        the selected one's with the alternative (noise-free: the criterion gap is the
+        non-centrality of the noisy one); told apart when both exceed the margin the
+        selection resolves a term by, one standard deviation below their mean.
+        """
+        sets = self.fitted.alternatives(self.axis)
+        chosen = list(self.fit.terms)
+        times = []
+        for alt in sets[1:]:
+            alt_fit = fit_terms(self.problem, alt, profile_intervals=False)
             yield
-            # an alternative the fit lists stays open whatever this refit says
-            if frozenset(alt_names) not in listed and (
-                    any(t not in alt_fit.terms for t in alt_names)
-                    or abs(alt_crit - crit) >= SEPARATION_MARGIN):
-                continue
-            other = tuple(alt_names)
+            differ = frozenset(chosen) ^ frozenset(alt)
+            gap = self._criterion(alt_fit) - self._criterion(self.fit)
             start = _nonlinear(alt_fit.terms)
-            # The pair separates when both directions do: at the later time.  The direction
-            # whose fit is linear (no tau_c profiled at every n) is searched first; the other
-            # only matters if it separates later (see _pair_time).
-            directions = sorted(((axis_terms, alt_names, 'fit'),
-                                 (alt_fit.terms, chosen, '+'.join(other))),
+            # The direction whose fit is linear (no tau_c profiled at every n) is searched
+            # first; the other only matters if it separates later (see _pair_time).
+            directions = sorted(((self.fit.terms, list(alt), 'fit'),
+                                 (alt_fit.terms, chosen, '+'.join(alt))),
                                 key=lambda d: any(len(TERM_PARAMETERS[t]) > 1 for t in d[1]))
-            n_sep = yield from self._pair_time(directions, alt_crit - crit, start, n_max)
-            if n_sep is None:
-                self.unresolved.append(Unresolved(self.axis, pair, None, 'not separated '
-                                                  f'within {HORIZON:g} x the record', other))
-            else:
-                self.unresolved.append(Unresolved(self.axis, pair, self._more_s(n_sep),
-                                                  None, other))
+            n_sep = yield from self._pair_time(directions, gap, start, n_max)
+            times.append((differ, n_sep))
+        if times:
+            more, reason = self._latest([n for _, n in times])
+            differ = sorted(set().union(*(d for d, _ in times)), key=ALL_TERMS.index)
+            self.unresolved = Unresolved(self.axis, tuple(differ), more, reason,
+                                         tuple(tuple(s) for s in sets))
+        return times
+
+    def _criterion(self, fit):
+        return fit.chi2 + len(fit.terms) * self.fit.selection_penalty
 
     def _pair_time(self, directions, crit_gap, start, n_max):
         """
@@ -492,7 +527,7 @@ class _AxisAdvisor:
         latest, at = None, None
         for truth, names, key in directions:
             # If the noise-free gap says "separated" already, the data were unlucky: grow the
-            # measured gap as the forecast grows instead (never 0 for an open pair).
+            # measured gap as the forecast grows instead (never 0 for an open set).
             gap0 = self.forecast.criterion_gap(self.n, truth, key, names, start)
             scale = max(abs(crit_gap), 1.0) / gap0 if _separated(gap0) else 1.0
 
@@ -511,38 +546,42 @@ class _AxisAdvisor:
                 latest, at = n_sep, x
         return latest
 
-    def _undetected(self, axis_terms, n_max):
-        chosen = list(axis_terms)
+    def _limit(self, term):
+        limit = self.fitted.upper_limit(self.axis, term)  # cached: exports use it too
+        return limit if math.isfinite(limit) else None
+
+    def _absent(self, n_max):
+        """Upper limit of each IEEE term no open set holds, and when one that large shows."""
+        chosen = list(self.fit.terms)
+        held = set().union(*(set(s) for s in self.fitted.alternatives(self.axis)))
         for term in IEEE_TERMS:
-            if term in chosen or term not in self.targets or not chosen:
+            if term in held or not chosen:
                 continue
-            limit = self.fitted.upper_limit(self.axis, term)  # cached: exports use it too
+            limit = self._limit(term)
             yield
-            if not math.isfinite(limit):
-                self.terms[term] = TermAdvice(None, None, 'no upper limit from these data',
-                                              detected=False)
+            if limit is None:
+                self.limits[term] = Limit(None, None, 'no upper limit from these data')
                 continue
-            truth = {**axis_terms, term: {'value': limit}}
+            truth = {**self.fit.terms, term: {'value': limit}}
             key = 'with_' + term
             # Scale the noise-free gain so that it is the measured 4 (the limit's delta chi^2)
             # now: its growth with n is what the forecast knows.
             gain0 = self.forecast.criterion_gap(self.n, truth, key, chosen) + self._penalty(
                 self.n, truth, key)
             if not gain0 > 0:
-                self.terms[term] = TermAdvice(None, None, 'the term does not change the '
-                                              'model curve', detected=False, upper_limit=limit)
+                self.limits[term] = Limit(limit, None, 'the term does not change the model '
+                                                       'curve')
                 continue
 
             def evaluate(n, truth=truth, key=key, gain0=gain0):
-                penalty = self._penalty(n, truth, key)
+                needed = self._penalty(n, truth, key) + ALTERNATIVE_MARGIN
                 gain = UPPER_LIMIT_DELTA_CHI2 * (self.forecast.criterion_gap(
-                    n, truth, key, chosen) + penalty) / gain0
-                return gain >= penalty, log_ratio(gain, penalty)
+                    n, truth, key, chosen) + self._penalty(n, truth, key)) / gain0
+                return gain >= needed, log_ratio(gain, needed)
             # the gain grows as n, the penalty as log of the number of averaging times
             n_hit = yield from _crossing(evaluate, self.n, n_max, 1.0)
-            self.terms[term] = TermAdvice(None, self._more_s(n_hit), None if n_hit else
-                                          f'not detected within {HORIZON:g} x the record',
-                                          detected=False, upper_limit=limit)
+            self.limits[term] = Limit(limit, self._more_s(n_hit), None if n_hit else
+                                      f'not resolved within {HORIZON:g} x the record')
 
     def _penalty(self, n, truth, key):
         problem = self.forecast.problem(n, truth, key)
@@ -555,8 +594,7 @@ class StagedAdvice:
 
     ``step()`` runs one forecast evaluation; when :attr:`done`, :attr:`advice` holds the
     :class:`Advice`.  :func:`advise` runs all steps at once.  ``undetected=False`` skips the
-    upper limits and detection times of undetected terms (half the work; the node's status
-    does not use them).
+    upper limits and resolution times of the terms no open set holds (half the work).
     """
 
     def __init__(self, result, fitted, targets=None, grid=None, undetected=True):
@@ -564,7 +602,8 @@ class StagedAdvice:
         grid = grid or analysis_grid()
         self.advice = Advice(targets, result.n_samples / result.rate_hz)
         self.advice.inadequate = [a for a in fitted.axes
-                                  if (ad := fitted.adequacy(a)) is not None and not ad.adequate]
+                                  if (ad := fitted.adequacy(a)) is not None
+                                  and ad.tested and not ad.adequate]
         self._axes = [_AxisAdvisor(result, fitted, axis, targets, grid, undetected)
                       for axis in fitted.axes if fitted.fits[axis].terms]
         self._gen = self._run()
@@ -574,7 +613,9 @@ class StagedAdvice:
         for adv in self._axes:
             yield from adv.steps()
             self.advice.axes[adv.axis] = adv.terms
-            self.advice.unresolved.extend(adv.unresolved)
+            self.advice.limits[adv.axis] = adv.limits
+            if adv.unresolved is not None:
+                self.advice.unresolved.append(adv.unresolved)
 
     def step(self):
         """Run the next step; return :attr:`done`."""
@@ -601,54 +642,10 @@ def advise(result, fitted, targets=None, grid=None, undetected=True):
     grid : callable, optional
         ``grid(n)`` -> averaging factors of a record of n samples (default: ``analyze``'s).
     undetected : bool
-        Also give the upper limits and detection times of undetected terms.
+        Also give the upper limits and resolution times of the terms no open set holds.
 
     """
     staged = StagedAdvice(result, fitted, targets, grid, undetected)
     while not staged.step():
         pass
     return staged.advice
-
-
-def advice_health(advice, name='recording advice'):
-    """
-    Return a :class:`~.health.Health` record of the advice (the allan node's status).
-
-    OK when every target is met and no pair is unresolved; WARN naming the longest additional
-    time otherwise; STALE while there is no advice (``advice`` None).  Key-values: per detected
-    term ``<axis>.<term>.more_s`` and ``.rel_halfwidth``, per unresolved pair
-    ``<axis>.<a>_vs_<b>.more_s`` (s; NaN: no prediction) and ``record_more_s``.
-    """
-    from ..live.health import Health, OK, STALE, WARN
-    if advice is None:
-        return Health(name, STALE, 'no estimate yet (collecting still samples)', {})
-    values = {'record_more_s': advice.record_more_s, 'recorded_s': advice.duration_s}
-    waits = []
-    for axis, terms in advice.axes.items():
-        for term, entry in terms.items():
-            if entry.detected:
-                more = math.nan if entry.more_s is None else entry.more_s
-                values[f'{axis}.{term}.more_s'] = more
-                values[f'{axis}.{term}.rel_halfwidth'] = entry.rel_halfwidth
-                waits.append((more, f'{axis} {term} to {advice.targets[term]:g}'))
-    for u in advice.unresolved:
-        more = math.nan if u.more_s is None else u.more_s
-        what = '_vs_'.join(u.terms) if len(u.terms) == 2 else 'maybe_' + '_'.join(u.terms)
-        values[f'{u.axis}.{what}.more_s'] = more
-        waits.append((more, f'{u.axis} {what.replace("_vs_", " vs ")}'))
-    open_items = [(m, what) for m, what in waits if not m == 0.0]
-    if advice.inadequate:
-        values['inadequate'] = ','.join(advice.inadequate)
-        return Health(name, WARN, 'the noise model does not describe '
-                                  + ', '.join(advice.inadequate)
-                                  + ': their precision figures are not meaningful', values)
-    if not open_items:
-        return Health(name, OK, f'every precision target is met ({advice.duration_s:.0f} s '
-                                f'recorded)', values)
-    finite = [(m, what) for m, what in open_items if math.isfinite(m)]
-    if finite:
-        more, what = max(finite)
-        message = f'record {more:.0f} s ({more / 3600:.2g} h) more ({what})'
-    else:
-        message = 'targets not reachable: ' + ', '.join(what for _, what in open_items)
-    return Health(name, WARN, message, values)

@@ -32,11 +32,13 @@ from .. import terms as _terms
 from ..allan.edf import CI_LEVEL
 from ..model import NoiseModel
 from ..terms import sinusoid_shape, TERMS
-from ..units import conventional, si_unit
+from ..units import conventional, IEEE_TERMS, si_unit
 
 
 #: Open term sets an upper limit is computed in, the best first (each costs a profile).
 LIMIT_SETS = 4
+#: Confidence of the upper limits (profile delta chi^2 = 4, :data:`.axis.UPPER_LIMIT_DELTA_CHI2`).
+LIMIT_LEVEL = 0.95
 
 
 class FittedModel:
@@ -59,7 +61,7 @@ class FittedModel:
             for term in self.model.terms[axis]:
                 if term in fit.coef and fit.candidates:
                     fit.intervals[term] = TERMS[term].pack(
-                        self._averaged(axis, term, CI_LEVEL),
+                        self.averaged_interval(axis, term, CI_LEVEL),
                         TERMS[term].unpack(fit.intervals[term])[1])
         self.intervals = {a: f.intervals for a, f in fits.items()}
         self.chi2 = {a: f.chi2 for a, f in fits.items()}
@@ -95,7 +97,7 @@ class FittedModel:
         fit = self.fits[axis]
         value = self.model.value(axis, term, param)
         if param == TERMS[term].params[0] and term in fit.coef:
-            return self._averaged(axis, term, level)
+            return self.averaged_interval(axis, term, level)
         z = two_sided_z(level)
         lo, hi = stored
         return (value * (lo / value) ** z, value * (hi / value) ** z)
@@ -113,12 +115,17 @@ class FittedModel:
             self._weights[axis] = weights(fit, rejected)
         return self._weights[axis]
 
-    def _averaged(self, axis, term, level):
-        """A term's main-parameter interval at ``level`` averaged over the term sets."""
+    def averaged_interval(self, axis, term, level=CI_LEVEL, selective=True):
+        """
+        A term's main-parameter interval at ``level`` averaged over the term sets (SI).
+
+        ``selective=False`` leaves out the post-selection lower end (what a longer record, in
+        which the term stands clear of its threshold, keeps of the width: the advisor's).
+        """
         fit = self.fits[axis]
         scale = fit.adequacy.scale if fit.adequacy is not None else 1.0
         rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
-        selection = (None if term == 'white_noise' or not fit.candidate_fits else
+        selection = (None if not selective or term == 'white_noise' or not fit.candidate_fits else
                      selection_gain(fit, term, ALTERNATIVE_MARGIN, fit.selection_penalty,
                                     rejected))
         return averaged_interval(self.set_weights(axis), term, level, fit, scale, selection)
@@ -215,6 +222,30 @@ class FittedModel:
             self._upper_limits[key] = (max(limits) if limits and all(
                 math.isfinite(v) for v in limits) else math.nan)
         return self._upper_limits[key]
+
+    def limits(self, axis):
+        """
+        ``{term: 95 % upper limit}`` (SI; NaN: not bounded) of the IEEE terms not resolved.
+
+        What the record says of a term it does not resolve (:meth:`upper_limit`): the terms
+        of :data:`~imu_allan.core.units.IEEE_TERMS` order, none for an axis not fitted.
+        """
+        if axis not in self.fits or not self.fits[axis].terms:
+            return {}
+        resolved = self.resolved(axis)
+        return {t: self.upper_limit(axis, t) for t in IEEE_TERMS if t not in resolved}
+
+    def limit_report(self, axis):
+        """JSON-ready ``{term: {upper_limit, level, unit, open, conventional}}`` (:meth:`limits`)."""
+        held = set().union(*(set(s) for s in self.alternatives(axis)))
+        out = {}
+        for term, limit in self.limits(axis).items():
+            finite = math.isfinite(limit)
+            conv, conv_unit = conventional(axis, term, limit) if finite else (None, None)
+            out[term] = {'upper_limit': limit if finite else None, 'level': LIMIT_LEVEL,
+                         'unit': si_unit(axis, term), 'open': term in held,
+                         'conventional': {'upper_limit': conv, 'unit': conv_unit}}
+        return out
 
     def adequacy(self, axis):
         """Return the adequacy test of ``axis`` (:class:`.adequacy.Adequacy`), None if unfitted."""

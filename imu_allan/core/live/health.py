@@ -98,15 +98,24 @@ def _fmt(value):
     return f'{value:.3g}' if math.isfinite(value) else 'nan'
 
 
-def budget_health(coeffs, budget, axes=AXES, prefix=''):
+def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None):
     """
     Compare a coefficient table with a budget; one :class:`Health` per axis.
+
+    Only a resolved term can raise a level: a term the record does not resolve is reported
+    as its upper limit, which says "within budget" once it lies below the budget and
+    nothing before (the data do not show the unit misses it).  A resolved term raises WARN
+    when the lower end of its 68.3 % interval lies above warn_ratio x budget, ERROR above
+    error_ratio x budget: raised when the data show the budget is missed, not when a short
+    record cannot yet show it is met.  The interval carries the choice of terms
+    (:mod:`imu_allan.core.fit.averaging`): a term resolved just past its threshold has a low
+    lower end and raises nothing.
 
     Parameters
     ----------
     coeffs : numpy.ndarray or None
         Shape (len(axes), 5, 3): ``[axis, term, (value, ci_low, ci_high)]`` in the order of
-        :data:`~imu_allan.core.units.IEEE_TERMS`, NaN where a term is not detected (the
+        :data:`~imu_allan.core.units.IEEE_TERMS`, NaN where a term is not resolved (the
         ``imu/allan_coeffs`` layout).  None means no estimate yet: every axis is STALE.
     budget : NoiseBudget
         The limits per axis and term.
@@ -114,13 +123,16 @@ def budget_health(coeffs, budget, axes=AXES, prefix=''):
         Axis names of the table rows.
     prefix : str
         Prefix of the status names (the node's name and a colon).
+    limits : numpy.ndarray, optional
+        Shape (len(axes), 5): the 95 % upper limits of the terms not resolved (SI, NaN where
+        resolved or unbounded; the ``imu/allan_coeffs`` limit block).
 
     Returns
     -------
     list of Health
         Values per budgeted term: ``<term>`` (measured), ``<term>.ci_low``, ``<term>.ci_high``,
-        ``<term>.budget``, ``<term>.ratio`` (measured / budget), ``<term>.unit`` (SI) and
-        ``<term>.conventional`` (value in datasheet units).
+        ``<term>.budget``, ``<term>.ratio`` (measured / budget), ``<term>.upper_limit`` (not
+        resolved), ``<term>.unit`` (SI) and ``<term>.conventional`` (value in datasheet units).
 
     """
     out = []
@@ -131,21 +143,27 @@ def budget_health(coeffs, budget, axes=AXES, prefix=''):
             out.append(Health(name, STALE, 'no estimate yet (collecting still samples)',
                               {f'{t}.budget': v for t, v in terms.items()}))
             continue
-        level, problems, values = OK, [], {}
+        level, problems, notes, values = OK, [], [], {}
         for term, limit in terms.items():
             j = IEEE_TERMS.index(term)
             value, low, high = (float(v) for v in coeffs[i, j])
+            upper = math.nan if limits is None else float(limits[i, j])
             values[term] = value
             values[f'{term}.ci_low'] = low
             values[f'{term}.ci_high'] = high
             values[f'{term}.budget'] = limit
             values[f'{term}.ratio'] = value / limit if math.isfinite(value) else math.nan
+            values[f'{term}.upper_limit'] = upper
             values[f'{term}.unit'] = si_unit(axis, term)
-            if math.isfinite(value):
-                conv, unit = conventional(axis, term, value)
-                values[f'{term}.conventional'] = f'{conv:.4g} {unit}'
-            if not math.isfinite(value):
-                continue  # not detected: below what this record can resolve
+            if not math.isfinite(value):  # not resolved: a limit, never a level
+                if math.isfinite(upper):
+                    conv, unit = conventional(axis, term, upper)
+                    notes.append(f'{term} < {_fmt(conv)} {unit} (95 %)'
+                                 + (': within budget' if upper <= limit else
+                                    ': not resolved yet'))
+                continue
+            conv, unit = conventional(axis, term, value)
+            values[f'{term}.conventional'] = f'{conv:.4g} {unit}'
             # Without an interval the point value is all we have.
             low_end = low if math.isfinite(low) else value
             if low_end > budget.error_ratio * limit:
@@ -159,12 +177,12 @@ def budget_health(coeffs, budget, axes=AXES, prefix=''):
                                 f'{si_unit(axis, term)} exceeds budget {_fmt(limit)} '
                                 f'({value / limit:.2f}x)')
             level = max(level, term_level)
-        if level == OK:
-            detected = [t for t in terms if math.isfinite(values.get(t, math.nan))]
-            message = ('within budget' if detected
-                       else 'no budgeted term detected yet')
-        else:
+        if level > OK:
             message = '; '.join(problems)
+        else:
+            resolved = [t for t in terms if math.isfinite(values.get(t, math.nan))]
+            message = '; '.join((['within budget (' + ', '.join(resolved) + ')']
+                                 if resolved else []) + notes) or 'no budgeted term resolved yet'
         out.append(Health(name, level, message, values))
     return out
 
