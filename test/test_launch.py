@@ -113,8 +113,9 @@ def decode_coeffs(msg):
     assert [(d.label, d.size, d.stride) for d in dims] == [('axis', 6, 90), ('term', 5, 15),
                                                            ('stat', 3, 3)]
     assert msg.layout.data_offset == 0
-    # the 90 numbers the dims describe; each axis's adequacy p follows (6 more)
-    assert len(msg.data) == 96
+    # the 90 numbers the dims describe; each axis's adequacy p follows (6 more), then the
+    # 30 upper limits of the terms not resolved
+    assert len(msg.data) == 126
     return np.asarray(msg.data[:90]).reshape(6, 5, 3)
 
 

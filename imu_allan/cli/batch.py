@@ -308,7 +308,7 @@ def run_batch(args, options):
         sys.stderr.write(f'analyze: {o["error"]}\n')
     if args.json:
         emit(strict_json.dumps({'reports': [o['report'] for o in results if o['ok']],
-                         'errors': [o['error'] for o in failed], 'skipped': skipped}))
+                                'errors': [o['error'] for o in failed], 'skipped': skipped}))
     else:
         for o in results:
             if o['ok']:

@@ -5,8 +5,9 @@ Subscribes ``imu/allan_coeffs``, ``imu/allan_deviation`` (relative names: ``--na
 ROS remapping after ``--ros-args`` move them) and ``/diagnostics``, and shows per axis the
 white noise N and bias instability B (and any other term it resolves) with their 68.3 %
 intervals in conventional units, or the 95 % upper limit of a term not resolved yet, the
-health of the IMU stream and the recording advice, when the node publishes one.  On a terminal the table is redrawn in place; otherwise each new estimate is
-printed as plain lines.  ``--once`` prints one snapshot and exits (status 1, one line on
+health of the IMU stream and the recording advice, when the node publishes one.  On a
+terminal the table is redrawn in place; otherwise each new estimate is printed as plain
+lines.  ``--once`` prints one snapshot and exits (status 1, one line on
 stderr, if no coefficients arrive within ``--timeout``); ``--json`` prints the decoded snapshot
 (one JSON object per line without ``--once``).  The recording advice is the node's own
 sentences (the words ``analyze`` and its page use, :mod:`imu_allan.report.advice`);
@@ -275,7 +276,7 @@ def render(state, topics, width=99, verbose=False):
 
 
 def _cell(state, i, axis, term):
-    """A table cell: the resolved value with its interval, else the upper limit, else -."""
+    """Return a table cell: the resolved value with its interval, else the limit, else -."""
     stats = state.coeffs[i, IEEE_TERMS.index(term)]
     if math.isfinite(stats[0]) or state.limits is None:
         return format_interval(axis, term, stats)

@@ -111,7 +111,7 @@ def _when(entry, what='decides'):
 
 def open_sets_words(entry):
     """
-    An axis's open term sets in one sentence: which terms, why they stay apart, how long.
+    Say an axis's open term sets in one sentence: which terms, why they stay apart, how long.
 
     'cannot tell yet whether bias instability or rate random walk is there (both lift the
     longest averaging times); about 3 h more decides'.
@@ -189,7 +189,7 @@ def _limit_words(axis, entry):
 
 def advice_sentence(doc):
     """
-    The console's closing sentence: how much longer to record, and why.
+    Return the console's closing sentence: how much longer to record, and why.
 
     Never "no need to record longer" while a term set remains open, the record was moving or
     a model does not describe its curve (its precision is not precision).
@@ -238,7 +238,7 @@ def advice_headline(doc, alternatives=False):
 
 def advice_statuses(advice, name, prefix=''):
     """
-    The allan node's ``/diagnostics`` statuses of the advice: the record's, then each axis's.
+    Return the allan node's ``/diagnostics`` statuses of the advice: record, then axes.
 
     ``advice``: an :class:`~imu_allan.core.fit.advisor.Advice` or None (STALE: no estimate
     yet); ``name``: the record status's name; per axis ``<prefix><axis> advice`` with its

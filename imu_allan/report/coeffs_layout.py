@@ -134,7 +134,9 @@ def decode_table(data, dims, trailing=0):
     sizes = tuple(int(size) for _, size in dims)
     values = np.asarray(data, dtype=float)
     table = int(np.prod(sizes))
-    allowed = {table, table + trailing} | ({table + trailing + LIMIT_VALUES} if trailing else set())
+    allowed = {table, table + trailing}
+    if trailing:  # and the limit block after the adequacy block
+        allowed.add(table + trailing + LIMIT_VALUES)
     if values.size not in allowed:
         raise ValueError(f'layout {sizes} does not match {values.size} values')
     return values[:table].reshape(sizes)

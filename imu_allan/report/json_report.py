@@ -58,6 +58,9 @@ def analysis_to_json(analysis, samples=None):
             'limits': analysis.fit.limit_report(axis),
             'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis]),
                     'selected': list(analysis.fit.fits[axis].terms),
+                    # the fitted curve at adev.tau (the selected set and the lines): what the
+                    # plots draw, unresolved terms included (their values are limits only)
+                    'model_adev': _floats(np.sqrt(analysis.fit.model_avar(axis, res.tau))),
                     'alternatives': analysis.fit.alternatives(axis),
                     'rejected': analysis.fit.rejected(axis),
                     'decided_by': analysis.fit.decided_by(axis),

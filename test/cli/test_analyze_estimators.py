@@ -62,10 +62,10 @@ def test_ohdev_decides_a_walk_against_a_ramp(tmp_path):
     """
     ``--estimators ohdev``: the Hadamard curve rejects a rate random walk the Allan fit left open.
 
-    gyro_x: 1 h at 100 Hz of N 2e-3, B 2e-4 and a rate ramp of 3e-6 rad/s^2 (seed 6 of
-    test/core/test_hadamard_check.py: the Allan fit leaves N K R and N B R open; the walk
-    N K R needs is at least 1.36x the most the Hadamard curve allows, so rounding the CSV to
-    9 digits cannot undo the decision).  Without OHDEV the pair stays open and is said so.
+    gyro_x: 1 h at 100 Hz of N 2e-3, B 2e-4 and a rate ramp of 3e-6 rad/s^2 (seed 6): the Allan
+    fit selects N R and leaves N K open beside it; the Hadamard curve, blind to the ramp,
+    allows less walk than N K needs, and N K leaves the open sets (N K R, where the ramp
+    carries the rise, stays).  Without OHDEV N K stays open and is said so.
     """
     from imu_allan import NoiseModel
     n = 360_000
@@ -76,15 +76,14 @@ def test_ohdev_decides_a_walk_against_a_ramp(tmp_path):
     data[:, 5] += 9.80665
     path = tmp_path / 'ramp.csv'
     write_csv(path, Samples(t=np.arange(n) / 100.0, data=data))
-    nkr = ['white_noise', 'rate_random_walk', 'rate_ramp']
+    nk = ['white_noise', 'rate_random_walk']
     plain = run_command('analyze', path, '--json')
     assert plain.returncode == 0, plain.stderr
     fit = json.loads(plain.stdout)['axes']['gyro_x']['fit']
-    assert nkr in fit['alternatives'] and fit['rejected'] == [] and fit['decided_by'] is None
+    assert nk in fit['alternatives'] and fit['rejected'] == [] and fit['decided_by'] is None
     checked = run_command('analyze', path, '--estimators', 'oadev,ohdev', '--json')
     assert checked.returncode == 0, checked.stderr
     fit = json.loads(checked.stdout)['axes']['gyro_x']['fit']
-    assert [r['terms'] for r in fit['rejected']] == [nkr]
+    assert [r['terms'] for r in fit['rejected']] == [nk]
     assert fit['rejected'][0]['by'] == 'ohdev'
-    assert nkr not in fit['alternatives']
-    assert fit['decided_by'] == 'oadev+ohdev'
+    assert nk not in fit['alternatives']

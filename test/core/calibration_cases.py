@@ -300,12 +300,15 @@ def score(cases, levels=(CI_LEVEL, 0.95)):
     """Per-axis outcomes: selection, alternatives, and per true term the coverage flags."""
     rows = []
     for truth, fitted, axis in cases:
-        chosen = set(fitted.model.terms.get(axis, {})) - NUISANCE
+        # the selected set (what the criterion chose; the resolved terms are its part that
+        # every open set holds, and coverage is scored on those)
+        chosen = set(fitted.fits[axis].terms) - NUISANCE
+        resolved = set(fitted.model.terms.get(axis, {})) - NUISANCE
         alternatives = [set(a) - NUISANCE for a in fitted.alternatives(axis)]
         fit = fitted.fits[axis]
         crits = {frozenset(names) - NUISANCE: crit for crit, names in fit.candidates}
         best = fit.candidates[0][0] if fit.candidates else math.nan
-        row = {'exact': chosen == set(truth),
+        row = {'exact': chosen == set(truth), 'resolved_exact': resolved == set(truth),
                'gap': crits.get(frozenset(truth), math.inf) - best,
                'among': any(a == set(truth) for a in alternatives),
                'n_alternatives': len(alternatives), 'cover': {},
@@ -315,7 +318,7 @@ def score(cases, levels=(CI_LEVEL, 0.95)):
                                      for e in fit.evidence),
                'adequacy_p': fit.adequacy.p if fit.adequacy is not None else math.nan}
         for term, value in truth.items():
-            if term not in chosen:
+            if term not in resolved:
                 continue
             row['cover'][term] = [_inside(fitted.interval(axis, term, level=lv), value)
                                   for lv in levels]
@@ -356,6 +359,7 @@ def summary(outcomes):
             cover.setdefault(term, []).append(flags)
     return {'axes': len(rows),
             'exact': float(np.mean([r['exact'] for r in rows])),
+            'resolved_exact': float(np.mean([r['resolved_exact'] for r in rows])),
             'among': float(np.mean([r['among'] or r['exact'] for r in rows])),
             # share of axes whose true set is within a criterion margin of the best
             'within': {m: float(np.mean([r['gap'] < m for r in rows])) for m in (2, 6, 10)},

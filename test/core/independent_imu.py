@@ -67,7 +67,7 @@ class Device:
         return n_density * math.sqrt(rate_hz * self.decimation / self.taps)
 
     def lsb(self, n_density, rate_hz):
-        """The LSB (SI) for a white-noise density (continuous-time) at output rate ``rate_hz``."""
+        """Return the LSB (SI) for a white-noise density (continuous-time) at ``rate_hz``."""
         return self.lsb_sigmas * self.output_sigma(n_density, rate_hz)
 
     def white_density(self, n_density, rate_hz):
@@ -135,7 +135,7 @@ class IndependentAxis:
         self.window = np.zeros(max(self.device.taps - 1, 0))  # the average's last inputs
 
     def _fast(self, n):
-        """n output samples of the device's averaged, decimated white noise and line."""
+        """Return n output samples of the device's averaged, decimated white noise and line."""
         dev = self.device
         n_in = n * dev.decimation
         rate_in = self.rate * dev.decimation
@@ -183,7 +183,7 @@ class IndependentAxis:
         return np.round(y / lsb) * lsb if lsb > 0 else y
 
     def white_truth(self):
-        """The white-noise density the output carries (continuous-time; :class:`Device`)."""
+        """Return the white-noise density the output carries (continuous-time; :class:`Device`)."""
         return self.device.white_density(self.truth.get('white_noise', 0.0), self.rate)
 
     def line_alias_hz(self):

@@ -100,7 +100,7 @@ def draw_axis(unit, rng, device, duration_s):
 
 
 def truth_of(axis):
-    """The terms an analysis should find (SI): the white density the output carries."""
+    """Return the terms an analysis should find (SI): the white density the output carries."""
     truth = {t: v for t, v in axis.truth.items() if t != 'gauss_markov'}
     if 'white_noise' in truth:
         truth['white_noise'] = axis.white_truth()
@@ -198,7 +198,7 @@ def run(lengths=LENGTHS, groups=2, seed=1, online=False, workers=None, units=UNI
 def summary(rows):
     """Per length: axes, spurious share, coverage per term, upper-limit coverage."""
     out = {}
-    for unit, device, length, row in rows:
+    for _unit, _device, length, row in rows:
         s = out.setdefault(length, {'axes': 0, 'spurious': 0, 'cover': {}, 'limit': {}})
         s['axes'] += 1
         s['spurious'] += bool(row['spurious'])

@@ -8,8 +8,7 @@ import json
 
 from core.advisor_cases import cases, RATE_HZ, rel_halfwidth, SEEDS
 from imu_allan.core.allan.estimate import allan_deviation
-from imu_allan.core.fit import fit_noise_model
-from imu_allan.core.fit import fit_terms
+from imu_allan.core.fit import fit_noise_model, fit_terms
 from imu_allan.core.fit.advisor import (
     _AxisAdvisor,
     _nonlinear,
@@ -127,7 +126,7 @@ def test_the_advice_says_each_thing_once(seconds):
             assert lim.more_s is not None or lim.reason
     doc = advice_to_json(advice)
     json.dumps(doc, allow_nan=False)
-    for axis, line in axis_lines(doc).items():
+    for line in axis_lines(doc).values():
         assert line.count('cannot tell') <= 1, line
 
 
@@ -146,7 +145,7 @@ def test_an_open_set_separates_when_the_later_of_its_two_directions_does():
         n_max = int(adv.n * HORIZON)
         chosen = list(adv.fit.terms)
         times = run(adv._open_sets(n_max))
-        for (differ, n_sep), alt in zip(times, fitted.alternatives(axis)[1:]):
+        for (_differ, n_sep), alt in zip(times, fitted.alternatives(axis)[1:]):
             alt_fit = fit_terms(adv.problem, alt, profile_intervals=False)
             gap = adv._criterion(alt_fit) - adv._criterion(adv.fit)
             start = _nonlinear(alt_fit.terms)

@@ -36,7 +36,10 @@ def _round_trip(model, seed):
                                              ('adis16448', ADIS, 22)])
 def test_round_trip_six_axes_two_hours(name, model, seed):
     """
-    White noise within 3 %; the other true terms found and inside their intervals.
+    White noise within 3 %; the other terms inside their intervals or below their upper limits.
+
+    The other true terms must be resolved and inside their intervals, or not resolved and below
+    their upper limits; no term may be reported that the unit lacks.
 
     One fixed seed checks 6 axes x 1-2 other terms.  A 68.3 % interval misses a third of the
     time by construction (test_interval_coverage checks that rate over 50 seeds), so here every
@@ -50,11 +53,16 @@ def test_round_trip_six_axes_two_hours(name, model, seed):
     inside = total = 0
     for axis in model.axes:
         truth = model.terms[axis]
-        assert set(fitted.model.terms[axis]) == set(truth), (axis, fitted.model.terms[axis])
+        # every term reported is the unit's; one it has but the record does not resolve (a
+        # random walk seen over the last half decade) is an upper limit above the truth
+        assert set(fitted.model.terms[axis]) <= set(truth), (axis, fitted.model.terms[axis])
         n_true = truth['white_noise']['value']
         assert fitted.value(axis, 'white_noise') == pytest.approx(n_true, rel=0.03)
         for term, params in truth.items():
             if term == 'white_noise':
+                continue
+            if term not in fitted.model.terms[axis]:
+                assert params['value'] <= fitted.upper_limit(axis, term), (axis, term)
                 continue
             value = fitted.value(axis, term)
             lo, hi = fitted.interval(axis, term)

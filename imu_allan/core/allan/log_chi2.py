@@ -38,11 +38,11 @@ def trigamma(x):
 
 
 def log_bias(edf):
-    """Mean of ln(chi^2_nu / nu) for ``edf`` nu (array): psi(nu / 2) - ln(nu / 2), < 0."""
+    """Return the mean of ln(chi^2_nu / nu) for ``edf`` nu (array): psi(nu/2) - ln(nu/2)."""
     half = 0.5 * np.asarray(edf, dtype=float)
     return _digamma(half) - np.log(half)
 
 
 def log_sd(edf):
-    """Standard deviation of ln(chi^2_nu / nu) for ``edf`` nu (array): sqrt(psi'(nu / 2))."""
+    """Return the standard deviation of ln(chi^2_nu / nu) for ``edf`` nu: sqrt(psi'(nu/2))."""
     return np.sqrt(trigamma(0.5 * np.asarray(edf, dtype=float)))

@@ -130,7 +130,7 @@ class Adequacy:
 
 
 def _finite(value):
-    """A float for JSON, None where it is not finite (strict JSON has no NaN)."""
+    """Return a float for JSON, None where it is not finite (strict JSON has no NaN)."""
     return float(value) if math.isfinite(value) else None
 
 

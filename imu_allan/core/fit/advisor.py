@@ -37,6 +37,8 @@ import math
 
 import numpy as np
 
+from .averaging import selection_gain
+
 # The fit's own problem set-up (whitening, shapes): the forecast must use exactly the same.
 from .axis import (
     ALTERNATIVE_MARGIN,
@@ -49,7 +51,6 @@ from .axis import (
     shape_columns,
     UPPER_LIMIT_DELTA_CHI2,
 )
-from .averaging import selection_gain
 from .bisection import bisection, guided, log_ratio
 from .bounded_min import bounded_minimum
 from .. import terms as _terms
@@ -444,8 +445,8 @@ class _AxisAdvisor:
             scale = (hi - lo) / (2.0 * value) / now if now > 0 else 1.0
 
             def evaluate(n, term=term, target=target, scale=scale):
-                rel = scale * self.forecast.rel_halfwidths(n, self.fit.terms).get(term,
-                                                                                   math.inf)
+                forecast = self.forecast.rel_halfwidths(n, self.fit.terms)
+                rel = scale * forecast.get(term, math.inf)
                 return rel <= target, log_ratio(target, rel)
             # the half-width falls as n^-1/2
             n_hit = yield from _crossing(evaluate, self.n, n_max, 0.5)
@@ -456,7 +457,7 @@ class _AxisAdvisor:
 
     def _clear_of_threshold(self, term):
         """
-        Samples after which a resolved term's interval no longer carries its selection.
+        Return the samples after which a resolved term's interval stops carrying its selection.
 
         The post-selection lower end (:func:`.averaging.selective_lower`) matters while the
         term's gain G is near the gain G* that resolves it; the gain grows as n, and from

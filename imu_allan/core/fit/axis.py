@@ -314,7 +314,7 @@ def ramp_drift_variance(problem, coef):
 
 def ramp_cross_sd(problem, coef):
     """
-    Standard deviation (AVAR units, per tau) of a ramp's cross term with the noise's drift.
+    Return the sd (AVAR units, per tau) of a ramp's cross term with the noise's drift.
 
     The estimator's cross term R tau^2 D / (T - 2 tau) (:func:`ramp_drift_variance`) moves
     every estimate with one D; its shape is the ramp's tau^2 only while tau << T, so beyond
@@ -373,10 +373,9 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
 
     ramp = deterministic_index(names)
 
-    spread = None
-    if ramp is not None and problem.duration_s:
-        def spread(coef):
-            return ramp_cross_sd(problem, dict(zip(names, coef[:len(names)])))
+    def cross(coef):  # a ramp's cross term with the noise's drift, as scatter
+        return ramp_cross_sd(problem, dict(zip(names, coef[:len(names)])))
+    spread = cross if ramp is not None and problem.duration_s else None
 
     def evaluate(nonlinear):
         return problem.solve(problem.with_nuisance(shape_columns(problem, names, nonlinear)),

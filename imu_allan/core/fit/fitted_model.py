@@ -19,7 +19,6 @@ from .adequacy import assess, STATISTIC_SCALE
 from .averaging import averaged_interval, selection_gain, weights
 from .axis import (
     ALTERNATIVE_MARGIN,
-    coefficient_interval,
     fit_axis,
     fit_terms,
     problem_upper_limit,
@@ -33,7 +32,6 @@ from ..allan.edf import CI_LEVEL
 from ..model import NoiseModel
 from ..terms import sinusoid_shape, TERMS
 from ..units import conventional, IEEE_TERMS, si_unit
-
 
 #: Open term sets an upper limit is computed in, the best first (each costs a profile).
 LIMIT_SETS = 4
@@ -117,7 +115,7 @@ class FittedModel:
 
     def averaged_interval(self, axis, term, level=CI_LEVEL, selective=True):
         """
-        A term's main-parameter interval at ``level`` averaged over the term sets (SI).
+        Return a term's main-parameter interval at ``level`` averaged over the term sets.
 
         ``selective=False`` leaves out the post-selection lower end (what a longer record, in
         which the term stands clear of its threshold, keeps of the width: the advisor's).
@@ -154,7 +152,7 @@ class FittedModel:
 
     def resolved(self, axis):
         """
-        The terms of ``axis`` the record resolves: those every open term set holds.
+        Return the terms of ``axis`` the record resolves: those every open term set holds.
 
         A term is reported only when each term set the data cannot reject
         (:meth:`alternatives`) contains it; one that some open sets hold and others do not is
@@ -166,7 +164,7 @@ class FittedModel:
         return set.intersection(*(set(s) for s in sets)) if sets else set()
 
     def unresolved(self, axis):
-        """The selected set's terms of ``axis`` that are not resolved (:meth:`resolved`)."""
+        """Return the selected set's terms of ``axis`` that are not resolved (:meth:`resolved`)."""
         fit = self.fits.get(axis)
         return [] if fit is None else [t for t in fit.terms if t not in self.resolved(axis)]
 
@@ -236,7 +234,7 @@ class FittedModel:
         return {t: self.upper_limit(axis, t) for t in IEEE_TERMS if t not in resolved}
 
     def limit_report(self, axis):
-        """JSON-ready ``{term: {upper_limit, level, unit, open, conventional}}`` (:meth:`limits`)."""
+        """Return ``{term: {upper_limit, level, unit, open, conventional}}`` (:meth:`limits`)."""
         held = set().union(*(set(s) for s in self.alternatives(axis)))
         out = {}
         for term, limit in self.limits(axis).items():
@@ -266,8 +264,8 @@ class FittedModel:
         fit = self.fits.get(axis)
         if fit is None:
             return _terms.model_avar({}, tau, self.rate_hz)
-        return _terms.model_avar(fit.terms, tau, self.rate_hz) + sum(_nuisance_avar(fit, tau),
-                                                                      0.0)
+        lines = sum(_nuisance_avar(fit, tau), 0.0)
+        return _terms.model_avar(fit.terms, tau, self.rate_hz) + lines
 
     def term_report(self, axis):
         """JSON-ready ``{term: {value, ci, unit, time, conventional}}`` for one axis."""

@@ -150,7 +150,9 @@ def hadamard_walk(hadamard, names):
     selection penalty, as :func:`~imu_allan.core.fit.fit_axis` scores term sets) and the
     upper end of K^2's 95 % interval (the unconstrained GLS sd where the fit pins K at 0).
     """
-    base = [n for n in _BASE if n in names] or ['white_noise']
+    # white noise and flicker always: the OHVAR curve sees a flicker floor the Allan set may
+    # not hold (a weak one beside a ramp), and K fitted without it takes the floor for a walk
+    base = [n for n in _BASE if n in names or n != 'quantization']
     without = fit_terms(hadamard, base, profile_intervals=False)
     with_k = fit_terms(hadamard, base + [_WALK], profile_intervals=False)
     penalty = SELECTION_PENALTY * math.log(max(hadamard.tau.size, 2))

@@ -93,6 +93,19 @@ class NoiseBudget:
         """Budget of a term on an axis, or NaN when not budgeted."""
         return self.limits.get(axis, {}).get(term, math.nan)
 
+    def level(self, axis, term, value, low):
+        """
+        Return the level a resolved term raises: WARN or ERROR once its lower end is over.
+
+        ``value``, ``low``: the estimate and its interval's lower end (SI; NaN for a term not
+        resolved, which raises nothing).  Without an interval the point value is all we have.
+        """
+        low_end = low if math.isfinite(low) else value
+        limit = self.limit(axis, term)
+        if low_end > self.error_ratio * limit:
+            return ERROR
+        return WARN if low_end > self.warn_ratio * limit else OK
+
 
 def _fmt(value):
     return f'{value:.3g}' if math.isfinite(value) else 'nan'
@@ -164,14 +177,7 @@ def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None):
                 continue
             conv, unit = conventional(axis, term, value)
             values[f'{term}.conventional'] = f'{conv:.4g} {unit}'
-            # Without an interval the point value is all we have.
-            low_end = low if math.isfinite(low) else value
-            if low_end > budget.error_ratio * limit:
-                term_level = ERROR
-            elif low_end > budget.warn_ratio * limit:
-                term_level = WARN
-            else:
-                term_level = OK
+            term_level = budget.level(axis, term, value, low)
             if term_level > OK:
                 problems.append(f'{term} {_fmt(value)} [{_fmt(low)}, {_fmt(high)}] '
                                 f'{si_unit(axis, term)} exceeds budget {_fmt(limit)} '
