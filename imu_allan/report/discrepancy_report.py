@@ -266,8 +266,8 @@ def findings_text(report):
     within = report.get('within_band') or []
     if within:
         band = report.get('materiality', {}).get('scale')
-        lines.append('within the band that matters' + (f' ({_num(band[0])}-{_num(band[1])})'
-                                                        if band else '') + ':')
+        where = f' ({_num(band[0])}-{_num(band[1])})' if band else ''
+        lines.append(f'within the band that matters{where}:')
         lines += [f'  - {f["sentence"]}' for f in within]
     return lines
 

@@ -1,5 +1,5 @@
 """
-Findings of the discrepancy workflow against the defects real IMU simulators shipped (issues 31, 37).
+Findings of the discrepancy workflow against the defects real simulators shipped (issues 31, 37).
 
 The suite (:mod:`findings_cases`) runs every case of ``CASES`` with four seeds: each defect
 through the simulator's code as implemented and as its parameters are documented (the correct
@@ -276,3 +276,22 @@ def test_rms_density_and_zeroed_walk_from_a_px4_block(tmp_path):
             assert 1 / 1.5 < accel[0].suggested / sp.PX4_IRIS['accel']['random_walk'] < 1.5
         else:
             assert sorted(f.cls for f in accel) == ['missing_term', 'white_scale']
+
+
+def test_report_says_what_is_within_the_band(tmp_path):
+    """The 1 % case's report: no finding, the kept-aside factor said in the console and page."""
+    from imu_allan.report.discrepancy_report import (
+        runs_report_dict,
+        runs_summary_text,
+        write_out_dir,
+    )
+    case = BY_NAME['white_one_percent']
+    result = run_case(case, 0)
+    report = runs_report_dict(result, case.model(case.axes, 250.0), ['a', 'b'])
+    assert report['consistent'] and report['findings'] == []
+    assert report['within_band'] and all(not f['material'] for f in report['within_band'])
+    text = runs_summary_text(report)
+    assert 'findings: none' in text and 'within the band that matters (0.8-1.25)' in text
+    assert 'is consistent with the stated (within 1' in text
+    write_out_dir(tmp_path / 'out', report, lambda folder: None)
+    assert 'Within the band that matters' in (tmp_path / 'out' / 'report.html').read_text()

@@ -96,8 +96,8 @@ def _one_message_flipped(tmp_path, offset, value):
 @pytest.mark.parametrize('offset, value, needle', [
     (CHANNEL_AT, 3, '1 message(s) on channel id(s) 3 that no Channel record declares'),
     (0, 0x85, '1 record(s) inside chunks with an opcode a chunk cannot hold (0x85')])
-def test_damaged_message_header_is_counted(shared_data, tmp_path, both, offset, value,  # noqa: F811
-                                           needle):
+def test_damaged_message_header_is_counted(shared_data, tmp_path, both,  # noqa: F811
+                                           offset, value, needle):
     """An undeclared channel id or a foreign opcode: one message lost, counted, both walks."""
     path = _one_message_flipped(tmp_path, offset, value)
     ref, fast, _ = both(path)
