@@ -5,11 +5,14 @@ Usage::
 
     discrepancy RECORDING... [--model MODEL.yaml|SDF | --terms white_noise,bias_instability]
                 [--json] [--out DIR] [--topic T] [--format FMT] [--sims K] [--seed S]
+                [--materiality LO,HI]
 
 One recording: the single-recording workflow of :mod:`imu_allan.core.discrepancy` (the gap, the
 missing effects added step by step) and, with ``--model``, the findings against the model as
 stated.  Several recordings of one configuration (any rates, any number of runs; ``--model``
-needed): the findings only (:func:`~imu_allan.core.discrepancy.find_discrepancies`).  A bag's
+needed): the findings only (:func:`~imu_allan.core.discrepancy.find_discrepancies`).  A scale
+factor is a finding only outside the ``--materiality`` band (default 0.8,1.25); inside it the
+report says "consistent (within X %)".  A bag's
 Imu covariance is read as the messages' own claim (:mod:`imu_allan.formats.imu_covariance`).
 ``--out DIR`` writes ``report.json``, ``report.html`` and, for one recording, the model, the
 plots and ``corrected.sdf`` for a Gazebo / PX4 model, all at once (a staging folder moved in).
@@ -58,7 +61,24 @@ def build_parser():
                         help='simulation seed (default 0)')
     parser.add_argument('--max-steps', type=bounded_int(0, 20), default=4, metavar='N',
                         help='most effects added per axis (default 4)')
+    parser.add_argument('--materiality', metavar='LO,HI',
+                        help='scale factors (measured / stated) inside this band do not matter: '
+                             'reported as consistent within X %%, not as findings (default '
+                             '0.8,1.25, materiality.DEFAULT_BAND; 1,1: every significant factor)')
     return parser
+
+
+def _materiality(text):
+    """Return the ``--materiality LO,HI`` band (None: the default), or InputError."""
+    from ..core.discrepancy.materiality import Materiality
+    if text is None:
+        return Materiality()
+    try:
+        lo, hi = (float(x) for x in text.split(','))
+        return Materiality(lo, hi)
+    except ValueError:
+        raise InputError('--materiality', f'{text[:40]!r}: give LO,HI with 0 < LO <= 1 <= HI, '
+                                          'e.g. 0.8,1.25') from None
 
 
 def _read_model(path):
@@ -128,7 +148,8 @@ def _one(args, model, sim, terms):
         stated_model, note = _stated_model(model, sim, rate)
         # the workflow's measured curve: the same data, rate, axes and averaging times
         findings = find_discrepancies([Recording(samples.data, rate, samples.axes, source,
-                                                 stated, result.measured)], stated_model)
+                                                 stated, result.measured)], stated_model,
+                                      materiality=args.band)
         if note:
             findings.notes.insert(0, note)
         if sim is not None:
@@ -181,7 +202,7 @@ def _several(args, model, sim):
     if not recordings:
         raise InputError(args.inputs[0], errors[0].split(': ', 1)[-1])
     try:
-        findings = find_discrepancies(recordings, models)
+        findings = find_discrepancies(recordings, models, materiality=args.band)
     except ValueError as exc:  # a record too short for any averaging-time grid
         raise InputError(args.inputs[0], str(exc)) from None
     if sim is not None:
@@ -205,6 +226,7 @@ def _write(out, report, files):
 def main(argv=None):
     """Entry point; returns the exit status."""
     args = build_parser().parse_args(argv)
+    args.band = _materiality(args.materiality)
     terms = None
     if args.terms is not None:
         terms = [t.strip() for t in args.terms.split(',') if t.strip()]

@@ -215,7 +215,9 @@ class SimImu:
 
     ``kind`` is ``'gazebo'`` or ``'px4'``; ``params`` holds, for gazebo, ``{axis: {noise
     field: value, 'type': str}}`` and for PX4 ``{plugin key: value}`` (defaults filled in,
-    listed in ``defaulted``); ``rate_hz`` is the sensor's ``<update_rate>`` (gazebo) or None.
+    listed in ``defaulted``, and for gazebo the ``<noise>`` fields the file does not write, as
+    ``group/letter/noise/field``); ``rate_hz`` is the sensor's ``<update_rate>`` (gazebo) or
+    None.
     """
 
     kind: str
@@ -311,7 +313,9 @@ class SimImu:
         :data:`CONVENTIONS`, first column: Gazebo white N = stddev (a density; precision
         rounding adds precision^2 / 12 per sample at ``data_rate_hz``), Gauss-Markov sigma =
         dynamic_bias_stddev, turn-on bias N(bias_mean + mean, bias_stddev); PX4 as coded
-        (its keys are densities), turn-on bias N(0, TurnOnBiasSigma).  The recordings are
+        (its keys are densities), turn-on bias N(0, TurnOnBiasSigma).  A bias key the file
+        sets to 0 (dynamic_bias_stddev, RandomWalk; not one it leaves out) is a Gauss-Markov of
+        sigma 0, a *zeroed* term the findings name when the data show it.  The recordings are
         compared with this (:func:`imu_allan.core.discrepancy.find_discrepancies`).
         """
         terms, turn_on = {}, {}
@@ -331,6 +335,9 @@ class SimImu:
                 std, tau = p['dynamic_bias_stddev'], p['dynamic_bias_correlation_time']
                 if std > 0 and tau > 0:
                     axis_terms['gauss_markov'] = {'sigma': std, 'tau_c': tau}
+                elif axis_terms and self.written(axis, 'dynamic_bias_stddev'):
+                    # the dynamic bias set to zero: a zeroed term (tau_c 0: unknown)
+                    axis_terms['gauss_markov'] = {'sigma': 0.0, 'tau_c': tau}
                 if axis_terms:
                     terms[axis] = axis_terms
                 turn_on[axis] = {'mean': p['bias_mean'] + p['mean'], 'sigma': p['bias_stddev']}
@@ -343,9 +350,18 @@ class SimImu:
                 for axis in AXES:
                     if is_gyro(axis) == (sensor == 'gyro'):
                         turn_on[axis] = {'mean': 0.0, 'sigma': self.params[keys[3]]}
+                        if axis in terms and self.params[keys[1]] == 0 and \
+                                keys[1] not in self.defaulted:  # RandomWalk set to 0: zeroed
+                            terms[axis]['gauss_markov'] = {'sigma': 0.0,
+                                                           'tau_c': self.params[keys[2]]}
         if not terms:
             raise InputError(self.source, f'{self.label} simulates no noise')
         return NoiseModel(terms, None, turn_on), note
+
+    def written(self, axis, name):
+        """Return True when the file writes gz ``<noise>`` field ``name`` of ``axis``."""
+        group, letter = GZ_AXES[axis]
+        return f'{group}/{letter}/noise/{name}' not in self.defaulted
 
     def key_of(self, axis, term):
         """Return the key that sets ``term`` on ``axis`` (Gazebo: its path), and its value."""
@@ -383,7 +399,43 @@ class SimImu:
             f.parameter, f.suggested = key, value / at_rate
             f.evidence['suggested_at_hz'] = rate
             f.evidence['configured'] = value
+        for f in findings:
+            if f.cls == 'biased_drive' and f.term == 'gauss_markov':
+                f.parameter = self.key_of(f.axis, 'gauss_markov')[0]  # no value corrects it
+            elif f.cls == 'zeroed_term' and f.term == 'gauss_markov' and f.evidence['needed']:
+                self._suggest_zeroed(f, rate)
         return findings
+
+    def _suggest_zeroed(self, f, rate):
+        """
+        Set a zeroed Gauss-Markov's key to what the data show, in the simulator's own terms.
+
+        The data stand for the noise the simulator should make: the key is set as
+        :meth:`corrected` would write it (gz: ``dynamic_bias_stddev`` the driving density and
+        ``stddev`` N sqrt(f); PX4: RandomWalk the driving density, NoiseDensity N), with the
+        correlation time and the white-noise key beside it in ``evidence.also``.
+        """
+        sigma, tau_c = f.evidence['needed']['sigma'], f.evidence['needed']['tau_c']
+        density = f.evidence.get('density') or {}
+        also = {}
+        if self.kind == 'gazebo':
+            group, letter = GZ_AXES[f.axis]
+            terms = {'gauss_markov': {'sigma': sigma, 'tau_c': tau_c}}
+            if density:
+                terms['white_noise'] = {'value': density['measured']}
+            values, _ = gazebo_values(terms, rate, (tau_c, tau_c))
+            f.parameter = f'{group}/{letter}/noise/dynamic_bias_stddev'
+            f.suggested = values['dynamic_bias_stddev']
+            also[f'{group}/{letter}/noise/dynamic_bias_correlation_time'] = tau_c
+            if density:
+                also[f'{group}/{letter}/noise/stddev'] = values['stddev']
+        else:
+            n_key, rw_key, tau_key, _ = PX4_KEYS['gyro' if is_gyro(f.axis) else 'accel']
+            f.parameter, f.suggested = rw_key, gm.driving_density(sigma, tau_c)
+            also[tau_key] = tau_c
+            if density:
+                also[n_key] = density['measured']
+        f.evidence.update(suggested_at_hz=rate, also=also)
 
     def corrected(self, result, data_source=None):
         """
@@ -476,7 +528,7 @@ def read_sim_model(path):
             if params[keys[2]] <= 0:  # the plugin asserts it (gazebo_imu_plugin.cpp:79, :92)
                 raise InputError(where, f'plugin/{keys[2]} must be > 0')
         return SimImu('px4', where, text, params, None, label, defaulted)
-    params = {}
+    params, defaulted = {}, []
     for axis, (group, letter) in GZ_AXES.items():
         holder = elem.find(group)
         holder = holder.find(letter) if holder is not None else None
@@ -492,6 +544,8 @@ def read_sim_model(path):
         p = {'type': kind_text}
         for name, default in GZ_FIELDS.items():
             p[name] = _float(noise, name, where, path_label, default)
+            if noise.find(name) is None:
+                defaulted.append(f'{path_label}/{name}')
             if p[name] < 0 and name not in ('mean', 'bias_mean'):
                 raise InputError(where, f'{path_label}/{name} is negative ({p[name]:g})')
         params[axis] = p
@@ -502,7 +556,7 @@ def read_sim_model(path):
         rate = _float(parent, 'update_rate', where, 'sensor', None)
         if rate is not None and rate < 0:
             raise InputError(where, f'sensor/update_rate is negative ({rate:g})')
-    return SimImu('gazebo', where, text, params, rate or None, label)
+    return SimImu('gazebo', where, text, params, rate or None, label, defaulted)
 
 
 # ---------------------------------------------------------------------------------------------

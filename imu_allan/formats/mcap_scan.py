@@ -7,6 +7,13 @@ compression, CRC checked) and runs of equal message records inside a chunk are s
 with one numpy view. Works without the summary section: a truncated file gives its complete
 chunks (and the complete records of an uncompressed chunk cut short), a corrupt compressed
 chunk is skipped.
+
+Chunks without a CRC cannot show a flipped value, but their structure can show damage, and
+a strict reader (the ``mcap`` package's) refuses it; each such fact is a counted warning
+(:meth:`McapScan.structure_warnings`): messages on a channel id no Channel record declares, a
+Channel naming a schema id no Schema record declares or declared twice differently, records a
+chunk may not hold (only Schema, Channel and Message), and message counts that differ from
+the summary's (the Statistics record, else the chunks' message indexes).
 """
 
 from collections import defaultdict
@@ -87,6 +94,8 @@ def open_chunk(buf, pos, rec_end):
 AHEAD = 4
 
 _MCAP_OPS = frozenset(range(0x01, 0x11))  # record opcodes of MCAP v0 (0x80-0xFF: private)
+#: The records a chunk may hold (MCAP specification, Chunk): Schema, Channel, Message.
+_CHUNK_OPS = frozenset((0x03, 0x04, 0x05))
 
 
 #: Bytes of an MCAP Message record before its data: opcode, length, channel id, sequence,
@@ -114,6 +123,9 @@ class McapScan:
         self.schemas = {}  # id -> name
         self.channels = {}  # id -> (topic, type name, encoding)
         self.counts = defaultdict(int)
+        self.summary_counts = None  # {channel id: messages} the summary states, when it does
+        self.foreign_records = defaultdict(int)  # opcode -> records a chunk may not hold
+        self.channel_problems = []  # Channel records that contradict the declarations
         self.collectors = {}
         self.warnings = []
         self.complete = False
@@ -164,6 +176,7 @@ class McapScan:
                 if self._kernel is not None:
                     for cid in np.flatnonzero(self._kernel_counts).tolist():
                         self.counts[cid] += int(self._kernel_counts[cid])
+                self.warnings += self.structure_warnings()
                 try:
                     buf.release()
                 except BufferError:
@@ -206,10 +219,20 @@ class McapScan:
                     chunk = struct.unpack_from('<Q', buf, pos + 9 + 16)[0]
                     self.chunk_offsets.append(chunk)
                     self.chunk_counts[chunk] = self._index_counts(buf, pos + 41)
+                elif op == 0x0B:
+                    self.summary_counts = self._statistics_counts(buf, pos + 9, pos + 9 + length)
                 pos += 9 + length
         except (struct.error, IndexError, ValueError):
             pass  # a damaged summary only means no help for the walk
         self.chunk_offsets.sort()
+
+    @staticmethod
+    def _statistics_counts(buf, pos, end):
+        """{channel id: messages} of a Statistics record's channel_message_counts."""
+        (size,) = struct.unpack_from('<I', buf, pos + 42)  # after the counts and the times
+        if pos + 46 + size > end or size % 10:
+            raise ValueError('bad Statistics record')
+        return dict(struct.unpack_from('<HQ', buf, pos + 46 + 10 * k) for k in range(size // 10))
 
     @staticmethod
     def _index_counts(buf, pos):
@@ -311,11 +334,9 @@ class McapScan:
                 name, _ = self._string(buf, pos + 11)
                 self.schemas[sid] = name
             elif op == 0x04:
-                (cid,) = unpack_h(buf, pos + 9)
-                (sid,) = unpack_h(buf, pos + 11)
-                topic, p = self._string(buf, pos + 13)
-                enc, _ = self._string(buf, p)
-                self.channels[cid] = (topic, self.schemas.get(sid, ''), enc)
+                self._channel(buf, pos)
+            elif not top and op not in _CHUNK_OPS:
+                self.foreign_records[op] += 1  # (a damaged opcode hides the record it was)
             elif op in (0x0F, 0x02) and top:
                 self.complete = True  # DataEnd or Footer: the summary follows
                 return
@@ -324,6 +345,63 @@ class McapScan:
             # Records ended cleanly without a DataEnd/Footer: the writer did not finish.
             self.warnings.append('MCAP file has no end marker (recording not closed?); '
                                  'read all complete records')
+
+    def _channel(self, buf, pos):
+        """
+        Take the Channel record at ``pos``; one that contradicts the declarations is noted.
+
+        The first declaration of an id stands (the summary's, read first, or the data's): a
+        second that differs, or one naming an undeclared schema id, is damage.
+        """
+        (cid,) = struct.unpack_from('<H', buf, pos + 9)
+        (sid,) = struct.unpack_from('<H', buf, pos + 11)
+        topic, p = self._string(buf, pos + 13)
+        enc, _ = self._string(buf, p)
+        if sid and sid not in self.schemas:
+            self.channel_problems.append(f'channel {cid} ({topic[:60]}) names schema id {sid}, '
+                                         'which no Schema record declares')
+            self.channels.setdefault(cid, (topic, '', enc))
+            return
+        channel = (topic, self.schemas.get(sid, ''), enc)
+        known = self.channels.setdefault(cid, channel)
+        if known != channel:
+            self.channel_problems.append(f'channel {cid} declared as {known[0][:60]} and again '
+                                         f'differently as {topic[:60]}: the first kept')
+
+    def structure_warnings(self):
+        """
+        Return one counted warning per kind of damaged structure the walk met (module docstring).
+
+        Each is damage that changes what is read without any CRC to catch it (a flipped channel
+        id or opcode loses that message), and that a strict reader refuses.
+        """
+        out = []
+        undeclared = {cid: n for cid, n in self.counts.items() if cid not in self.channels}
+        if undeclared:
+            ids = ', '.join(str(c) for c in sorted(undeclared)[:5])
+            out.append(f'{sum(undeclared.values())} message(s) on channel id(s) {ids} that no '
+                       'Channel record declares (damaged channel ids): not read')
+        if self.foreign_records:
+            ops = ', '.join(f'0x{op:02X}' for op in sorted(self.foreign_records)[:5])
+            out.append(f'{sum(self.foreign_records.values())} record(s) inside chunks with an '
+                       f'opcode a chunk cannot hold ({ops}; damaged record headers): skipped')
+        out += [f'damaged Channel record: {p}' for p in self.channel_problems[:3]]
+        stated = self.summary_counts
+        if stated is None and self.chunk_counts and \
+                all(self.chunk_counts.get(o) for o in self.chunk_offsets):
+            stated = defaultdict(int)
+            for counts in self.chunk_counts.values():
+                for cid, n in counts.items():
+                    stated[cid] += n
+        if stated is not None and self.complete and not self.warnings:  # (else: loss said)
+            differ = sorted(c for c in set(stated) | set(self.channels)
+                            if stated.get(c, 0) != self.counts.get(c, 0))
+            if differ:
+                words = '; '.join(f'{self.channels.get(c, (f"channel {c}",))[0][:60]}: '
+                                  f'{stated.get(c, 0)} stated, {self.counts.get(c, 0)} found'
+                                  for c in differ[:3])
+                out.append(f'the summary counts other messages than the file holds ({words})')
+        return out
 
     def _load_kernel(self):
         """

@@ -55,17 +55,21 @@ def report_dict(result, source, findings=None):
         out['findings'] = [_step_finding(step) for step in result.steps
                            if step.effect != 'recalibration']
         out['consistent'] = not out['findings']
-    for f in out['findings']:
-        f['sentence'] = finding_sentence(f)
+    _add_sentences(out)
     return _clean(out)
+
+
+def _add_sentences(out):
+    """Give every finding of a report, material or within the band, its ``sentence``."""
+    for f in out['findings'] + out.get('within_band', []):
+        f['sentence'] = finding_sentence(f)
 
 
 def runs_report_dict(findings, model, sources):
     """Return the JSON report of several recordings: findings, recordings, the stated model."""
     out = {'sources': list(sources), 'model': model.to_dict()['axes']}
     out.update(findings.to_dict())
-    for f in out['findings']:
-        f['sentence'] = finding_sentence(f)
+    _add_sentences(out)
     return _clean(out)
 
 
@@ -77,7 +81,7 @@ def _step_finding(step):
              and 'unit' in v}
     return {'class': 'missing_term', 'axis': step.axis, 'term': step.effect, 'factor': None,
             'factor_ci': None, 'factor_ci95': None, 'rate_exponent': None,
-            'rate_exponent_ci': None,
+            'rate_exponent_ci': None, 'material': True,
             'evidence': {'parameters': params, 'units': units, 'gap_before': step.gap_before,
                          'gap_after': step.gap_after, 'p_value': step.p_value,
                          'tau_range_s': list(step.tau_range) if step.tau_range else None}}
@@ -129,12 +133,63 @@ def _suggestion(f):
     return f'; set {key} to {f["suggested"]:.3g}' + (f' (at {rate:g} Hz)' if rate else '')
 
 
+def _what(f):
+    """Return the words for what a finding's factor is about ('the white noise' ...)."""
+    term = f.get('term') or ''
+    if f['class'] == 'time_constant':
+        return 'the Gauss-Markov correlation time'
+    if f['class'] == 'metadata':
+        return 'the covariance the messages state'
+    if f['class'] == 'run_to_run':
+        return f'the turn-on bias ({(f.get("evidence") or {}).get("kind")})'
+    return 'the white noise' if term == 'white_noise' else 'the ' + term.replace('_', ' ')
+
+
+def _within_sentence(f):
+    """Say a significant factor inside the materiality band: consistent within X %."""
+    return (f'{f["axis"]}: {_what(f)} is consistent with the stated (within '
+            f'{_num(f.get("within_percent"), 2)} %): {_num(f.get("factor"), 4)}'
+            f'{_ci(f.get("factor_ci95"), 4)} (95 %) x the stated{_scaling(f)}, inside the band '
+            f'that matters.')
+
+
+def _zeroed_sentence(f):
+    """Say a term the model sets to zero that the data show, the density slot beside it."""
+    ev = f.get('evidence') or {}
+    words = (f.get('term') or '').replace('_', ' ')
+    shown = ev.get('shown_as', '').replace('_', ' ')
+    needed = ', '.join(f'{k} {_num(v)} {(ev.get("units_needed") or {}).get(k, "")}'.strip()
+                       for k, v in (ev.get('needed') or {}).items())
+    text = (f'{f["axis"]}: the model sets the {words} to zero, but the data show it (as a '
+            f'{shown}; it needs {needed or "a value the data do not fix"})')
+    density = ev.get('density')
+    if density and density['factor'] < 1:
+        text += (f', while the white-noise slot holds {_num(density["stated"])} '
+                 f'{density["unit"]}, {_num(1.0 / density["factor"])} x the measured '
+                 f'{_num(density["measured"])}: the per-sample RMS at '
+                 f'{_num(density["per_sample_rms_at_hz"])} Hz (the record\'s RMS is '
+                 f'{_num(density["record_rms"])}) in a density slot')
+    elif density:
+        text += (f'; the white noise is {_num(f.get("factor"))}{_ci(f.get("factor_ci"))} x '
+                 f'the stated')
+    if f.get('parameter') and f.get('suggested') is not None:
+        text += f'; set {f["parameter"]} to {f["suggested"]:.3g}'
+        also = ev.get('also') or ({density['parameter']: density['suggested']} if density
+                                  and density['factor'] < 1 else {})
+        text += ''.join(f', {k} to {v:.3g}' for k, v in also.items())
+    return text + '.'
+
+
 def finding_sentence(f):
     """One sentence for a finding (its report dict), with the corrected value when known."""
     cls, axis, term = f['class'], f['axis'], f.get('term')
     ev = f.get('evidence') or {}
     factor = f'{_num(f.get("factor"))}{_ci(f.get("factor_ci"))}'
     words = (term or '').replace('_', ' ')
+    if f.get('material') is False:
+        return _within_sentence(f)
+    if cls == 'zeroed_term':
+        return _zeroed_sentence(f)
     if cls in ('white_scale', 'bias_scale'):
         what = 'white noise' if term == 'white_noise' else words
         stated = ev.get('stated')
@@ -162,9 +217,15 @@ def finding_sentence(f):
         return (f'{axis}: the bias levels off (tau_c about {_num(tau_c)} s) where an unbounded '
                 f'random walk is stated: a Gauss-Markov driven at {factor} x the stated K.')
     if cls == 'biased_drive':
-        return (f'{axis}: the bias drifts the same way in every run '
-                f'({ev.get("positive_runs")} of {ev.get("runs")} slopes positive): its drive has '
-                f'a mean of {factor} x its stated per-step standard deviation.')
+        key = f' (of {f["parameter"]})' if f.get('parameter') else ''
+        masked = ev.get('masked') or []
+        return (f'{axis}: the bias drifts the same way in every run and axis '
+                f'({ev.get("positive_runs")} of {ev.get("runs")} slopes positive here): its drive'
+                f'{key} has a mean of {factor} x its stated per-step standard deviation (a '
+                f'uniform draw in [0, 1) used for a zero-mean normal one gives 0.5); draw it '
+                f'zero-mean, no value of the parameter corrects it'
+                + (f' (what the drift also explains is left out: {", ".join(masked)})'
+                   if masked else '') + '.')
     if cls == 'run_to_run':
         return _run_sentence(axis, ev, factor)
     if cls == 'metadata':
@@ -199,10 +260,16 @@ def _run_sentence(axis, ev, factor):
 
 
 def findings_text(report):
-    """Console lines of the findings (each one sentence) and the verdict."""
-    if report.get('consistent'):
-        return ['findings: none: the data match the model']
-    return ['findings:'] + [f'  - {f["sentence"]}' for f in report['findings']]
+    """Console lines of the findings (one sentence each), the verdict, those within the band."""
+    lines = (['findings: none: the data match the model'] if report.get('consistent') else
+             ['findings:'] + [f'  - {f["sentence"]}' for f in report['findings']])
+    within = report.get('within_band') or []
+    if within:
+        band = report.get('materiality', {}).get('scale')
+        where = f' ({_num(band[0])}-{_num(band[1])})' if band else ''
+        lines.append(f'within the band that matters{where}:')
+        lines += [f'  - {f["sentence"]}' for f in within]
+    return lines
 
 
 def runs_summary_text(report):

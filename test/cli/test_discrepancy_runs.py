@@ -174,8 +174,43 @@ def test_an_unreadable_recording_is_left_out_and_said(gz_csvs, tmp_path):
     assert any(str(missing) in n for n in report['notes'])
 
 
+def test_rms_density_and_zeroed_walks_name_the_keys_to_set(px4_bags, tmp_path):
+    """
+    Name the zeroed accelerometer walk of a block with per-sample RMS densities (issue 37).
+
+    The iris recordings against that block (densities the per-sample RMS at 200 Hz, the
+    accelerometer's RandomWalk and TurnOnBiasSigma set to 0).  On the accel axes the zeroed
+    Gauss-Markov is named (``zeroed_term``, factor 1 / sqrt(200) in its 95 % interval) with
+    accelerometerRandomWalk to set (the true 0.006 within a factor 1.5: a 2-min walk's fit)
+    and NoiseDensity beside it; every finding is material and the report states the band.
+    """
+    paths, _ = px4_bags
+    sdf = tmp_path / 'rms.sdf'
+    sdf.write_text(PX4_SDF.replace('0.00018665', f'{0.00018665 * math.sqrt(200):.6g}')
+                   .replace('0.00186', f'{0.00186 * math.sqrt(200):.6g}')
+                   .replace('<accelerometerRandomWalk>0.006', '<accelerometerRandomWalk>0')
+                   .replace('<accelerometerTurnOnBiasSigma>0.196',
+                            '<accelerometerTurnOnBiasSigma>0'))
+    proc = run_command('discrepancy', *paths, '--model', sdf, '--json', timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    report = json.loads(proc.stdout)
+    assert report['materiality']['scale'] == [0.8, 1.25]
+    assert all(f['material'] for f in report['findings'])
+    zeroed = [f for f in report['findings'] if f['class'] == 'zeroed_term']
+    assert sorted(f['axis'] for f in zeroed) == ['accel_x', 'accel_y', 'accel_z']
+    for f in zeroed:
+        assert f['factor_ci95'][0] < 200 ** -0.5 < f['factor_ci95'][1]
+        assert f['parameter'] == 'accelerometerRandomWalk'
+        assert 1 / 1.5 < f['suggested'] / 0.006 < 1.5
+        assert f['evidence']['also']['accelerometerNoiseDensity'] == pytest.approx(0.00186,
+                                                                                   rel=0.05)
+        assert 'set accelerometerRandomWalk to' in f['sentence']
+
+
 @pytest.mark.parametrize('args, needle', [
     (['{a}', '{b}'], 'give --model'),
+    (['{a}', '{b}', '--model', '{sdf}', '--materiality', '1.1,2'], '--materiality'),
+    (['{a}', '{b}', '--model', '{sdf}', '--materiality', 'wide'], '--materiality'),
     (['{missing}', '{missing}', '--model', '{sdf}'], 'no such file'),
     (['{a}', '{b}', '--model', '{sdf}', '--out', '{a}'], 'not a folder'),
     (['{a}', '{b}', '--model', '{bad}'], 'bad.sdf'),

@@ -59,9 +59,15 @@ def sensor(axis):
     return 'gyro' if axis.startswith('gyro') else 'accel'
 
 
-def ar1(rng, n, phi, step_sd, x0=0.0, mean_step=0.0):
-    """x_k = phi x_(k-1) + mean_step + step_sd N(0, 1), k = 0..n-1, from x_(-1) = x0."""
-    w = mean_step + step_sd * rng.standard_normal(n)
+def ar1(rng, n, phi, step_sd, x0=0.0, mean_step=0.0, uniform=False):
+    """
+    x_k = phi x_(k-1) + mean_step + step_sd N(0, 1), k = 0..n-1, from x_(-1) = x0.
+
+    ``uniform`` True draws U[0, 1) where N(0, 1) is meant (a ``rand() / RAND_MAX`` in place of
+    the normal generator): the drive then has a mean of 0.5 and a std of 1 / sqrt(12) = 0.289
+    step_sd.
+    """
+    w = mean_step + step_sd * (rng.random(n) if uniform else rng.standard_normal(n))
     zi = np.array([phi * x0])
     return lfilter([1.0], [1.0, -phi], w, zi=zi)[0]
 
@@ -70,7 +76,7 @@ def ar1(rng, n, phi, step_sd, x0=0.0, mean_step=0.0):
 
 
 def gz_axis(rng, n, rate_hz, p, per_sample=True, driving=True, dynamic=True, random_sign=True,
-            turn_on_in_process=True):
+            turn_on_in_process=True, uniform_drive=False):
     """
     One axis of gz-sensors' GaussianNoiseModel (``per_sample`` etc. True: the code as it is).
 
@@ -78,7 +84,8 @@ def gz_axis(rng, n, rate_hz, p, per_sample=True, driving=True, dynamic=True, ran
     ``driving`` False uses sigma_b_d = sigma_b sqrt(-expm1(-2 dt / tau)) (dynamic_bias_stddev
     read as the stationary std, gz-sensors#616); ``dynamic`` False ignores the dynamic bias (the
     version before it); ``random_sign`` False keeps the turn-on bias's sign;
-    ``turn_on_in_process`` False keeps the turn-on bias constant beside the process.
+    ``turn_on_in_process`` False keeps the turn-on bias constant beside the process;
+    ``uniform_drive`` True draws the dynamic bias's drive from U[0, 1) (:func:`ar1`).
     """
     dt = float(np.float32(1.0 / rate_hz))  # ImuSensor::Update: a float duration
     bias0 = rng.normal(p.get('bias_mean', 0.0), p.get('bias_stddev', 0.0)) \
@@ -94,7 +101,7 @@ def gz_axis(rng, n, rate_hz, p, per_sample=True, driving=True, dynamic=True, ran
         if driving else drive * math.sqrt(-math.expm1(-2.0 * dt / tau))
     phi = math.exp(-dt / tau)
     start = bias0 if turn_on_in_process else 0.0
-    bias = ar1(rng, n, phi, sigma_b_d, x0=start)
+    bias = ar1(rng, n, phi, sigma_b_d, x0=start, uniform=uniform_drive)
     bias[0] = start  # the first update has dt = 0: no bias step
     return bias + (0.0 if turn_on_in_process else bias0) + white
 
@@ -108,13 +115,15 @@ def gz_run(axes, n, rate_hz, seed, config=GZ_TUTORIAL, **code):
 # ---------------------------------------------------------------- PX4 SITL (gazebo classic)
 
 
-def px4_axis(rng, n, rate_hz, p, walk=False, turn_on=True, tau=None, drive_mean=0.0):
+def px4_axis(rng, n, rate_hz, p, walk=False, turn_on=True, tau=None, drive_mean=0.0,
+             uniform_drive=False):
     """
     One axis of gazebo_imu_plugin's addNoise (defaults: the code as it is).
 
     ``walk`` True drops the decay (phi = 1, the step sd of tau -> inf: an unbounded random
     walk of strength RandomWalk); ``turn_on`` False draws no turn-on bias; ``tau`` replaces the
-    correlation time; ``drive_mean`` adds a mean to the bias drive per step (units of its sd).
+    correlation time; ``drive_mean`` adds a mean to the bias drive per step (units of its sd);
+    ``uniform_drive`` draws the bias drive from U[0, 1) (:func:`ar1`).
     """
     dt = 1.0 / rate_hz
     tau = p['tau'] if tau is None else tau
@@ -125,7 +134,7 @@ def px4_axis(rng, n, rate_hz, p, walk=False, turn_on=True, tau=None, drive_mean=
     else:
         phi = math.exp(-dt / tau)
         step = math.sqrt(-rw * rw * tau / 2.0 * (math.exp(-2.0 * dt / tau) - 1.0))
-    bias = ar1(rng, n, phi, step, mean_step=drive_mean * step)
+    bias = ar1(rng, n, phi, step, mean_step=drive_mean * step, uniform=uniform_drive)
     return bias + p['density'] / math.sqrt(dt) * rng.standard_normal(n) + b_on
 
 

@@ -1,5 +1,5 @@
 """
-Findings of the discrepancy workflow against the defects real IMU simulators shipped (issue 31).
+Findings of the discrepancy workflow against the defects real simulators shipped (issues 31, 37).
 
 The suite (:mod:`findings_cases`) runs every case of ``CASES`` with four seeds: each defect
 through the simulator's code as implemented and as its parameters are documented (the correct
@@ -13,8 +13,10 @@ independently of the package's simulator.  The issue's rates, asserted here:
   honest 68.3 % interval covers 68 % +- 7 % on 52 cases; below 55 % the intervals would be
   too narrow by a factor of about 1.3);
 * the correct implementations, and the non-defects, leave nothing on >= 95 % of their
-  analyses (at most 2 of 56 with a finding; Bonferroni at 1 % per analysis makes about 0.5
-  expected).
+  analyses (at most 3 of 72 with a finding; Bonferroni at 1 % per analysis makes about 0.7
+  expected);
+* a white noise stated 1 % off is never named, though its factor excludes 1 (the materiality
+  band, :mod:`imu_allan.core.discrepancy.materiality`).
 
 ``python test/core/findings_cases.py 25`` measures the same with 25 seeds (docs/discrepancy.md).
 The building blocks (pooling over rates, the run-to-run tests, the model file's turn-on bias,
@@ -24,11 +26,13 @@ the SDF reader's documented reading and its suggestions) are tested on their own
 import math
 
 from core import simulator_pairs as sp
-from core.findings_cases import BY_NAME, CASES, suite, summary
-from imu_allan.core.discrepancy import find_discrepancies, Recording
+from core.findings_cases import BY_NAME, CASES, run_case, suite, summary
+from imu_allan.core.discrepancy import find_discrepancies, Finding, Recording
 from imu_allan.core.discrepancy.evidence import LogEstimate
+from imu_allan.core.discrepancy.materiality import Materiality
 from imu_allan.core.discrepancy.pooling import pool, z_critical
 from imu_allan.core.model import ModelError, NoiseModel
+from imu_allan.formats.gazebo_sdf import read_sim_model
 import numpy as np
 import pytest
 
@@ -43,7 +47,7 @@ def records():
 
 def test_defects_are_named(records):
     stats = summary(records)
-    assert stats['cases'] == 13 * len(SEEDS)
+    assert stats['cases'] == sum(1 for c in CASES if c.cls) * len(SEEDS)
     assert stats['named'] >= 0.90, [r for r in records if r['named'] is False]
     for case in CASES:
         if case.cls:
@@ -162,3 +166,132 @@ def test_generators_follow_their_sources():
     rng = np.random.default_rng(3)
     h = sp.hector_axis(rng, 400000, 100.0, 1.0, 1.0 / 20.0, 0.0)
     assert np.std(h[20000:]) == pytest.approx(0.1, rel=0.15)
+
+
+def test_one_percent_is_significant_and_never_named(records):
+    """
+    The white noise stated 1.01 x (two rates, two 10-min runs each): consistent within ~1 %.
+
+    The factor's 95 % interval excludes 1 on most seeds (the case is one the old rule named),
+    yet nothing is a finding; what is kept aside says the factor and how close it is.
+    """
+    rs = [r for r in records if r['case'] == 'white_one_percent']
+    assert rs and all(r['defect_consistent'] and r['correct_consistent'] for r in rs)
+    assert sum(bool(r['within']) for r in rs) >= 3
+    for r in rs:
+        for cls, _, factor, within in r['within']:
+            assert cls == 'white_scale' and factor == pytest.approx(1 / 1.01, abs=0.005)
+            assert 0.5 < within < 2.5
+
+
+def _finding(cls, factor, ci95, exponent=None, **evidence):
+    return Finding(cls, 'gyro_x', 'white_noise', factor, None, ci95, exponent, None, evidence)
+
+
+def test_materiality_band():
+    """Ratios outside the band are material, inside it are not; other classes always are."""
+    band = Materiality()
+    assert not band.material(_finding('white_scale', 1.01, [1.004, 1.016]))
+    assert band.within_percent(_finding('white_scale', 1.01, [1.004, 1.016])) == \
+        pytest.approx(1.6)
+    assert band.material(_finding('white_scale', 1.3, [1.2, 1.4]))
+    assert band.material(_finding('bias_scale', 0.7, [0.6, 0.8]))
+    assert not band.material(_finding('metadata', 1.5, [1.45, 1.55]))  # a variance: band^2
+    assert band.material(_finding('metadata', 1.6, [1.55, 1.65]))
+    assert band.material(_finding('run_to_run', 0.9, [0.85, 0.95], kind='bimodal'))
+    assert not band.material(_finding('run_to_run', 0.9, [0.85, 0.95], kind='spread'))
+    assert band.material(_finding('biased_drive', 0.01, [0.005, 0.015]))
+    # 1 at 1 Hz but f^-1/2: judged at the rates recorded
+    scaled = _finding('white_scale', 1.0, [0.99, 1.01], -0.5, per_rate=[
+        {'rate_hz': 100.0, 'factor': 0.1, 'factor_ci': [0.099, 0.101]}])
+    assert band.material(scaled)
+    assert Materiality(1.0, 1.0).material(_finding('white_scale', 1.01, [1.004, 1.016]))
+    for lo, hi in ((1.1, 2.0), (0.0, 1.2), (0.8, 0.9)):
+        with pytest.raises(ValueError, match='must hold 1'):
+            Materiality(lo, hi)
+
+
+def test_biased_drive_in_one_run_of_three_axes():
+    """
+    A uniform [0, 1) drive in one 5-min run of three gyro axes (PX4 addNoise).
+
+    The sign test alone cannot reach the decision level with three slopes (p >= 0.25); the
+    t test of the drive factors does.  The factor is the drive's mean over the stated step sd,
+    0.5; nothing else is named (the drift's ramp and scale are the drive's, masked).
+    """
+    case = BY_NAME['px4_uniform_drive']
+    result = run_case(case, 11)
+    assert {f.cls for f in result.findings} == {'biased_drive'}
+    for f in result.findings:
+        assert f.evidence['p_sign'] >= 0.25 and f.evidence['p_value'] < 0.01 / result.n_tests
+        assert f.factor_ci95[0] < 0.5 < f.factor_ci95[1]
+        assert f.parameter == f'{f.axis}.gauss_markov'
+        assert f.to_dict()['material'] is True
+
+
+PX4_RMS = """<plugin name="rotors_gazebo_imu_plugin" filename="libgazebo_imu_plugin.so">
+  <gyroscopeNoiseDensity>{g}</gyroscopeNoiseDensity>
+  <gyroscopeRandomWalk>0</gyroscopeRandomWalk>
+  <gyroscopeBiasCorrelationTime>1000.0</gyroscopeBiasCorrelationTime>
+  <accelerometerNoiseDensity>{a}</accelerometerNoiseDensity>
+  {accel_walk}
+  <accelerometerBiasCorrelationTime>300.0</accelerometerBiasCorrelationTime>
+</plugin>
+"""
+
+
+def test_rms_density_and_zeroed_walk_from_a_px4_block(tmp_path):
+    """
+    A PX4 block with per-sample RMS (at 200 Hz) densities and RandomWalk set to 0.
+
+    Against the sensor it should simulate (PX4's iris noise, two 10-min records at 100 and
+    250 Hz): the zeroed Gauss-Markov is named with the white factor 1 / sqrt(200) and the
+    values to set in the plugin's own terms (RandomWalk the driving density: the true 3.88e-5
+    and 0.006 within a factor 1.5, the spread of a 10-min walk's fit over six seeds being
+    +-17 %; NoiseDensity within 3 %).  Left out (not written) the key is no zeroed term: the
+    walk is then a missing term.
+    """
+    rms = {s: p['density'] * math.sqrt(200.0) for s, p in sp.PX4_IRIS.items()}
+    axes = ('gyro_x', 'accel_x')
+    recs = [Recording(sp.px4_run(axes, int(600 * rate), rate, [5, k], turn_on=False), rate,
+                      axes) for k, rate in enumerate((100.0, 250.0))]
+    for written in (True, False):
+        path = tmp_path / f'px4_{written}.sdf'
+        path.write_text(PX4_RMS.format(g=rms['gyro'], a=rms['accel'], accel_walk=(
+            '<accelerometerRandomWalk>0</accelerometerRandomWalk>' if written else '')))
+        sim = read_sim_model(path)
+        models = [sim.intended_model(r.rate_hz)[0] for r in recs]
+        result = find_discrepancies(recs, models)
+        sim.suggest(result.findings, [r.rate_hz for r in recs])
+        found = {f.axis: f for f in result.findings}
+        gyro = found['gyro_x']
+        assert gyro.cls == 'zeroed_term' and gyro.parameter == 'gyroscopeRandomWalk'
+        assert gyro.factor_ci95[0] < 200 ** -0.5 < gyro.factor_ci95[1]
+        assert 1 / 1.5 < gyro.suggested / sp.PX4_IRIS['gyro']['random_walk'] < 1.5
+        assert gyro.evidence['also']['gyroscopeNoiseDensity'] == pytest.approx(
+            sp.PX4_IRIS['gyro']['density'], rel=0.03)
+        accel = [f for f in result.findings if f.axis == 'accel_x']
+        if written:
+            assert [f.cls for f in accel] == ['zeroed_term']
+            assert 1 / 1.5 < accel[0].suggested / sp.PX4_IRIS['accel']['random_walk'] < 1.5
+        else:
+            assert sorted(f.cls for f in accel) == ['missing_term', 'white_scale']
+
+
+def test_report_says_what_is_within_the_band(tmp_path):
+    """The 1 % case's report: no finding, the kept-aside factor said in the console and page."""
+    from imu_allan.report.discrepancy_report import (
+        runs_report_dict,
+        runs_summary_text,
+        write_out_dir,
+    )
+    case = BY_NAME['white_one_percent']
+    result = run_case(case, 0)
+    report = runs_report_dict(result, case.model(case.axes, 250.0), ['a', 'b'])
+    assert report['consistent'] and report['findings'] == []
+    assert report['within_band'] and all(not f['material'] for f in report['within_band'])
+    text = runs_summary_text(report)
+    assert 'findings: none' in text and 'within the band that matters (0.8-1.25)' in text
+    assert 'is consistent with the stated (within 1' in text
+    write_out_dir(tmp_path / 'out', report, lambda folder: None)
+    assert 'Within the band that matters' in (tmp_path / 'out' / 'report.html').read_text()

@@ -14,9 +14,12 @@ with a standard error in log space from the sandwich covariance.  Around that:
   random walk is tried as a bounded Gauss-Markov;
 * when the refitted model still leaves the band, the effects the model lacks compete as in the
   single-recording workflow (:func:`.workflow.evaluate_candidates`), up to two per axis;
+* a stated term whose amplitude is zero (a simulator key set to 0) is left out of the fit
+  and listed as *zeroed*: when the data show it, it is among the effects the model lacks;
 * the raw numbers the run-to-run, drive and metadata evidence need: the means of the first and
-  last tenth of the record, the least-squares slope, and the per-sample white variance (the
-  Allan variance at the shortest averaging time).
+  last tenth of the record, the least-squares slope, the record's RMS (the per-sample std of
+  everything in it) and the per-sample white variance (the Allan variance at the shortest
+  averaging time).
 
 SI units throughout; factors are measured / stated.  ROS-free.
 """
@@ -116,8 +119,10 @@ class AxisEvidence:
     the factor's upper limits ``{'upper68', 'upper_crit', 'p_stated'}``, ``process`` the
     wrong-process evidence or None, ``missing`` the effects added (``{'term', 'params',
     'p_value'}``), ``gap_stated`` / ``gap_fitted`` the gap against the stated and the
-    refitted model, ``means`` / ``slope_per_s`` the raw statistics, ``white_variance`` the
-    per-sample white variance with its EDF.
+    refitted model, ``means`` / ``slope_per_s`` / ``rms`` the raw statistics, ``white_variance``
+    the per-sample white variance with its EDF, ``zeroed`` the stated terms of amplitude zero
+    (``{term: params}``, left out of ``stated`` and of the fit), ``tau_range`` the averaging
+    times measured (s).
     """
 
     axis: str
@@ -138,8 +143,11 @@ class AxisEvidence:
     means: dict = field(default_factory=dict)
     mean_noise_var: dict = field(default_factory=dict)
     slope_per_s: float = math.nan
+    rms: float = math.nan
     white_variance: tuple = (math.nan, math.nan)
     stated_variance: float = None
+    zeroed: dict = field(default_factory=dict)
+    tau_range: tuple = (math.nan, math.nan)
 
 
 def _log_sd(fit, term, kind):
@@ -343,6 +351,12 @@ def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, free
     return positions, position_p, free_scales, process
 
 
+def split_zeroed(terms):
+    """Return ``(terms with a positive amplitude, the terms whose amplitude is 0)``."""
+    kept = {t: p for t, p in terms.items() if amplitude(p, t) > 0}
+    return kept, {t: p for t, p in terms.items() if t not in kept}
+
+
 def _raw_statistics(x, rate_hz):
     """Means of the first and last tenth of the record, and the LS slope (per s)."""
     n = x.size
@@ -387,12 +401,14 @@ def measure_recording(recording, model, z_crit=3.0, alpha=ALPHA, points_per_deca
                          'for a discrepancy analysis')
     out = {}
     for j, axis in enumerate(recording.axes):
-        stated = model.terms.get(axis, {})
-        if not stated and axis not in model.turn_on_bias:
+        stated, zeroed = split_zeroed(model.terms.get(axis, {}))
+        if not (stated or zeroed) and axis not in model.turn_on_bias:
             continue
         x = data[:, j]
-        ev = AxisEvidence(axis, rate, recording.duration_s, stated, {})
+        ev = AxisEvidence(axis, rate, recording.duration_s, stated, {}, zeroed=zeroed)
         ev.means, ev.slope_per_s = _raw_statistics(x, rate)
+        ev.rms = float(np.std(x))
+        ev.tau_range = (float(measured.tau[0]), float(measured.tau[-1]))
         if recording.stated_variance and axis in recording.stated_variance:
             ev.stated_variance = recording.stated_variance[axis]
         ev.white_variance = (float(measured.avar[0, j]), float(measured.edf[0, j]))

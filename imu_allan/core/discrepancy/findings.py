@@ -19,6 +19,10 @@ wrong_process      a walk where a bounded Gauss-Markov is stated or the reverse;
                    the measured driving density / the stated one
 biased_drive       a drift of the same sign on every axis and run; factor = the drive's mean
                    per step / its stated standard deviation per step
+zeroed_term        a term the model sets to zero (a simulator key at 0) that the data show;
+                   factor = the white noise's measured / stated (< 1 when the density slot
+                   carries the per-sample RMS that stood in for it); ``suggested`` the value
+                   the zeroed term needs
 run_to_run         the turn-on bias: spread, mean, a sign drawn at random (factor = sign
                    agreement), or a decay (factor = last-tenth / first-tenth level)
 metadata           the messages' covariance / the measured per-sample variance
@@ -27,7 +31,9 @@ missing_term       an effect the model lacks (no factor: its fitted parameters a
 
 Every test of an analysis is counted and the decision level is Bonferroni over all of them at
 ``alpha`` (1 % by default): on recordings that match their model the whole list stays empty
-in about 99 % of analyses.  Factors carry 68.3 % intervals (``factor_ci``) and 95 % ones
+in about 99 % of analyses.  A significant factor is a finding only when it matters
+(:mod:`.materiality`: outside the band 0.8-1.25 by default); the others are kept aside as
+*consistent within X %*.  Factors carry 68.3 % intervals (``factor_ci``) and 95 % ones
 (``factor_ci95``).  SI units; ROS-free.
 """
 
@@ -39,14 +45,19 @@ from scipy.stats import chi2
 
 from .band import ALPHA, Z95
 from .evidence import amplitude, LogEstimate, measure_recording
+from .materiality import Materiality
 from .pooling import pool, z_critical
 from .runs import drive_test, MIN_RUNS, turn_on_tests
+from ..simulation.gauss_markov import best_gauss_markov, BIAS_TERMS, stationary_sigma
 from ..terms import TERMS
 from ..units import sensor_of
 
 #: The order findings are listed in.
 CLASSES = ('white_scale', 'bias_scale', 'time_constant', 'term_absent', 'wrong_process',
-           'biased_drive', 'run_to_run', 'metadata', 'missing_term')
+           'biased_drive', 'zeroed_term', 'run_to_run', 'metadata', 'missing_term')
+#: Findings on an axis whose bias drifts with a biased drive that describe its bias terms: the
+#: drift is in their Allan variance too, so they are left to the biased_drive finding.
+DRIFT_MASKED = ('bias_scale', 'time_constant', 'wrong_process', 'term_absent', 'missing_term')
 #: Terms whose amplitude is a white-type (short averaging time) level.
 WHITE_TERMS = ('white_noise', 'quantization')
 #: Tests per axis besides two per stated term (factor and its rate exponent): position,
@@ -69,13 +80,17 @@ class Finding:
     evidence: dict = field(default_factory=dict)
     parameter: str = None
     suggested: float = None
+    material: bool = True
+    within_percent: float = None
 
     def to_dict(self):
         """Report entry: the contract keys, then ``parameter`` / ``suggested`` when known."""
         out = {'class': self.cls, 'axis': self.axis, 'term': self.term, 'factor': self.factor,
                'factor_ci': self.factor_ci, 'factor_ci95': self.factor_ci95,
                'rate_exponent': self.rate_exponent, 'rate_exponent_ci': self.rate_exponent_ci,
-               'evidence': self.evidence}
+               'evidence': self.evidence, 'material': self.material}
+        if not self.material:
+            out['within_percent'] = self.within_percent
         if self.parameter is not None:
             out['parameter'] = self.parameter
             out['suggested'] = self.suggested
@@ -94,21 +109,26 @@ class FindingsResult:
     alpha: float
     notes: list = field(default_factory=list)
     evidence: dict = field(default_factory=dict)  # {axis: [AxisEvidence per recording]}
+    within: list = field(default_factory=list)  # significant, inside the materiality band
+    materiality: Materiality = field(default_factory=Materiality)
 
     @property
     def consistent(self):
-        """Return True when the data match the model (no finding)."""
+        """Return True when the data match the model (no material finding)."""
         return not self.findings
 
     def to_dict(self):
         """Return ``findings``, ``consistent``, ``recordings`` and how the decisions were made."""
         return {'consistent': self.consistent,
                 'findings': [f.to_dict() for f in self.findings],
+                'within_band': [f.to_dict() for f in self.within],
+                'materiality': self.materiality.to_dict(),
                 'recordings': self.recordings,
                 'decision': {'alpha': self.alpha, 'tests': self.n_tests,
                              'z_critical': self.z_crit,
                              'rule': 'Bonferroni over every test of the analysis; factor '
-                                     'intervals 68.3 % (factor_ci) and 95 % (factor_ci95)'},
+                                     'intervals 68.3 % (factor_ci) and 95 % (factor_ci95); a '
+                                     'finding needs its factor outside the materiality band'},
                 'notes': list(self.notes)}
 
 
@@ -137,12 +157,17 @@ def _significant(pooled, z_crit):
 
 
 def _axis_findings(axis, evs, z_crit, p_crit):
-    """Return the findings of the Allan-variance evidence of one axis over its recordings."""
-    out = []
+    """
+    Return the findings of the Allan-variance evidence of one axis over its recordings.
+
+    Also returns ``{term: Pooled}``, each stated term's pooled amplitude factor (significant
+    or not).
+    """
+    out, scales = [], {}
     stated = evs[0].stated
     fitted = [e for e in evs if e.fitted]
     if not fitted:
-        return out
+        return out, scales
     unit = {t: TERMS[t].param_unit(axis, TERMS[t].params[0]) for t in stated}
     # a walk where a bounded bias is stated (or the reverse), in most of the recordings
     process = [e.process for e in fitted if e.process is not None]
@@ -176,7 +201,7 @@ def _axis_findings(axis, evs, z_crit, p_crit):
         if term == 'gauss_markov' and tau_pooled is not None:
             source = 'free_scales'  # with the correlation time refitted
         estimates = [getattr(e, source)[term] for e in fitted if term in getattr(e, source)]
-        pooled = pool(estimates, z_crit)
+        pooled = scales[term] = pool(estimates, z_crit)
         absent = [e.absent[term] for e in fitted if term in e.absent]
         # absent: most recordings do without it and reject its stated size, unless the
         # recordings that do show it tell how it scales with the rate
@@ -210,7 +235,91 @@ def _axis_findings(axis, evs, z_crit, p_crit):
                                                 for k in params},
                 'per_recording': found, 'recordings_with_it': len(found),
                 'recordings': len(fitted)}))
-    return out
+    return out, scales
+
+
+def _zeroed_params(term, stated, found, params, tau_range, rate_hz):
+    """
+    Return the parameters ``term`` needs to be what the data show as ``found``, or None.
+
+    The same family: its fitted parameters.  A zeroed Gauss-Markov (its stated tau_c kept
+    when it has one) or random walk shown as another bias term: the Gauss-Markov closest to
+    it over the measured averaging times
+    (:func:`~imu_allan.core.simulation.gauss_markov.best_gauss_markov`), as sigma and tau_c or
+    as its driving density.
+    """
+    if found == term:
+        return dict(params)
+    if term not in ('gauss_markov', 'rate_random_walk') or found not in BIAS_TERMS:
+        return None
+    gm = best_gauss_markov({found: params}, tau_range, rate_hz)
+    if term == 'rate_random_walk':
+        return {'value': gm.drive}
+    tau_c = stated.get('tau_c') or 0.0
+    if tau_c > 0 and found == 'rate_random_walk':  # below tau_c a Gauss-Markov is that walk
+        return {'sigma': stationary_sigma(params['value'], tau_c), 'tau_c': tau_c}
+    return {'sigma': gm.sigma, 'tau_c': gm.tau_c}
+
+
+def _zeroed_findings(axis, evs, found, white):
+    """
+    Turn the missing effects that stand for a zeroed term into ``zeroed_term`` findings.
+
+    ``found``: the axis's findings; ``white``: its pooled white-noise factor (or None).  A
+    zeroed term is matched with the missing effect of its own family, else (a bias term) with
+    the first missing bias effect.  The finding's factor is the white noise's: a density slot
+    that carries a per-sample RMS (the bias folded into it) has factor 1 / sqrt(f) at the
+    rate f of that RMS, which the evidence states with the record's own RMS beside it; the
+    white-scale finding of the axis is folded into it.  Returns the new list.
+    """
+    zeroed = evs[0].zeroed
+    missing = [f for f in found if f.cls == 'missing_term']
+    if not zeroed or not missing:
+        return found
+    out = [f for f in found if f.cls != 'missing_term']
+    fitted = [e for e in evs if e.fitted]
+    tau_range = (min(e.tau_range[0] for e in fitted), max(e.tau_range[1] for e in fitted))
+    rate = float(np.median([e.rate_hz for e in fitted]))
+    for term, params in zeroed.items():
+        match = next((m for m in missing if m.term == term), None) or next(
+            (m for m in missing if term in BIAS_TERMS and m.term in BIAS_TERMS), None)
+        if match is None:
+            continue
+        missing.remove(match)
+        density = next((f for f in out if f.cls == 'white_scale' and f.term == 'white_noise'),
+                       None)
+        if density is not None:
+            out.remove(density)
+        needed = _zeroed_params(term, params, match.term, match.evidence['parameters'],
+                                tau_range, rate)
+        evidence = {'shown_as': match.term, **match.evidence, 'stated': dict(params),
+                    'needed': needed, 'density': _density_evidence(evs, white),
+                    'units_needed': {k: TERMS[term].param_unit(axis, k) for k in needed or {}}}
+        key = TERMS[term].params[0]
+        f = Finding('zeroed_term', axis, term, evidence=evidence, parameter=f'{axis}.{term}.{key}',
+                    suggested=needed[key] if needed else None)
+        if white is not None:
+            f.factor, f.factor_ci, f.factor_ci95 = white.factor(), white.interval(), \
+                white.interval(Z95)
+            if white.scaled:
+                f.rate_exponent, f.rate_exponent_ci = white.exponent, white.exponent_interval()
+        out.append(f)
+    return out + missing
+
+
+def _density_evidence(evs, white):
+    """Return what the white-noise slot holds against the data (and the record's RMS)."""
+    stated = evs[0].stated.get('white_noise')
+    if stated is None or white is None:
+        return None
+    n_stated = amplitude(stated, 'white_noise')
+    rms = float(np.median([e.rms for e in evs]))
+    factor = white.factor()
+    return {'stated': n_stated, 'measured': n_stated * factor, 'factor': factor,
+            'unit': TERMS['white_noise'].param_unit(evs[0].axis, 'value'),
+            'parameter': f'{evs[0].axis}.white_noise.value', 'suggested': n_stated * factor,
+            'record_rms': rms, 'stated_over_record_rms': n_stated / rms if rms > 0 else None,
+            'per_sample_rms_at_hz': factor ** -2 if factor < 1 else None}
 
 
 def _run_findings(axis, evs, stated, p_crit):
@@ -268,7 +377,7 @@ def count_tests(models, recordings):
 
 
 def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
-                       min_clusters=10):
+                       min_clusters=10, materiality=None):
     """
     Compare recordings of one configuration with the noise model it states: findings.
 
@@ -284,6 +393,9 @@ def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
     points_per_decade, min_clusters : int
         Averaging-time grid of the estimator (as
         :func:`~imu_allan.core.allan.estimate.allan_deviation`).
+    materiality : Materiality, optional
+        The band of scale factors that do not matter (default 0.8-1.25,
+        :mod:`.materiality`); a significant factor inside it goes to ``within``.
 
     Returns
     -------
@@ -318,7 +430,8 @@ def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
     few_runs = []
     for axis, evs in per_axis.items():
         stated_terms[axis] = evs[0].stated
-        findings += _axis_findings(axis, evs, z_crit, p_crit)
+        axis_found, scales = _axis_findings(axis, evs, z_crit, p_crit)
+        findings += _zeroed_findings(axis, evs, axis_found, scales.get('white_noise'))
         turn_on = models[0].turn_on_bias.get(axis)
         if turn_on is not None:
             runs, decays = _run_findings(axis, evs, turn_on, p_crit)
@@ -338,18 +451,41 @@ def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
                  if sensor_of(a) == sensor and a not in decaying}
         p, axes = drive_test(group, stated_terms)
         if p < p_crit:
-            for axis, d in axes.items():
-                findings.append(Finding('biased_drive', axis, next(
-                    (t for t in ('rate_random_walk', 'gauss_markov')
-                     if t in stated_terms.get(axis, {})), None), d['factor'], d['factor_ci'],
-                    d['factor_ci95'], evidence={**d['evidence'], 'p_value': p}))
-            drifting = set(axes)
-            findings = [f for f in findings if not (f.cls == 'missing_term' and
-                                                    f.term == 'rate_ramp' and
-                                                    f.axis in drifting)]
+            findings = _drive_findings(findings, axes, stated_terms, p)
     findings.sort(key=lambda f: (CLASSES.index(f.cls), f.axis))
-    return FindingsResult(findings, summaries, sorted(per_axis), n_tests, z_crit, alpha,
-                          notes, per_axis)
+    materiality = materiality or Materiality()
+    for f in findings:
+        f.material = materiality.material(f)
+        if not f.material:
+            f.within_percent = materiality.within_percent(f)
+    return FindingsResult([f for f in findings if f.material], summaries, sorted(per_axis),
+                          n_tests, z_crit, alpha, notes, per_axis,
+                          [f for f in findings if not f.material], materiality)
+
+
+def _drive_findings(findings, axes, stated_terms, p):
+    """
+    Add the biased_drive findings of one sensor's drifting axes; mask what the drift explains.
+
+    On those axes the findings about the bias terms (:data:`DRIFT_MASKED`, not white noise)
+    describe the drift as well (a ramp, a bias scale or correlation time fitted to it): they
+    are left out and named in the drive's evidence (``masked``).
+    """
+    out = []
+    masked = {}
+    for f in findings:
+        if f.axis in axes and f.cls in DRIFT_MASKED and f.term not in WHITE_TERMS:
+            masked.setdefault(f.axis, []).append(f'{f.cls} {f.term}')
+        else:
+            out.append(f)
+    for axis, d in axes.items():
+        term = next((t for t in ('rate_random_walk', 'gauss_markov')
+                     if t in stated_terms.get(axis, {})), None)
+        out.append(Finding('biased_drive', axis, term, d['factor'], d['factor_ci'],
+                           d['factor_ci95'], evidence={**d['evidence'], 'p_value': p,
+                                                       'masked': masked.get(axis, [])},
+                           parameter=f'{axis}.{term}' if term else None))
+    return out
 
 
 def fisher(p_values):

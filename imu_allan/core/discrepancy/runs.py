@@ -21,10 +21,11 @@ An accelerometer axis whose runs sit at more than 1 m/s^2 carries gravity: only 
 intercept) and spread are tested there.
 
 Drift with a biased drive: a random walk or Gauss-Markov driven by noise with a non-zero mean
-drifts the same way in every run and on every axis.  The least-squares slope of each run is a
-sign: under a zero-mean drive the signs are fair coins, so the count of positive slopes over all
-runs and axes of a sensor is binomial(n, 1/2).  The factor is the drive's mean in units of its
-standard deviation per step, from the mean slope and the stated drive.
+(a uniform draw in [0, 1) used as a zero-mean normal one) drifts the same way in every run and
+on every axis.  The least-squares slope of each run is a sign: under a zero-mean drive the signs
+are fair coins (binomial(n, 1/2) over all runs and axes of a sensor), and the drive factors the
+slopes give (the drive's mean in units of its stated standard deviation per step) scatter about
+0; :func:`drive_test` tests both.
 
 All intervals are 68.3 % (t or chi-square quantiles for the few runs there are).
 """
@@ -202,43 +203,89 @@ def _drive(stated_terms, rate_hz):
     return None
 
 
+def _slope_variance(terms, rate_hz, duration_s):
+    """
+    Variance of a record's least-squares slope under ``terms``, up to a common factor.
+
+    2 AVAR(T/2) / (T/2)^2, the variance of the difference of the two halves' means over half
+    the record: the OLS slope's variance is 0.75 of it for white noise and 0.9 for a random
+    walk, so it weighs records of different lengths and rates against each other (the scale
+    itself is estimated from the slopes, :func:`drive_test`).
+    """
+    from ..terms import model_avar
+    half = 0.5 * duration_s
+    return 2.0 * float(model_avar(terms, np.array([half]), rate_hz)[0]) / half ** 2
+
+
+def _run_factors(evs, stated):
+    """
+    Each run's drive factor (mean step / stated step sd) and its relative variance, or None.
+
+    None when the axis states no drive (a random walk or a Gauss-Markov).
+    """
+    out = []
+    for e in evs:
+        drive = _drive(stated, e.rate_hz)
+        if drive is None or not math.isfinite(e.slope_per_s):
+            return None
+        step_sd, tau_c = drive
+        per_slope = 1.0 / (e.rate_hz * _ramp_gain(tau_c, e.duration_s) * step_sd)
+        out.append((e.slope_per_s * per_slope,
+                    _slope_variance(stated, e.rate_hz, e.duration_s) * per_slope ** 2))
+    return out
+
+
+def _sign_p(slopes):
+    """Two-sided binomial(n, 1/2) p-value of the positive count among ``slopes``."""
+    n, k = len(slopes), int(np.sum(np.array(slopes) > 0))
+    return float(min(1.0, 2.0 * min(binom.cdf(k, n, 0.5), binom.sf(k - 1, n, 0.5))))
+
+
 def drive_test(per_axis, stated_terms):
     """
-    Sign test of the drift of one sensor's axes over all runs, and each axis's drive factor.
+    Test one sensor's drift over all its runs and axes for a drive with a mean; each axis's factor.
+
+    Two tests, the smaller p-value doubled (Bonferroni): the *sign* test (the slopes' signs
+    against binomial(n, 1/2), exact under any zero-mean drive) and a *t test* of the runs'
+    drive factors (each run's mean step over the stated step sd, weighted by the relative
+    variance the stated model gives its slope, :func:`_slope_variance`): their weighted mean
+    against 0 with the scale estimated from their scatter about it, t(n - 1).  The t test needs
+    no stated scale, so a mis-scaled bias term does not make a drift of it, and it tells a
+    drift every axis shares in one run of three axes (the sign test needs 13 slopes to reach
+    a Bonferroni level of 1e-4).  An axis's factor is its runs' weighted mean with that pooled
+    scatter (t intervals, n - 1 degrees of freedom): the axes of a sensor share the drive.
 
     ``per_axis``: ``{axis: [AxisEvidence per run]}``; ``stated_terms``: ``{axis: terms}``.
-    Returns ``(p_value, {axis: {'factor', 'factor_ci', 'evidence'}})``; the sign test needs
-    at least :data:`MIN_RUNS` runs on some axis.
+    Returns ``(p_value, {axis: {'factor', 'factor_ci', 'factor_ci95', 'evidence'}})``; both
+    tests need at least :data:`MIN_RUNS` slopes.
     """
     slopes = [e.slope_per_s for evs in per_axis.values() for e in evs
               if math.isfinite(e.slope_per_s)]
-    runs = max((len(v) for v in per_axis.values()), default=0)
-    if runs < MIN_RUNS or not slopes:
+    if len(slopes) < MIN_RUNS:
         return 1.0, {}
-    n = len(slopes)
-    k = int(np.sum(np.array(slopes) > 0))
-    p = float(min(1.0, 2.0 * min(binom.cdf(k, n, 0.5), binom.sf(k - 1, n, 0.5))))
+    p_sign = _sign_p(slopes)
+    factors = {a: _run_factors(evs, stated_terms.get(a, {})) for a, evs in per_axis.items()}
+    f = np.array([x for v in factors.values() if v for x, _ in v])
+    w = 1.0 / np.array([v for fs in factors.values() if fs for _, v in fs])
+    p_t, scatter, dof = 1.0, None, f.size - 1
+    if f.size >= MIN_RUNS and np.all(np.isfinite(w) & (w > 0)):
+        mean = float(np.sum(w * f) / np.sum(w))
+        scatter = float(np.sum(w * (f - mean) ** 2)) / dof  # variance at unit weight
+        if scatter > 0:
+            p_t = float(2.0 * student.sf(abs(mean) / math.sqrt(scatter / np.sum(w)), dof))
+    p = min(1.0, 2.0 * min(p_sign, p_t))
     out = {}
     for axis, evs in per_axis.items():
-        factors = []
-        for e in evs:
-            drive = _drive(stated_terms.get(axis, {}), e.rate_hz)
-            if drive is None:
-                break
-            step_sd, tau_c = drive
-            mean_step = e.slope_per_s / (e.rate_hz * _ramp_gain(tau_c, e.duration_s))
-            factors.append(mean_step / step_sd)
         same = [e.slope_per_s for e in evs]
-        evidence = {'slopes_per_s2': same, 'positive_runs': int(np.sum(np.array(same) > 0)),
-                    'runs': len(same)}
-        if len(factors) == len(evs) and len(factors) >= MIN_RUNS:
-            f = np.array(factors)
-            m = float(np.mean(f))
-            ci, ci95 = _t_intervals(m, float(np.std(f, ddof=1)) / math.sqrt(f.size),
-                                    f.size - 1)
-            out[axis] = {'factor': m, 'factor_ci': ci, 'factor_ci95': ci95,
-                         'evidence': evidence}
-        else:
-            out[axis] = {'factor': None, 'factor_ci': None, 'factor_ci95': None,
-                         'evidence': evidence}
+        entry = {'factor': None, 'factor_ci': None, 'factor_ci95': None,
+                 'evidence': {'slopes_per_s2': same, 'positive_runs': int(np.sum(
+                     np.array(same) > 0)), 'runs': len(same), 'p_sign': p_sign, 'p_t': p_t}}
+        fs = factors[axis]
+        if fs and scatter:
+            fa, wa = np.array([x for x, _ in fs]), 1.0 / np.array([v for _, v in fs])
+            m = float(np.sum(wa * fa) / np.sum(wa))
+            ci, ci95 = _t_intervals(m, math.sqrt(scatter / np.sum(wa)), dof)
+            entry.update(factor=m, factor_ci=ci, factor_ci95=ci95)
+            entry['evidence']['run_factors'] = fa.tolist()
+        out[axis] = entry
     return p, out
