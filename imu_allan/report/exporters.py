@@ -48,6 +48,7 @@ from pathlib import Path
 from .export_registry import Exporter, EXPORTERS, register
 from .export_values import ExportValues
 from .sim_exporters import SIM_EXPORTERS
+from ..core.units import discrete_random_walk_step, discrete_white_std
 from ..errors import InputError
 
 EXPORT_DIR = 'export'
@@ -207,6 +208,13 @@ _FOUR = (('gyro', 'white_noise'), ('gyro', 'rate_random_walk'), ('accel', 'white
          ('accel', 'rate_random_walk'))
 
 
+def _per_step(term, value, rate_hz):
+    """N sqrt(f) (white noise, per sample) or K sqrt(f) (a random walk's step over dt)."""
+    if term == 'white_noise':
+        return discrete_white_std(value, rate_hz)
+    return discrete_random_walk_step(value, rate_hz) * rate_hz
+
+
 def _worst_four(values, keys, convert=None):
     """Worst-axis gyro N, gyro K, accel N, accel K under ``keys`` (``convert(term, value)``)."""
     out = {}
@@ -274,10 +282,9 @@ def _vins_build(values):
     # sample) white terms and dt for the bias terms.  Per step the angle gets
     # 2 (0.5 dt)^2 GYR_N^2 = 0.5 dt^2 GYR_N^2 (continuous: N^2 dt, so GYR_N = N sqrt(2 f)) and
     # the bias dt^2 GYR_W^2 (continuous: K^2 dt, so GYR_W = K sqrt(f)).
-    root = math.sqrt(values.rate_hz)
-
     def per_sample(term, value):
-        return value * root * (math.sqrt(2.0) if term == 'white_noise' else 1.0)
+        return _per_step(term, value, values.rate_hz) * (
+            math.sqrt(2.0) if term == 'white_noise' else 1.0)
     return {**_worst_four(values, ('gyr_n', 'gyr_w', 'acc_n', 'acc_w'), per_sample),
             'g_norm': GRAVITY, 'imu': 1, 'imu_topic': values.topic}
 
@@ -425,7 +432,7 @@ def _fast_lio_build(values):
     # dt^2 acc_cov (continuous: N^2 dt -> acc_cov = N^2 f) and the bias dt^2 b_acc_cov
     # (continuous: K^2 dt -> b_acc_cov = K^2 f): per-sample variances.
     mapping = _worst_four(values, ('gyr_cov', 'b_gyr_cov', 'acc_cov', 'b_acc_cov'),
-                          lambda term, value: value * value * values.rate_hz)
+                          lambda term, value: _per_step(term, value, values.rate_hz) ** 2)
     return {'/**': {'ros__parameters': {'mapping': mapping}}}
 
 
