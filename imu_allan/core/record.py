@@ -208,9 +208,9 @@ def record_advice(analysis, options):
     """
     from .fit.advisor import advise, analysis_grid
     opts = options.analysis
-    m_max = None if opts.tau_max is None else int(opts.tau_max * analysis.rate_hz)
     advice = advise(analysis.result, analysis.fit, options.targets,
-                    analysis_grid(opts.points_per_decade, opts.min_clusters, m_max))
+                    analysis_grid(opts.points_per_decade, opts.min_clusters,
+                                  opts.m_max(analysis.rate_hz)))
     if not analysis.static:
         advice.moving = [a for a, d in (analysis.motion or {}).items() if d.get('moving')]
     return advice
