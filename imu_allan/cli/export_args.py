@@ -8,8 +8,8 @@ the exporters themselves and their registry are in :mod:`imu_allan.report.export
 import argparse
 import math
 
+from ..core.export_values import check_inflate
 from ..errors import InputError
-from ..report.export_values import check_inflate
 from ..report.exporters import exporter_names, EXPORTERS, ExportOptions
 
 

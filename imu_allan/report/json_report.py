@@ -16,7 +16,6 @@ import numpy as np
 
 from .advice import advice_sentence, advice_to_json
 from .dynamic_report import dynamic_json, dynamic_sentence
-from .export_values import motion_withheld
 from .fit_quality import (
     adequacy_lines,
     fit_json,
@@ -28,6 +27,7 @@ from .fit_quality import (
 from .kalibr import kalibr_values
 from .temperature_report import temperature_json, temperature_sentence
 from ..core.checks.warmup import warmup_sentence
+from ..core.export_values import motion_withheld
 from ..core.units import sample_unit
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
@@ -183,8 +183,6 @@ class OutFiles:
 
     #: the denoised bag folder (``DIR/denoised_bag``), None without one
     denoised_bag: str = None
-    #: the ``overbound`` block of the exports (:func:`~.exporters.write_exports`), None: none
-    overbound: dict = None
     #: the names written into DIR; None while report.json itself is being written
     files: list = None
 
@@ -194,21 +192,20 @@ def record_to_json(record, out=None):
     Return the report dictionary of a record's analysis (JSON-ready), the one place it is made.
 
     The estimate's blocks (:func:`analysis_to_json`, with ``recording``), the parts'
-    (:data:`BLOCKS`) and, with ``out`` (:class:`OutFiles`), ``denoised_bag``, ``overbound``
-    and ``out_files``.
+    (:data:`BLOCKS`), ``overbound`` (the exports' block, computed with the record) and, with
+    ``out`` (:class:`OutFiles`), ``denoised_bag`` before it and ``out_files`` after it.
     """
     report = analysis_to_json(record.analysis, record.samples)
     for key, name, render in BLOCKS:
         part = getattr(record, name)
         if part is not None:
             report[key] = render(part)
-    if out is not None:
-        if out.denoised_bag is not None:
-            report['denoised_bag'] = out.denoised_bag
-        if out.overbound:
-            report['overbound'] = out.overbound
-        if out.files is not None:
-            report['out_files'] = list(out.files)
+    if out is not None and out.denoised_bag is not None:
+        report['denoised_bag'] = out.denoised_bag
+    if record.overbound is not None and record.overbound.block is not None:
+        report['overbound'] = record.overbound.block
+    if out is not None and out.files is not None:
+        report['out_files'] = list(out.files)
     return report
 
 
