@@ -61,7 +61,7 @@ def analysis_to_json(analysis, samples=None):
                     'decided_by': analysis.fit.decided_by(axis),
                     **fit_json(analysis.fit, axis)},
         }
-        if getattr(analysis, 'deviations', None):
+        if analysis.deviations:
             axes[axis]['deviations'] = {
                 kind: {'tau': _floats(d.tau), 'dev': _floats(d.dev[:, d.axis_index(axis)]),
                        'ci_low': _floats(d.ci_low[:, d.axis_index(axis)]),
@@ -82,7 +82,7 @@ def analysis_to_json(analysis, samples=None):
             'static': bool(analysis.static),
             'motion': analysis.motion,
             'tau_max_s': float(res.tau[-1]),
-            'warmup_s': float(getattr(analysis, 'warmup_s', 0.0)),
+            'warmup_s': float(analysis.warmup_s),
             'warnings': list(analysis.warnings),
         },
         'timing': {'gaps': timing.n_gaps, 'missing_samples': timing.missing_samples,
@@ -143,7 +143,7 @@ def console_summary(analysis):
         kal = 'not given: the IMU moved (analyze --allow-motion gives the numbers anyway)'
     lines.append(f'Kalibr (continuous-time, worst axis): {kal}')
     lines.append('verdict: ' + ('static' if analysis.static else 'NOT static (moving)'))
-    if getattr(analysis, 'warmup_s', 0.0):
+    if analysis.warmup_s:
         lines.append(warmup_sentence(analysis.warmup_s))
     if analysis.outliers.total:
         lines.append(f'outliers beyond Tukey fences (F=3): {analysis.outliers.total}')
