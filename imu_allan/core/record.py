@@ -313,30 +313,20 @@ def coincidences(changes, warmup_s, moves, margin_s):
     return out
 
 
-def overbound_values(analysis, request):
+def overbound_values(fitted, request):
     """
     Overbound every model of ``request`` (an :class:`OverboundRequest`) on the fitted axes.
 
-    The fits of :func:`overbound_fits`, and the report's ``overbound`` block of the request's
-    consumers (an OverboundError if one of them cannot be made).
+    ``fitted``: an Analysis or a FittedModel.  Per axis for ``over == 'axis'``, over each
+    sensor's fitted axes for ``'sensor'``; a model that cannot be made is kept as its
+    :class:`~.overbound.OverboundError` (:meth:`OverboundValues.get` raises it); with the
+    request's consumers also report.json's ``overbound`` block (where one cannot be made, its
+    error).  ValueError without a measured Allan deviation.
     """
-    values = overbound_fits(analysis.fit, request)
-    if request.consumers:
-        from .export_values import overbound_block
-        values.block = overbound_block(analysis, values, request.consumers, request.inflate)
-    return values
-
-
-def overbound_fits(fit, request):
-    """
-    :class:`OverboundValues` of the models of ``request`` on the axes of ``fit`` (FittedModel).
-
-    Per axis for ``over == 'axis'``, over each sensor's fitted axes for ``'sensor'``; a model
-    that cannot be made is kept as its :class:`~.overbound.OverboundError`
-    (:meth:`OverboundValues.get` raises it).  ValueError without a measured Allan deviation.
-    """
+    from .export_values import fit_of, overbound_block
     from .overbound import overbound_axes
     from .units import AXES, sensor_of
+    fit = fit_of(fitted)
     if fit.result is None:
         raise ValueError('overbound needs the measured Allan deviation (a FittedModel from '
                          'fit_noise_model, or an Analysis)')
@@ -357,4 +347,6 @@ def overbound_fits(fit, request):
                 values.fits[key] = overbound_axes(fit.result, target, shapes, request.horizon_s)
             except OverboundError as exc:
                 values.fits[key] = exc
+    if request.consumers:
+        values.block = overbound_block(fitted, values, request.consumers, request.inflate)
     return values

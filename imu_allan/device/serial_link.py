@@ -326,22 +326,21 @@ class SessionHooks:
 
 @dataclass(frozen=True)
 class SessionOptions:
-    """How a :class:`Gx3Session` runs; times in s."""
+    """
+    How a :class:`Gx3Session` runs; times in s.
 
-    #: no record for this long: the link is stalled (reconnect)
+    No record for ``stall_timeout``: reconnect; the wait for a reply; the pause between reads;
+    0xD1 every ``temperature_period`` (0: never); the 0xDB filter window (taps); a raw capture
+    file (None: none); the reconnect delays.
+    """
+
     stall_timeout: float = 1.0
-    #: wait for a command's reply
     reply_timeout: float = 0.3
-    #: between reads of the port
     poll_interval: float = 0.005
-    #: ask for the temperature (0xD1) this often while streaming (0: never)
     temperature_period: float = 0.0
-    #: the gyro/accel filter window sent with 0xDB, taps
     filter_window: int = 15
-    #: append every byte read to this file (a raw capture), None: none
     record_raw: str = None
-    #: reconnect delays (None: :class:`Backoff`'s defaults)
-    backoff: Backoff = None
+    backoff: Backoff = None  # None: Backoff()
 
 
 class Gx3Session:

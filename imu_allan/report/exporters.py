@@ -40,14 +40,14 @@ builder asks ``values.worst(sensor, term, key)`` or ``values.per_axis(sensor, te
 and upper-limit marks follow from those calls.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import json
 import math
 from pathlib import Path
 
 from .export_registry import Exporter, EXPORTERS, register
 from .sim_exporters import SIM_EXPORTERS
-from ..core.export_values import ExportValues, fit_of
+from ..core.export_values import ExportValues
 from ..core.units import discrete_random_walk_step, discrete_white_std
 
 EXPORT_DIR = 'export'
@@ -520,8 +520,8 @@ def _overbound_fits(fitted, exports):
         raise ValueError('horizon_s is only used with overbound=True')
     if not exports.overbound:
         return None
-    from ..core.record import overbound_fits
-    return overbound_fits(fit_of(fitted), exports.overbound_request())
+    from ..core.record import overbound_values
+    return overbound_values(fitted, replace(exports.overbound_request(), consumers=()))
 
 
 def export(fitted, name, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw',

@@ -408,14 +408,13 @@ def test_overbound_file_stays_above_the_bound(fitted, tmp_path, kind):
     sqrt(f), fails.
     """
     from imu_allan.core.allan.edf import chi2_interval
-    from imu_allan.core.export_values import overbound_block
     from imu_allan.core.overbound import upper_bound
-    from imu_allan.core.record import overbound_fits
+    from imu_allan.core.record import overbound_values
     from imu_allan.report.exporters import ExportOptions, write_exports
     res = fitted.result
     request = ExportOptions((kind,), overbound=True)
-    fits = overbound_fits(fitted, request.overbound_request())
-    summary = overbound_block(fitted, fits, request.overbound_request().consumers)
+    fits = overbound_values(fitted, request.overbound_request())
+    summary = fits.block
     written = write_exports(tmp_path, fitted, request, fits=fits)
     text = (tmp_path / written[0]).read_text()
     assert 'overbound: the values of this consumer' in text.split('-->')[0]

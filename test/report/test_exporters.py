@@ -35,10 +35,9 @@ import sys
 from conftest import run_command
 import imu_allan
 from imu_allan.core.allan.edf import chi2_interval
-from imu_allan.core.export_values import overbound_block
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.overbound import upper_bound
-from imu_allan.core.record import overbound_fits
+from imu_allan.core.record import overbound_values
 from imu_allan.core.simulation.simulate import flicker_noise
 from imu_allan.errors import InputError
 from imu_allan.report.exporters import export, EXPORTERS, ExportOptions, write_exports
@@ -435,8 +434,8 @@ def test_cli_writes_every_export_and_rejects_bad_names(tmp_path):
 def overbound_files(fitted, tmp_path_factory):
     folder = tmp_path_factory.mktemp('overbound')
     request = ExportOptions(tuple(EXPORTERS), overbound=True).overbound_request()
-    fits = overbound_fits(fitted, request)
-    summary = overbound_block(fitted, fits, request.consumers)
+    fits = overbound_values(fitted, request)
+    summary = fits.block
     written = write_exports(folder, fitted, ExportOptions(tuple(EXPORTERS), overbound=True),
                             source='simulated test record', fits=fits)
     return {p.split('/')[-1]: (folder / p).read_text() for p in written}, summary

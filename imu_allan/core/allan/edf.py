@@ -106,21 +106,6 @@ def _sz(t, f, alpha, d):
     return out
 
 
-def _basic_sum(j_count, big_m, s, f, alpha, d):
-    """Eq (10) summed directly: sz(0)^2 + (1 - J/M) sz(J/S)^2 + 2 sum_j<J (1 - j/M) sz(j/S)^2."""
-    j = np.arange(1, int(j_count), dtype=float)
-    inner = np.sum((1.0 - j / big_m) * _sz(j / s, f, alpha, d) ** 2)
-    return (float(_sz(0.0, f, alpha, d)) ** 2
-            + (1.0 - j_count / big_m) * float(_sz(j_count / s, f, alpha, d)) ** 2
-            + 2.0 * float(inner))
-
-
-def _summed(j_count, big_m, s, f, alpha, d):
-    """Return the EDF of the paper's basic sum: sz(0)^2 M over eq (10)."""
-    return 1.0 / (_basic_sum(j_count, big_m, s, f, alpha, d)
-                  / (float(_sz(0.0, f, alpha, d)) ** 2 * big_m))
-
-
 @functools.lru_cache(maxsize=65536)
 def edf_greenhall(alpha, d, m, n_phase, overlapping, modified, tables=True):
     """
@@ -165,18 +150,15 @@ def edf_greenhall(alpha, d, m, n_phase, overlapping, modified, tables=True):
         return 1.0 / ((a0 - d / 2.0 / r) / big_m)
     if not modified and alpha <= 0 and m * (d + 1) > _J_MAX:
         f = math.inf  # cases 1-3: the infinite-filter limit for long filters
-    if not tables:
+    if not tables or j_count <= _J_MAX:  # cases 1-3 alike: the basic sum
         return _exact(alpha, d, s, f, j_count, big_m)
-    if j_count <= _J_MAX:  # cases 1-3 alike: the basic sum
-        return _summed(j_count, big_m, s, f, alpha, d)
     if alpha == 1 and not modified:  # case 3: unmodified flicker PM
         b0, b1 = _TABLE3[d]
         if r > d + 1:
             a0, a1 = _TABLE2[1][d]
             return 1.0 / ((a0 - a1 / r) / ((b0 + b1 * math.log(m)) ** 2 * r))
         m_prime = _J_MAX / r
-        return 1.0 / (_basic_sum(_J_MAX, _J_MAX, m_prime, m_prime, 1, d)
-                      / ((b0 + b1 * math.log(m)) ** 2 * _J_MAX))
+        return _summed(_J_MAX, _J_MAX, m_prime, m_prime, 1, d, (b0 + b1 * math.log(m)) ** 2)
     if r > d + 1:  # cases 1 and 2: Table 1 (modified) or 2
         a0, a1 = (_TABLE1 if modified else _TABLE2)[alpha][d]
         return 1.0 / ((a0 - a1 / r) / r)
@@ -207,10 +189,19 @@ def _exact(alpha, d, s, f, j_count, big_m):
     if j_count == (d + 1) * s:  # every weight is linear in 1/M: the cached M-free parts
         sz0_sq, a, b = _lag_moments(alpha, d, s, f)
         return sz0_sq * big_m / (a - b / big_m)
+    return _summed(j_count, big_m, s, f, alpha, d)
+
+
+def _summed(j_count, big_m, s, f, alpha, d, norm=None):
+    """
+    EDF ``norm M`` over eq (10), the basic sum over J lags (``norm`` None: sz(0)^2).
+
+    sum = sz(0)^2 + (1 - J/M) sz(J/S)^2 + 2 sum_{j<J} (1 - j/M) sz(j/S)^2.
+    """
     sz0 = float(_sz(0.0, f, alpha, d))
     basic = (sz0 * sz0 + (1.0 - j_count / big_m) * float(_sz(j_count / s, f, alpha, d)) ** 2
              + 2.0 * _lag_sums(j_count, s, f, alpha, d, (lambda j: 1.0 - j / big_m,))[0])
-    return sz0 * sz0 * big_m / basic
+    return (sz0 * sz0 if norm is None else norm) * big_m / basic
 
 
 @functools.lru_cache(maxsize=65536)
