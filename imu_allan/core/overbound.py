@@ -103,20 +103,6 @@ class OverboundFit:
         """Return one parameter (SI), NaN if the model has no such term."""
         return self.terms.get(term, {}).get(param, math.nan)
 
-    def factors(self, raw_terms):
-        """
-        ``{term: overbound / raw}`` of each amplitude against a raw fit's ``{term: params}``.
-
-        NaN where the raw fit has no such term (the exporters compare with its 95 % upper limit
-        then, :class:`imu_allan.core.export_values.ExportValues`).
-        """
-        out = {}
-        for term in self.terms:
-            main = TERMS[term].params[0]
-            raw = raw_terms.get(term, {}).get(main, math.nan)
-            out[term] = self.value(term, main) / raw if raw > 0 else math.nan
-        return out
-
 
 def upper_bound(result, axes, horizon_s=None, level=OVERBOUND_LEVEL):
     """

@@ -167,19 +167,10 @@ def edf_greenhall(alpha, d, m, n_phase, overlapping, modified, tables=True):
 
 def edf_oadev(alpha, m, n_phase):
     """
-    EDF of the overlapping Allan variance at averaging factor ``m`` (sums, no tables).
+    EDF of the overlapping Allan variance, the exact sums (no tables).
 
-    :func:`edf_greenhall` with d = 2, F = S = m and ``tables=False`` (cached there).
-
-    Parameters
-    ----------
-    alpha : int
-        Frequency-PSD power-law exponent of the dominant noise (-2 .. +2).
-    m : int
-        Averaging factor (tau / tau0), >= 1.
-    n_phase : int
-        Number of phase points (samples of rate + 1).
-
+    :func:`edf_greenhall` with d = 2, F = S = m: ``alpha`` the noise, ``m`` = tau / tau0,
+    ``n_phase`` phase points (rate samples + 1).
     """
     return edf_greenhall(alpha, 2, m, n_phase, True, False, False)
 
