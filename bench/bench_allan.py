@@ -19,7 +19,7 @@ import allantools
 from benchlib import best_of, goal, header
 from imu_allan import allan_deviation, simulate, thesis_gx3_25_model
 from imu_allan.core.allan import kernel as allan_kernel
-from imu_allan.core.allan.edf import edf_oadev
+from imu_allan.core.allan.edf import edf_greenhall
 from imu_allan.core.allan.estimate import AllanResult, tau_grid
 import numpy as np
 
@@ -60,11 +60,11 @@ def main():
     allan_kernel.avar(data[:1000], np.array([1]))
 
     def ours_fn():
-        edf_oadev.cache_clear()  # each run computes its EDFs, as a new process does
+        edf_greenhall.cache_clear()  # each run computes its EDFs, as a new process does
         return allan_deviation(data, RATE, taus=taus)
 
     def edf_fn():
-        edf_oadev.cache_clear()
+        edf_greenhall.cache_clear()
         return AllanResult.from_avar(ms, avar, N_SAMPLES, RATE)
 
     ours, ours_w, ours_c = best_of(ours_fn)

@@ -8,8 +8,8 @@ the exporters themselves and their registry are in :mod:`imu_allan.report.export
 import argparse
 import math
 
+from ..core.export_values import check_inflate
 from ..errors import InputError
-from ..report.export_values import check_inflate
 from ..report.exporters import exporter_names, EXPORTERS, ExportOptions
 
 
@@ -56,9 +56,9 @@ def parse_horizon(text, option='--overbound-horizon'):
 
 def check_overbound_args(args):
     """Refuse ``--overbound`` without ``--export`` and a horizon without ``--overbound``."""
-    if getattr(args, 'overbound_horizon', None) is not None and not args.overbound:
+    if args.overbound_horizon is not None and not args.overbound:
         raise InputError('--overbound-horizon', 'needs --overbound')
-    if getattr(args, 'overbound', False) and not args.export:
+    if args.overbound and not args.export:
         raise InputError('--overbound', 'needs --export NAMES (it changes the exported values)')
 
 

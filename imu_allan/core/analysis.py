@@ -8,6 +8,7 @@ problem with the data raises :class:`~imu_allan.errors.InputError` naming the so
 
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from .checks.preprocess import check_timing, OutlierReport, replace_outliers, Ti
 from .checks.stamp_order import drop_isolated, without_dropped
 from .checks.warmup import find_warmup
 from .fit import fit_noise_model, FitError, FittedModel
-from .sensor.measure import measure_sensor
+from .sensor.measure import measure_sensor, SensorReport
 from .units import is_gyro, physical_limits, sample_unit
 from ..errors import InputError
 
@@ -60,6 +61,10 @@ class AnalysisOptions:
     #: the device's filter window, s, when known (the 3DM-GX3-25's 0xDB window / 1 kHz);
     #: its filter then replaces the measured one in the fit
     filter_window_s: float = None
+
+    def m_max(self, rate_hz):
+        """Return the longest averaging factor ``tau_max`` allows at ``rate_hz`` (None: any)."""
+        return None if self.tau_max is None else int(self.tau_max * rate_hz)
 
 
 @dataclass
@@ -99,9 +104,9 @@ class Analysis:
     #: with their warning; :mod:`.stamp_order`), before the warm-up cut; the input object
     #: itself when nothing was dropped.  Callers use it instead of applying the rule again.
     samples: object = None
-    #: The sensor's own processing measured from ``data`` (:class:`~.sensor.SensorReport`;
-    #: None when not asked, ``AnalysisOptions.sensor``).
-    sensor: object = None
+    #: The sensor's own processing measured from ``data`` (None when not asked,
+    #: ``AnalysisOptions.sensor``).
+    sensor: Optional[SensorReport] = None
 
 
 _VALIDATE_BLOCK = 1 << 16  # rows checked at a time
@@ -196,46 +201,11 @@ def analyze_samples(samples, options=None):
     warnings = list(samples.warnings)
     timing = check_timing(samples.t)
     rate = options.rate_hz or timing.rate_hz
-    if timing.n_gaps:
-        jump = timing.longest_gap_s > max(1.0, JUMP_INTERVALS * timing.nominal_dt)
-        if jump and not options.allow_jumps:
-            i = int(timing.gap_indices[np.argmax(np.diff(samples.t)[timing.gap_indices])])
-            cause = f' (the reader: {samples.warnings[0]})' if samples.warnings else ''
-            raise InputError(where, f'time stamps jump by {timing.longest_gap_s:.3f} s after '
-                                    f'sample {i} (t={samples.t[i]:.6f} s){cause}; the Allan '
-                                    f'deviation needs an unbroken record')
-        warnings.append(f'{timing.n_gaps} gap(s) in the time stamps, about '
-                        f'{timing.missing_samples} sample(s) missing (longest '
-                        f'{timing.longest_gap_s:.4f} s); samples are treated as evenly spaced')
-    if timing.jitter > 0.05:
-        warnings.append(f'time-stamp jitter is {100 * timing.jitter:.1f} % of the sample '
-                        f'interval; the device timer or a driver with even stamps helps')
-    data, outliers = np.asarray(samples.data, dtype=float), None
-    if options.replace_outliers:
-        data, outliers = replace_outliers(samples.data, samples.axes, replace=True)
-        outliers.replaced = bool(outliers.total)
-        if outliers.total:
-            warnings.append(f'{outliers.total} outlier(s) replaced (Tukey F=3): '
-                            + ', '.join(f'{a} {c}' for a, c in outliers.counts.items() if c))
-    t = samples.t
-    warmup_s = find_warmup(data, rate, samples.axes)[0]
-    if warmup_s:  # the settling start would pass for a random walk: leave it out
-        cut = int(round(warmup_s * rate))
-        data, t = data[cut:], t[cut:]
+    warnings += _timing_warnings(samples, timing, options.allow_jumps, where)
+    data, t, outliers, warmup_s = _analysed_rows(samples, rate, options.replace_outliers,
+                                                 warnings)
     n = data.shape[0]
-    needed = 2 * options.min_clusters
-    if n < needed:
-        raise InputError(where, f'record of {n} samples ({n / rate:.3g} s) is too short for '
-                                f'any averaging time (needs at least {needed} samples)')
-    taus = None
-    if options.tau_max is not None:
-        longest = n / rate / options.min_clusters
-        if options.tau_max > longest:
-            raise InputError(where, f'record of {n / rate:.4g} s is too short for averaging '
-                                    f'times up to {options.tau_max:g} s (at most '
-                                    f'{longest:.4g} s with {options.min_clusters} clusters)')
-        taus = tau_grid(n, options.points_per_decade, options.min_clusters,
-                        m_max=int(options.tau_max * rate)) / rate
+    taus = _averaging_times(n, rate, options, where)
     pool = ThreadPoolExecutor(1, thread_name_prefix='imu_allan_checks')
     measured = (pool.submit(measure_sensor, data, rate, samples.axes)
                 if options.sensor and not options.online else None)
@@ -267,7 +237,6 @@ def analyze_samples(samples, options=None):
                               processing=processing, tau_range=options.tau_range)
     except FitError as exc:
         raise InputError(where, str(exc)) from None
-    upper = _kalibr_upper_limits(fit)
     outliers, static, motion = pending.result()
     if not static:
         moving = [a for a, d in motion.items() if d['moving']]
@@ -276,10 +245,69 @@ def analyze_samples(samples, options=None):
     return Analysis(source=where, axes=tuple(samples.axes), n_samples=n, rate_hz=rate,
                     duration_s=n / rate, timing=timing, outliers=outliers, result=result,
                     fit=fit, static=static, motion=motion, warnings=warnings, data=data,
-                    t=t, upper_limits=upper,
-                    integrity=getattr(samples, 'integrity', ''), warmup_s=warmup_s,
-                    allow_motion=options.allow_motion, deviations=deviations,
-                    samples=samples, sensor=sensor)
+                    t=t, upper_limits=_kalibr_upper_limits(fit), integrity=samples.integrity,
+                    warmup_s=warmup_s, allow_motion=options.allow_motion,
+                    deviations=deviations, samples=samples, sensor=sensor)
+
+
+def _timing_warnings(samples, timing, allow_jumps, where):
+    """Return the warnings on the time stamps' gaps and jitter; InputError for a jump."""
+    warnings = []
+    if timing.n_gaps:
+        jump = timing.longest_gap_s > max(1.0, JUMP_INTERVALS * timing.nominal_dt)
+        if jump and not allow_jumps:
+            i = int(timing.gap_indices[np.argmax(np.diff(samples.t)[timing.gap_indices])])
+            cause = f' (the reader: {samples.warnings[0]})' if samples.warnings else ''
+            raise InputError(where, f'time stamps jump by {timing.longest_gap_s:.3f} s after '
+                                    f'sample {i} (t={samples.t[i]:.6f} s){cause}; the Allan '
+                                    f'deviation needs an unbroken record')
+        warnings.append(f'{timing.n_gaps} gap(s) in the time stamps, about '
+                        f'{timing.missing_samples} sample(s) missing (longest '
+                        f'{timing.longest_gap_s:.4f} s); samples are treated as evenly spaced')
+    if timing.jitter > 0.05:
+        warnings.append(f'time-stamp jitter is {100 * timing.jitter:.1f} % of the sample '
+                        f'interval; the device timer or a driver with even stamps helps')
+    return warnings
+
+
+def _analysed_rows(samples, rate, replace, warnings):
+    """
+    Return ``(data, t, outliers, warmup_s)``: the rows the estimate uses (SI, s).
+
+    Outliers replaced when asked (``outliers`` is their report then, else None: counted on
+    the checks' thread), the warm-up (s) cut: the settling start would pass for a random walk.
+    A warning is appended to ``warnings`` for replaced outliers.
+    """
+    data, outliers = np.asarray(samples.data, dtype=float), None
+    if replace:
+        data, outliers = replace_outliers(samples.data, samples.axes, replace=True)
+        outliers.replaced = bool(outliers.total)
+        if outliers.total:
+            warnings.append(f'{outliers.total} outlier(s) replaced (Tukey F=3): '
+                            + ', '.join(f'{a} {c}' for a, c in outliers.counts.items() if c))
+    t = samples.t
+    warmup_s = find_warmup(data, rate, samples.axes)[0]
+    if warmup_s:
+        cut = int(round(warmup_s * rate))
+        data, t = data[cut:], t[cut:]
+    return data, t, outliers, warmup_s
+
+
+def _averaging_times(n, rate, options, where):
+    """Return the averaging times (s) up to ``options.tau_max`` (None: the default grid)."""
+    needed = 2 * options.min_clusters
+    if n < needed:
+        raise InputError(where, f'record of {n} samples ({n / rate:.3g} s) is too short for '
+                                f'any averaging time (needs at least {needed} samples)')
+    if options.tau_max is None:
+        return None
+    longest = n / rate / options.min_clusters
+    if options.tau_max > longest:
+        raise InputError(where, f'record of {n / rate:.4g} s is too short for averaging '
+                                f'times up to {options.tau_max:g} s (at most '
+                                f'{longest:.4g} s with {options.min_clusters} clusters)')
+    return tau_grid(n, options.points_per_decade, options.min_clusters,
+                    m_max=options.m_max(rate)) / rate
 
 
 def _kalibr_upper_limits(fit):

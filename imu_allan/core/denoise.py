@@ -34,6 +34,8 @@ import numpy as np
 import pywt
 import scipy.ndimage
 
+from .units import discrete_white_std
+
 METHODS = ('wavelet', 'median')
 RULES = ('universal', 'minimax', 'sure')
 MODES = ('soft', 'hard')
@@ -135,7 +137,7 @@ def denoise(data, rate_hz=None, method='wavelet', wavelet='sym8', level=12, rule
     if noise_density is not None:
         if not rate_hz:
             raise ValueError('noise_density needs rate_hz')
-        sigma = np.asarray(noise_density, dtype=float) * math.sqrt(rate_hz)
+        sigma = discrete_white_std(np.asarray(noise_density, dtype=float), rate_hz)
     if sigma is not None:
         sigma = np.broadcast_to(np.asarray(sigma, dtype=float), (n_axes,))
     w = pywt.Wavelet(wavelet)

@@ -10,7 +10,7 @@ directory (``~/.cache/numba``, or ``$NUMBA_CACHE_DIR`` when set); where no direc
 writable at all, :func:`jit` compiles without the cache and lists the kernel in
 :data:`UNCACHED`, so that its module can say so or decline to use it.
 
-Imported only by the kernel modules (:mod:`.allan_kernel`, :mod:`..formats.bag_kernels`),
+Imported only by the kernel modules (:mod:`.allan.kernel`, :mod:`..formats.bag_kernels`),
 themselves imported on first use: numba is optional and costs about 1 s to load.
 
 Before the first kernel runs, even from the cache, numba loads its typing registries, and one

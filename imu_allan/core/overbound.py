@@ -37,6 +37,7 @@ import numpy as np
 
 from .allan.edf import chi2_interval
 from .terms import TERMS
+from ..errors import InputError
 
 #: Two-sided confidence level of the bound the model must lie above (its upper end).
 OVERBOUND_LEVEL = 0.95
@@ -44,6 +45,24 @@ OVERBOUND_LEVEL = 0.95
 TIGHT_RTOL = 1e-6
 #: Correlation times tried for a Gauss-Markov, per decade, from tau0 / 10 to 100 x horizon.
 TAU_C_PER_DECADE = 8
+#: The consumer noise model of most estimators: white noise plus a bias random walk.
+WHITE_WALK = ('white_noise', 'rate_random_walk')
+
+
+class OverboundError(InputError):
+    """The data give no overbound (no usable bound, no model above it): ``--overbound``."""
+
+    option = '--overbound'
+
+    def __init__(self, problem):
+        """Name the option the problem belongs to."""
+        super().__init__(self.option, problem)
+
+
+class HorizonError(OverboundError):
+    """The horizon lies outside the measured averaging times: ``--overbound-horizon``."""
+
+    option = '--overbound-horizon'
 
 
 @dataclass
@@ -84,20 +103,6 @@ class OverboundFit:
         """Return one parameter (SI), NaN if the model has no such term."""
         return self.terms.get(term, {}).get(param, math.nan)
 
-    def factors(self, raw_terms):
-        """
-        ``{term: overbound / raw}`` of each amplitude against a raw fit's ``{term: params}``.
-
-        NaN where the raw fit has no such term (the exporters compare with its 95 % upper limit
-        then, :class:`imu_allan.report.export_values.ExportValues`).
-        """
-        out = {}
-        for term in self.terms:
-            main = TERMS[term].params[0]
-            raw = raw_terms.get(term, {}).get(main, math.nan)
-            out[term] = self.value(term, main) / raw if raw > 0 else math.nan
-        return out
-
 
 def upper_bound(result, axes, horizon_s=None, level=OVERBOUND_LEVEL):
     """
@@ -106,22 +111,24 @@ def upper_bound(result, axes, horizon_s=None, level=OVERBOUND_LEVEL):
     ``result`` is an :class:`~imu_allan.core.allan.estimate.AllanResult`; ``axes`` one axis name or
     several (the bound is then their envelope, the largest at each tau: one model for several
     axes, for consumers with one number per sensor).  Points without a finite EDF are left
-    out.  ValueError if ``horizon_s`` is outside [tau0, longest tau] or nothing is left.
+    out.  :class:`HorizonError` if ``horizon_s`` is outside [tau0, longest tau],
+    :class:`OverboundError` if nothing is left.
     """
     axes = [axes] if isinstance(axes, str) else list(axes)
     tau = np.asarray(result.tau, dtype=float)
     if tau.size == 0:
-        raise ValueError('no averaging time was measured')
+        raise OverboundError('no averaging time was measured')
     horizon = float(tau[-1]) if horizon_s is None else float(horizon_s)
     if not (math.isfinite(horizon) and tau[0] * (1 - 1e-9) <= horizon <= tau[-1] * (1 + 1e-9)):
-        raise ValueError(f'horizon {horizon_s!r} s must lie between the shortest ({tau[0]:.4g} s) '
-                         f'and the longest ({tau[-1]:.4g} s) averaging time measured')
+        raise HorizonError(f'horizon {horizon_s!r} s must lie between the shortest '
+                           f'({tau[0]:.4g} s) and the longest ({tau[-1]:.4g} s) averaging time '
+                           'measured')
     cols = [result.axis_index(a) for a in axes]
     _, high = chi2_interval(result.adev[:, cols], result.edf[:, cols], level=level)
     bound = np.max(high * high, axis=1) if high.size else np.zeros(tau.size)
     keep = (tau <= horizon * (1 + 1e-9)) & np.all(np.isfinite(high), axis=1) & (bound > 0)
     if not keep.any():
-        raise ValueError(f'no averaging time up to {horizon:.4g} s has a usable bound')
+        raise OverboundError(f'no averaging time up to {horizon:.4g} s has a usable bound')
     return tau[keep], bound[keep], horizon
 
 
@@ -192,7 +199,7 @@ def overbound(tau, bound, shapes, rate_hz, horizon_s=None, level=OVERBOUND_LEVEL
         if solved is not None and (best is None or solved[1] < best[1]):
             best = (solved[0], solved[1], position, columns)
     if best is None:
-        raise ValueError(f'no {" + ".join(shapes)} model lies above the bound')
+        raise OverboundError(f'no {" + ".join(shapes)} model lies above the bound')
     x, objective, position, columns = best
     x = np.maximum(x, 0.0)
     model = columns @ x
@@ -227,6 +234,6 @@ def white_overbound(result, axes=None, horizon_s=None, level=OVERBOUND_LEVEL):
         try:
             out[j] = overbound_axes(result, axis, ('white_noise',), horizon_s,
                                     level).value('white_noise')
-        except ValueError:  # no finite EDF yet on this axis (absent, or too few samples)
+        except OverboundError:  # no finite EDF yet on this axis (absent, or too few samples)
             pass
     return out

@@ -16,11 +16,17 @@ Units are SI throughout; noise coefficients are continuous-time; times are s.
 
 from dataclasses import asdict, dataclass, field, replace
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .analysis import AnalysisOptions, analyze_samples
+from .analysis import Analysis, AnalysisOptions, analyze_samples
+from .overbound import OverboundError
 from ..errors import InputError
+
+if TYPE_CHECKING:  # (imported where computed: the change test and the advisor load late)
+    from .change.dynamic import DynamicResult
+    from .fit.advisor import Advice
 
 
 @dataclass(frozen=True)
@@ -32,11 +38,15 @@ class OverboundRequest:
     :data:`~.terms.TERMS`), ``over`` ``'axis'`` (one model per axis) or ``'sensor'`` (one
     model over the envelope of a sensor's axes, for consumers with one number per sensor).
     ``horizon_s``: the longest averaging time the bound holds for, s (None: the longest
-    measured).
+    measured).  ``consumers``: ``(name, model, build)`` of the exporters whose values the
+    ``overbound`` block describes (:func:`~.export_values.overbound_block`; none: no block),
+    with the standard deviations multiplied by ``inflate = (white, walk)``.
     """
 
     models: tuple = ()
     horizon_s: float = None
+    consumers: tuple = ()
+    inflate: tuple = (1.0, 1.0)
 
 
 @dataclass
@@ -61,8 +71,9 @@ class DenoisedRecord:
     """The wavelet-denoised record and its analysis (same options as the record's)."""
 
     #: the analysed samples (``Analysis.t`` and ``.data``: after the warm-up cut), denoised
+    #: (:class:`~imu_allan.formats.samples.Samples`, a layer above: not imported here)
     samples: object
-    analysis: object
+    analysis: Analysis
 
 
 @dataclass
@@ -75,9 +86,8 @@ class DynamicAnalysis:
     windows cover the analysed samples only, from ``analysed_from_s`` on.
     """
 
-    #: :class:`~.dynamic.DynamicResult`
-    result: object
-    #: :class:`~.change_detection.Change` list
+    result: 'DynamicResult'
+    #: :class:`~.change.detection.Change` list
     changes: list
     #: where the analysed samples start, s from the first sample (the warm-up)
     analysed_from_s: float = 0.0
@@ -127,20 +137,22 @@ class OverboundValues:
     Overbounding values of the requested consumer models (:mod:`.overbound`).
 
     ``fits``: ``(axes, shapes) -> OverboundFit``, ``axes`` one axis name or a tuple of a
-    sensor's axes (their envelope), or the reason (text) the overbound could not be made: it
-    is raised only where a consumer asks for it (:meth:`get`).
+    sensor's axes (their envelope), or the :class:`~.overbound.OverboundError` the overbound
+    could not be made for: it is raised only where a consumer asks for it (:meth:`get`).
     """
 
     #: the horizon as asked, s (None: the longest measured averaging time)
     horizon_s: float
     fits: dict = field(default_factory=dict)
+    #: report.json's ``overbound`` block (:func:`~.export_values.overbound_block`), None: none
+    block: dict = None
 
     def get(self, axes, shapes):
-        """Return the fit of ``shapes`` over ``axes``; None if not computed; ValueError if none."""
+        """Return the fit of ``shapes`` over ``axes``; None if not computed; raise its error."""
         key = (axes if isinstance(axes, str) else tuple(axes), tuple(shapes))
         fit = self.fits.get(key)
-        if isinstance(fit, str):
-            raise ValueError(fit)
+        if isinstance(fit, OverboundError):
+            raise fit
         return fit
 
 
@@ -153,10 +165,9 @@ class RecordAnalysis:
     the other parts are computed from it.
     """
 
-    #: :class:`~.analysis.Analysis`
-    analysis: object
-    #: :class:`~.advisor.Advice`: how much longer to record, on ``analyze``'s grid
-    advice: object
+    analysis: Analysis
+    #: how much longer to record, on ``analyze``'s grid
+    advice: 'Advice'
     denoised: DenoisedRecord = None
     dynamic: DynamicAnalysis = None
     temperature: TemperatureAnalysis = None
@@ -208,9 +219,9 @@ def record_advice(analysis, options):
     """
     from .fit.advisor import advise, analysis_grid
     opts = options.analysis
-    m_max = None if opts.tau_max is None else int(opts.tau_max * analysis.rate_hz)
     advice = advise(analysis.result, analysis.fit, options.targets,
-                    analysis_grid(opts.points_per_decade, opts.min_clusters, m_max))
+                    analysis_grid(opts.points_per_decade, opts.min_clusters,
+                                  opts.m_max(analysis.rate_hz)))
     if not analysis.static:
         advice.moving = [a for a, d in (analysis.motion or {}).items() if d.get('moving')]
     return advice
@@ -302,16 +313,24 @@ def coincidences(changes, warmup_s, moves, margin_s):
     return out
 
 
-def overbound_values(analysis, request):
+def overbound_values(fitted, request):
     """
     Overbound every model of ``request`` (an :class:`OverboundRequest`) on the fitted axes.
 
-    Per axis for ``over == 'axis'``, over each sensor's fitted axes for ``'sensor'``; a model
-    that cannot be made is kept as its reason (:meth:`OverboundValues.get` raises it).
+    ``fitted``: an Analysis or a FittedModel.  Per axis for ``over == 'axis'``, over each
+    sensor's fitted axes for ``'sensor'``; a model that cannot be made is kept as its
+    :class:`~.overbound.OverboundError` (:meth:`OverboundValues.get` raises it); with the
+    request's consumers also report.json's ``overbound`` block (where one cannot be made, its
+    error).  ValueError without a measured Allan deviation.
     """
+    from .export_values import fit_of, overbound_block
     from .overbound import overbound_axes
     from .units import AXES, sensor_of
-    axes = [a for a in AXES if a in analysis.fit.axes]
+    fit = fit_of(fitted)
+    if fit.result is None:
+        raise ValueError('overbound needs the measured Allan deviation (a FittedModel from '
+                         'fit_noise_model, or an Analysis)')
+    axes = [a for a in AXES if a in fit.axes]
     values = OverboundValues(request.horizon_s)
     for shapes, over in request.models:
         shapes = tuple(shapes)
@@ -325,8 +344,9 @@ def overbound_values(analysis, request):
             if key in values.fits:
                 continue
             try:
-                values.fits[key] = overbound_axes(analysis.result, target, shapes,
-                                                  request.horizon_s)
-            except ValueError as exc:
-                values.fits[key] = str(exc)
+                values.fits[key] = overbound_axes(fit.result, target, shapes, request.horizon_s)
+            except OverboundError as exc:
+                values.fits[key] = exc
+    if request.consumers:
+        values.block = overbound_block(fitted, values, request.consumers, request.inflate)
     return values

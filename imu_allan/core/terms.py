@@ -27,6 +27,7 @@ sinusoid (A, f0)   A^2 [sin^2(pi f0 tau) / (pi f0 tau)]^2                 bump a
 from dataclasses import dataclass, field
 import functools
 import math
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -206,18 +207,22 @@ class TermSpec:
     id_shape : callable
         Continuous-time AVAR shape per unit squared amplitude used to identify the dominant
         noise at each averaging time (no sampling corrections).
+    id_alpha : int or None
+        The exponent that identification counts where the term dominates, if not ``alpha``
+        (the deterministic ramp: random-walk FM, the most conservative EDF there).
 
     """
 
     name: str
     symbol: str
     params: tuple
-    alpha: object
+    alpha: Optional[int]
     adev_slope: str
     si_units: dict
     conventional: dict
     peak_ratio: float = None
-    id_shape: object = None
+    id_shape: Callable = None
+    id_alpha: int = None
     position_units: dict = field(default_factory=dict)
 
     @property
@@ -311,12 +316,10 @@ TERMS = {spec.name: spec for spec in (
              _conv(('deg/h/sqrt(h)', HOUR * math.sqrt(HOUR) / DEG),
                    ('m/s/h/sqrt(h)', HOUR * math.sqrt(HOUR))),
              id_shape=random_walk_shape),
-    # A ramp is deterministic, but for noise identification it is counted as random-walk FM,
-    # the most conservative EDF where it dominates.
     TermSpec('rate_ramp', 'R', ('value',), None, '+1',
              _conv('rad/s^2', 'm/s^3'), _conv(('deg/h^2', HOUR * HOUR / DEG),
                                               ('m/s/h^2', HOUR * HOUR)),
-             id_shape=ramp_shape),
+             id_shape=ramp_shape, id_alpha=-2),
     # peak ratios: maximum of gauss_markov_shape(tau, 1), and tan(x) = 2x for the sinusoid
     # (x = pi f0 tau); both computed to 1e-10 and rounded here.
     TermSpec('gauss_markov', 'GM', ('sigma', 'tau_c'), None, '+1/2 then -1/2',
@@ -348,9 +351,10 @@ class RunTermSpec:
 TURN_ON_BIAS = RunTermSpec('turn_on_bias', ('mean', 'sigma'), _conv('rad/s', 'm/s^2'),
                            _conv(('deg/h', HOUR / DEG), ('mg', 1e3 / STANDARD_GRAVITY)))
 
-#: Exponent used for noise identification where a term dominates (ramp: random-walk FM).
-ID_ALPHA = {'quantization': 2, 'white_noise': 0, 'bias_instability': -1,
-            'rate_random_walk': -2, 'rate_ramp': -2}
+#: Exponent used for noise identification where a term dominates (the terms with an
+#: ``id_shape``, in registry order; :attr:`TermSpec.id_alpha`).
+ID_ALPHA = {name: spec.alpha if spec.id_alpha is None else spec.id_alpha
+            for name, spec in TERMS.items() if spec.id_shape is not None}
 
 
 def term_avar(term, params, tau, rate_hz):

@@ -33,11 +33,13 @@ times the device clock's 1e-4 tolerance).  So:
 """
 
 from collections import deque
+from dataclasses import dataclass
 import math
 import os
 import select
 import threading
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -312,11 +314,41 @@ class SessionStats:
         self.temperatures = 0
 
 
+@dataclass(frozen=True)
+class SessionHooks:
+    """What a :class:`Gx3Session` calls (from its thread): see the class docstring."""
+
+    on_batch: Callable
+    clock: Callable = time.time
+    log: Callable = None
+    on_temperature: Callable = None
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    """
+    How a :class:`Gx3Session` runs; times in s.
+
+    No record for ``stall_timeout``: reconnect; the wait for a reply; the pause between reads;
+    0xD1 every ``temperature_period`` (0: never); the 0xDB filter window (taps); a raw capture
+    file (None: none); the reconnect delays.
+    """
+
+    stall_timeout: float = 1.0
+    reply_timeout: float = 0.3
+    poll_interval: float = 0.005
+    temperature_period: float = 0.0
+    filter_window: int = 15
+    record_raw: str = None
+    backoff: Backoff = None  # None: Backoff()
+
+
 class Gx3Session:
     """
     Talk to one 3DM-GX3-25 on a serial port and deliver decoded batches.
 
-    ``on_batch(code, records, stamps)`` is called from the session thread with ``records``
+    ``hooks`` (:class:`SessionHooks`): ``on_batch(code, records, stamps)`` is called from the
+    session thread with ``records``
     from :func:`~imu_allan.device.gx3_protocol.record_array` (a structured array: fields by
     name, device units) and host-clock ``stamps`` (int64 nanoseconds).  ``clock()`` returns
     host seconds (the driver passes its ROS clock).  ``log(level, text)`` reports events
@@ -329,32 +361,29 @@ class Gx3Session:
     its timer (mapped like the records', or the host clock before the first record).
     """
 
-    def __init__(self, port, baud, mode, rate_hz, on_batch, clock=time.time, log=None,
-                 stall_timeout=1.0, reply_timeout=0.3, record_raw=None, poll_interval=0.005,
-                 time_sync=None, backoff=None, temperature_period=0.0, on_temperature=None,
-                 filter_window=15):
-        """Configure; call :meth:`run` in a thread and :meth:`stop` to end it."""
+    def __init__(self, port, baud, mode, rate_hz, hooks, options=None):
+        """Configure (``options``: :class:`SessionOptions`); then :meth:`run`, :meth:`stop`."""
+        opt = options or SessionOptions()
         self.decimation, self.flags = check_rate(rate_hz, baud, mode)
-        self.filter_window = int(filter_window)  # gyro/accel window sent with 0xDB, taps
+        self.filter_window = int(opt.filter_window)
         self.sampling = None  # the 0xDB settings the device confirmed (SamplingSettings)
         self.code = MODES[mode]
         self.baud = baud
         self.link = SerialLink(port, baud)
-        self.on_batch = on_batch
-        self.clock = clock
-        self.log = log or (lambda level, text: None)
-        self.stall_timeout = stall_timeout
-        self.reply_timeout = reply_timeout
-        self.poll_interval = poll_interval
-        self.sync = time_sync or TimeSync()
-        self.backoff = backoff or Backoff()
+        self.on_batch, self.clock = hooks.on_batch, hooks.clock
+        self.log = hooks.log or (lambda level, text: None)
+        self.stall_timeout = opt.stall_timeout
+        self.reply_timeout = opt.reply_timeout
+        self.poll_interval = opt.poll_interval
+        self.sync = TimeSync()
+        self.backoff = opt.backoff or Backoff()
         self.parser = StreamParser()
         self.unwrapper = p.TimerUnwrapper()
         self.stats = SessionStats()
         self.expected_step = self.decimation * p.TICKS_PER_SECOND / p.BASE_RATE_HZ
         # Only a batch with a step above this can hold a gap (count_gaps' rule).
         self.gap_step = GAP_FACTOR * self.expected_step
-        self.raw = open(record_raw, 'ab') if record_raw else None
+        self.raw = open(opt.record_raw, 'ab') if opt.record_raw else None
         self.state = 'starting'
         self.last_error = ''
         self.firmware = ''
@@ -367,8 +396,8 @@ class Gx3Session:
         self._replies = deque()
         self._last_read = 0.0  # host time of the last read with data (s)
         self.thread = None
-        self.temperature_period = float(temperature_period or 0.0)
-        self.on_temperature = on_temperature
+        self.temperature_period = float(opt.temperature_period or 0.0)
+        self.on_temperature = hooks.on_temperature
         self.last_temperature_c = math.nan
         self._next_temperature = 0.0
 

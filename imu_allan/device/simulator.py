@@ -16,6 +16,7 @@ import sys
 import termios
 import time
 import tty
+from typing import Union
 
 import numpy as np
 
@@ -60,7 +61,7 @@ class SimConfig:
     gravity: float = STANDARD_GRAVITY
     rate_hz: float = 100.0
     baud: int = p.DEFAULT_BAUD
-    stream: object = None
+    stream: Union[int, str] = None
     timer_start: int = 0
     seed: int = None
     link: str = None

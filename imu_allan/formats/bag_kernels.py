@@ -29,6 +29,8 @@ Allan kernel (:mod:`imu_allan.core.jit`: module-level functions with ``cache=Tru
 user cache folder where ``__pycache__`` is read-only).
 """
 
+from collections import namedtuple
+
 import numpy as np
 
 from .sqlite_digest import DIGEST_ROWID, DIGEST_TS  # fixed constants: no stale cache
@@ -189,17 +191,23 @@ def space_adds_up(u8, base, hdr, usable, used):  # pragma: no cover - compiled
     return usable - content == used + free + np.int64(u8[hdr + 7])
 
 
+#: The output arrays of :func:`sqlite_walk`, one entry per kept row (numba takes it as one
+#: argument): rowid, receive time (ns), blob offset and length in the file's bytes, decoded
+#: flag, and where decoded the stamp (s) and the six values (rad/s, m/s^2).
+WalkRows = namedtuple('WalkRows', 'order stamp off length ok t data')
+
+
 @jit(nogil=True)
-def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off, length, ok,
-                t, data, slow, digest):  # pragma: no cover - compiled; tested against _batch
+def sqlite_walk(views, pages, layout, wanted, rows, slow,
+                digest):  # pragma: no cover - compiled; tested against _batch
     """
     Walk table-leaf pages: rows of the wanted topics decoded, odd cells listed for Python.
 
-    ``u4`` / ``f8``: little-endian uint32 / float64 views of ``u8`` at every byte offset
-    (:func:`byte_views`); ``pages``: page numbers; ``wanted``: topic ids.  Kept rows go to
-    ``order`` (rowid), ``stamp`` (receive time, ns), ``off`` / ``length`` (blob bytes in
-    ``u8``) and, where ``ok``, to ``t`` (s) and ``data`` (rad/s, m/s^2); the cells that are
-    not plain message rows on their page go to ``slow`` as (cell offset, page offset).
+    ``views``: the file's bytes ``u8`` and their little-endian uint32 / float64 views at every
+    byte offset (:func:`byte_views`); ``pages``: page numbers; ``layout``: (page size, usable
+    bytes per page); ``wanted``: topic ids.  Kept rows go to ``rows`` (:class:`WalkRows`);
+    the cells that are not plain message rows on their page go to ``slow`` as (cell offset,
+    page offset).
     Returns (rows kept, slow cells, pages that are not table leaves, table leaves whose
     free-space accounting fails (:func:`space_adds_up`, a cell before the content start or
     past the usable end included)), or (-1, 0, 0, 0) when an output array is too short or a
@@ -208,13 +216,16 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
     :func:`row_digest` and their count (once the batch is accepted: ``digest`` is changed
     only when the walk returns rows).
     """
+    u8, u4, f8 = views
+    page_size, usable = layout
+    order, stamp, off, length, ok, t, data = rows
     last = u8.shape[0] - 1
     kept = 0
     nslow = 0
     lost = 0
     space = 0
     total = np.uint64(0)
-    rows = 0
+    n_rows = 0
     for i in range(pages.shape[0]):
         base = (pages[i] - 1) * page_size
         hdr = base + 100 if pages[i] == 1 else base
@@ -261,7 +272,7 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
             topic = _be_int(u8, rec + hs, s1)
             received = _be_int(u8, rec + hs + z1, s2)
             total += row_digest(received, rowid)
-            rows += 1
+            n_rows += 1
             hit = False
             for w in range(wanted.shape[0]):
                 if topic == wanted[w]:
@@ -279,7 +290,7 @@ def sqlite_walk(u8, u4, f8, pages, page_size, usable, wanted, order, stamp, off,
         if not (fits and space_adds_up(u8, base, hdr, usable, used)):
             space += 1
     digest[0] += total
-    digest[1] += np.uint64(rows)
+    digest[1] += np.uint64(n_rows)
     return kept, nslow, lost, space
 
 

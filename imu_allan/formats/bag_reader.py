@@ -259,12 +259,7 @@ def _read_generic(where, p, topic):
         return _read_sqlite_files(where, files, topic, force_generic=True)
     warnings = []
     try:
-        topics = {}
-        for c in reader.connections:
-            typ, n = topics.get(c.topic, (c.msgtype, 0))
-            topics[c.topic] = (typ, n + c.msgcount)
-        chosen = choose_topic(where, topics, topic)
-        conns = [c for c in reader.connections if c.topic == chosen]
+        chosen, conns = _chosen_connections(reader, where, topic)
         stamps, rows = [], []
         bad = 0
         frame_id = ''
@@ -500,17 +495,22 @@ class _SqliteSource:
             self.con.close()
 
 
+def _chosen_connections(reader, where, topic):
+    """Return the Imu topic of a rosbags reader (:func:`choose_topic`) and its connections."""
+    topics = {}
+    for c in reader.connections:
+        typ, n = topics.get(c.topic, (c.msgtype, 0))
+        topics[c.topic] = (typ, n + c.msgcount)
+    chosen = choose_topic(where, topics, topic)
+    return chosen, [c for c in reader.connections if c.topic == chosen]
+
+
 def _read_ros1_fast(where, p, topic):
     """Fast path for ROS 1 bags: raw records from rosbags, ROS 1 layout decoded in bulk."""
     reader = any_reader([p], where)
     warnings = []
     try:
-        topics = {}
-        for c in reader.connections:
-            typ, n = topics.get(c.topic, (c.msgtype, 0))
-            topics[c.topic] = (typ, n + c.msgcount)
-        chosen = choose_topic(where, topics, topic)
-        conns = [c for c in reader.connections if c.topic == chosen]
+        chosen, conns = _chosen_connections(reader, where, topic)
         msgtype = conns[0].msgtype
         coll = Collector(True, lambda b: reader.deserialize(b, msgtype))
         stamps, blobs = [], []

@@ -41,7 +41,7 @@ import numpy as np
 from ..core.model import NoiseModel
 from ..core.simulation import gauss_markov as gm
 from ..core.terms import gauss_markov_shape
-from ..core.units import AXES, is_gyro, si_unit
+from ..core.units import AXES, discrete_white_std, is_gyro, si_unit
 from ..errors import InputError
 
 GAZEBO_FILE = 'gazebo_imu.sdf'
@@ -575,7 +575,7 @@ def gazebo_values(axis_terms, rate_hz, tau_range, precision=None, inflate=(1.0, 
     driving density.
     """
     lines = []
-    white = axis_terms.get('white_noise', {}).get('value', 0.0) ** 2 * rate_hz
+    white = discrete_white_std(axis_terms.get('white_noise', {}).get('value', 0.0), rate_hz) ** 2
     q = axis_terms.get('quantization', {}).get('value')
     if precision is not None:
         if precision > GZ_MIN_PRECISION:

@@ -663,8 +663,8 @@ class SqlitePages:
         if self._views is None:
             self._views = kernel.byte_views(u8)
         kept, nslow, lost, space = kernel.sqlite_walk(
-            u8, *self._views, pages, ps, self.usable, wanted, order, stamp, off, length, ok, t,
-            data, slow, self.digest)
+            (u8, *self._views), pages, (ps, self.usable), wanted,
+            kernel.WalkRows(order, stamp, off, length, ok, t, data), slow, self.digest)
         if kept < 0:
             return False
         self.lost_pages += lost

@@ -26,10 +26,10 @@ import math
 
 import numpy as np
 
-from ..core.units import AXES, conventional, sensor_of
+from ..core.units import AXES, conventional, sensor_of, TERMS
 
-#: The terms followed, with their usual letters.
-TREND_TERMS = {'white_noise': 'N', 'bias_instability': 'B'}
+#: The terms followed, with their letters (the registry's symbols).
+TREND_TERMS = {t: TERMS[t].symbol for t in ('white_noise', 'bias_instability')}
 SENSORS = ('gyro', 'accel')
 WORST = 'worst'
 #: Band half-width in spreads; with the interval's own ~1 sigma that is ~4 sigma: a healthy IMU

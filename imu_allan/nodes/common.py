@@ -8,6 +8,7 @@ status building.
 from dataclasses import dataclass
 import math
 import sys
+from typing import Union
 
 # rclpy is imported lazily inside the functions that need it, so ``--help`` answers instantly
 # and this module can be imported by tests that only build parameter descriptions.
@@ -126,7 +127,7 @@ class Param:
     """
 
     name: str
-    default: object
+    default: Union[bool, int, float, str]
     description: str
     range: tuple = None  # noqa: A003 - the descriptor's own word
     read_only: bool = False

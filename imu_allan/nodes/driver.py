@@ -46,7 +46,7 @@ from .common import (
     validate_on_set,
 )
 from ..device import gx3_protocol as p
-from ..device.serial_link import check_rate, Gx3Session, MODES
+from ..device.serial_link import check_rate, Gx3Session, MODES, SessionHooks, SessionOptions
 from ..errors import InputError
 from ..formats.imu_cdr import CdrPacker
 
@@ -143,11 +143,11 @@ class DriverNode(Node):
         try:
             self.session = Gx3Session(
                 cfg['port'], cfg['baud'], cfg['mode'], cfg['rate_hz'],
-                on_batch=self._on_batch, poll_interval=cfg['read_period'],
-                clock=self._now, log=self._log, stall_timeout=stall,
-                record_raw=cfg['record_raw'] or None,
-                temperature_period=cfg['temperature_period'],
-                on_temperature=self._on_temperature, filter_window=cfg['filter_window'])
+                SessionHooks(self._on_batch, self._now, self._log, self._on_temperature),
+                SessionOptions(stall_timeout=stall, poll_interval=cfg['read_period'],
+                               temperature_period=cfg['temperature_period'],
+                               filter_window=cfg['filter_window'],
+                               record_raw=cfg['record_raw'] or None))
         except OSError as exc:
             raise InputError(cfg['record_raw'], f'cannot open for writing '
                                                 f'({exc.strerror})') from None

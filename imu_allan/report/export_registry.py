@@ -10,8 +10,7 @@ here imports either.
 from dataclasses import dataclass
 from typing import Callable
 
-#: The consumer noise model of most estimators: white noise plus a bias random walk.
-WHITE_WALK = ('white_noise', 'rate_random_walk')
+from ..core.overbound import WHITE_WALK
 
 
 @dataclass(frozen=True)

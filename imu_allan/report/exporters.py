@@ -4,7 +4,7 @@ Exporters: the fitted noise model in the keys, units and time base each consumer
 Which consumer wants what (keys, units, continuous-time density or per-sample value, and the
 line of its source where it converts) is documented in ``docs/exports.md``; each builder below
 cites that source line too.  The rules every file shares live in
-:mod:`imu_allan.report.export_values`: fitted continuous-time SI values, a term the fit did
+:mod:`imu_allan.core.export_values`: fitted continuous-time SI values, a term the fit did
 not select written as its 95 % upper limit and marked, ``inflate = (white, walk)`` on the
 standard deviations, the worst axis where the format has one number per sensor.
 
@@ -21,7 +21,7 @@ Registry
 ``model`` is the consumer's own noise model (terms of ``core/terms.py``; default white noise +
 rate random walk), the one ``--overbound`` fits (:mod:`imu_allan.core.overbound`).
 
-``build(values) -> dict`` turns an :class:`~imu_allan.report.export_values.ExportValues` into
+``build(values) -> dict`` turns an :class:`~imu_allan.core.export_values.ExportValues` into
 the data the file holds (that dict is what :func:`export` returns); ``render(data, header,
 values)`` returns ``{file name: text}`` for the files in ``files`` (``header``: the comment
 lines of :func:`header_lines`, to be written first).  Adding a consumer (for example Gazebo's
@@ -40,15 +40,15 @@ builder asks ``values.worst(sensor, term, key)`` or ``values.per_axis(sensor, te
 and upper-limit marks follow from those calls.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import json
 import math
 from pathlib import Path
 
 from .export_registry import Exporter, EXPORTERS, register
-from .export_values import ExportValues
 from .sim_exporters import SIM_EXPORTERS
-from ..errors import InputError
+from ..core.export_values import ExportValues
+from ..core.units import discrete_random_walk_step, discrete_white_std
 
 EXPORT_DIR = 'export'
 #: Standard gravity written where a consumer wants a gravity magnitude (m/s^2).
@@ -76,13 +76,22 @@ class ExportOptions:
     horizon_s: float = None
 
     def overbound_request(self):
-        """Return the models the record must overbound for these exports (None: none)."""
+        """Return what the record must overbound for these exports (None: nothing)."""
         if not (self.overbound and self.names):
             return None
         from ..core.record import OverboundRequest
-        models = dict.fromkeys((tuple(EXPORTERS[n].model), EXPORTERS[n].overbound_over)
-                               for n in self.names)
-        return OverboundRequest(tuple(models), self.horizon_s)
+        exporters = [exporter_of(n) for n in self.names]
+        models = dict.fromkeys((tuple(e.model), e.overbound_over) for e in exporters)
+        return OverboundRequest(tuple(models), self.horizon_s,
+                                tuple((e.name, e.model, e.build) for e in exporters),
+                                self.inflate)
+
+
+def exporter_of(name):
+    """Return the registered :class:`Exporter` ``name``; ValueError if there is none."""
+    if name not in EXPORTERS:
+        raise ValueError(f'unknown exporter {name!r} (known: {", ".join(EXPORTERS)})')
+    return EXPORTERS[name]
 
 
 # ----------------------------------------------------------------------------- header
@@ -207,6 +216,13 @@ _FOUR = (('gyro', 'white_noise'), ('gyro', 'rate_random_walk'), ('accel', 'white
          ('accel', 'rate_random_walk'))
 
 
+def _per_step(term, value, rate_hz):
+    """N sqrt(f) (white noise, per sample) or K sqrt(f) (a random walk's step over dt)."""
+    if term == 'white_noise':
+        return discrete_white_std(value, rate_hz)
+    return discrete_random_walk_step(value, rate_hz) * rate_hz
+
+
 def _worst_four(values, keys, convert=None):
     """Worst-axis gyro N, gyro K, accel N, accel K under ``keys`` (``convert(term, value)``)."""
     out = {}
@@ -274,10 +290,9 @@ def _vins_build(values):
     # sample) white terms and dt for the bias terms.  Per step the angle gets
     # 2 (0.5 dt)^2 GYR_N^2 = 0.5 dt^2 GYR_N^2 (continuous: N^2 dt, so GYR_N = N sqrt(2 f)) and
     # the bias dt^2 GYR_W^2 (continuous: K^2 dt, so GYR_W = K sqrt(f)).
-    root = math.sqrt(values.rate_hz)
-
     def per_sample(term, value):
-        return value * root * (math.sqrt(2.0) if term == 'white_noise' else 1.0)
+        return _per_step(term, value, values.rate_hz) * (
+            math.sqrt(2.0) if term == 'white_noise' else 1.0)
     return {**_worst_four(values, ('gyr_n', 'gyr_w', 'acc_n', 'acc_w'), per_sample),
             'g_norm': GRAVITY, 'imu': 1, 'imu_topic': values.topic}
 
@@ -425,7 +440,7 @@ def _fast_lio_build(values):
     # dt^2 acc_cov (continuous: N^2 dt -> acc_cov = N^2 f) and the bias dt^2 b_acc_cov
     # (continuous: K^2 dt -> b_acc_cov = K^2 f): per-sample variances.
     mapping = _worst_four(values, ('gyr_cov', 'b_gyr_cov', 'acc_cov', 'b_acc_cov'),
-                          lambda term, value: value * value * values.rate_hz)
+                          lambda term, value: _per_step(term, value, values.rate_hz) ** 2)
     return {'/**': {'ros__parameters': {'mapping': mapping}}}
 
 
@@ -499,17 +514,14 @@ register(Exporter(
 # ----------------------------------------------------------------------------- API
 
 
-def _prepare(fitted, name, rate_hz, inflate, source, topic, overbound=False, horizon_s=None,
-             fits=None):
-    if name not in EXPORTERS:
-        raise ValueError(f'unknown exporter {name!r} (known: {", ".join(EXPORTERS)})')
-    exporter = EXPORTERS[name]
-    spec = {'horizon_s': horizon_s} if overbound else None
-    if horizon_s is not None and not overbound:
+def _overbound_fits(fitted, exports):
+    """Return the overbounds of ``exports`` (:class:`ExportOptions`) of a fit; None: raw."""
+    if exports.horizon_s is not None and not exports.overbound:
         raise ValueError('horizon_s is only used with overbound=True')
-    values = ExportValues(fitted, rate_hz, inflate, source, topic, spec, exporter.model, fits)
-    data = exporter.build(values)
-    return exporter, values, data
+    if not exports.overbound:
+        return None
+    from ..core.record import overbound_values
+    return overbound_values(fitted, replace(exports.overbound_request(), consumers=()))
 
 
 def export(fitted, name, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw',
@@ -524,55 +536,36 @@ def export(fitted, name, rate_hz=None, inflate=1.0, source=None, topic='/imu/dat
     is at or above the measured upper 95 % bound from tau0 to ``horizon_s`` (default: the
     longest measured averaging time; :mod:`imu_allan.core.overbound`).
     """
-    return _prepare(fitted, name, rate_hz, inflate, source, topic, overbound, horizon_s)[2]
+    exporter = exporter_of(name)
+    fits = _overbound_fits(fitted, ExportOptions((name,), inflate, overbound, horizon_s))
+    return exporter.build(ExportValues(fitted, rate_hz, inflate, source, topic, fits,
+                                       exporter.model))
 
 
-def overbound_summary(values):
-    """Return the ``overbound`` entry of one exporter for ``report.json`` (None if raw)."""
-    if values.overbound is None:
-        return None
-    return {key: {'factor': {a: (f if math.isfinite(f) else None)
-                             for a, f in entry['factor'].items()},
-                  'tight_tau_s': entry['tight_tau_s']}
-            for key, entry in values.overbound_used.items()}
-
-
-def write_exports(folder, fitted, names, rate_hz=None, inflate=1.0, source=None,
-                  topic='/imu/data_raw', overbound=False, horizon_s=None, summary=None,
-                  fits=None):
+def write_exports(folder, fitted, exports, source=None, topic='/imu/data_raw', fits=None,
+                  rate_hz=None):
     """
-    Write the named exporters' files into ``folder/export/``; return their relative paths.
+    Write the exporters of ``exports`` (:class:`ExportOptions`) into ``folder/export/``.
 
-    With ``overbound`` and a dict ``summary``, fills it with the ``overbound`` block of
-    ``report.json``: horizon, level, inflation and, per exporter and key, the factor against the
-    raw fit per axis and the averaging times where the bound is tight.  A horizon outside the
-    measured averaging times is an InputError naming ``--overbound-horizon``, any other reason
-    the overbound cannot be made one naming ``--overbound``.  ``fits``: the overbounding
-    values computed with the record (:class:`~imu_allan.core.record.OverboundValues`), used
-    instead of fitting here.
+    Returns the files' paths relative to ``folder``.  ``fits``: the overbounding values
+    computed with the record (:class:`~imu_allan.core.record.OverboundValues`), else (with
+    ``exports.overbound``) fitted here; an overbound that cannot be made raises its
+    :class:`~imu_allan.core.overbound.OverboundError` (an InputError naming the option).
     """
+    exporters = [exporter_of(n) for n in exports.names]
+    if fits is None:
+        fits = _overbound_fits(fitted, exports)
     target = Path(folder) / EXPORT_DIR
     target.mkdir(parents=True, exist_ok=True)
     written = []
-    for name in names:
-        try:
-            exporter, values, data = _prepare(fitted, name, rate_hz, inflate, source, topic,
-                                              overbound, horizon_s, fits)
-        except ValueError as exc:
-            if overbound:  # the horizon, or a record without a usable bound: one line, exit 2
-                raise InputError('--overbound-horizon' if 'horizon ' in str(exc) else
-                                 '--overbound', f'{name}: {exc}') from None
-            raise
+    for exporter in exporters:
+        values = ExportValues(fitted, rate_hz, exports.inflate, source, topic,
+                              fits if exports.overbound else None, exporter.model)
+        data = exporter.build(values)
         for file_name, text in exporter.render(data, header_lines(exporter, values),
                                                values).items():
             (target / file_name).write_text(text, encoding='utf-8')
             written.append(f'{EXPORT_DIR}/{file_name}')
-        if overbound and summary is not None:
-            from ..core.overbound import OVERBOUND_LEVEL
-            summary.setdefault('horizon_s', values.horizon_s)
-            summary.setdefault('level', OVERBOUND_LEVEL)
-            summary.setdefault('inflate', list(values.inflate))
-            summary.setdefault('exports', {})[name] = overbound_summary(values)
     return written
 
 

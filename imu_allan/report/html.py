@@ -31,15 +31,11 @@ from markupsafe import Markup
 
 from .advice import advice_headline, axis_lines, format_duration
 from .fit_quality import misfit_sentence
+from ..core.terms import TERMS
 from ..core.units import conventional, si_unit
 
 TEMPLATES = Path(__file__).with_name('templates')
 STYLE = 'style.css'
-#: The symbol of each noise term beside its name in the coefficient tables (IEEE Std 952 letters
-#: where they exist), in the order the discrepancy page lists the terms.
-TERM_LETTERS = {'quantization': 'Q', 'white_noise': 'N', 'bias_instability': 'B',
-                'rate_random_walk': 'K', 'rate_ramp': 'R', 'gauss_markov': 'GM',
-                'sinusoid': 'sin'}
 #: What each file beside the analysis page is for (one line each); export files are described
 #: from the exporter registry.
 FILE_PURPOSES = {
@@ -188,7 +184,8 @@ def coefficient_rows(report):
                        'ci': [fmt(c) for c in t[name].get('ci', [None, None])],
                        'unit': t[name].get('unit', '')}
                       for name in ('tau_c', 'frequency_hz') if isinstance(t.get(name), dict)]
-            rows.append({'axis': axis, 'term': term, 'letter': TERM_LETTERS.get(term, ''),
+            letter = TERMS[term].symbol if term in TERMS else ''
+            rows.append({'axis': axis, 'term': term, 'letter': letter,
                          'value': fmt(t.get('value')), 'ci': [fmt(lo), fmt(hi)],
                          'unit': t.get('unit', ''), 'conv_value': fmt(conv.get('value')),
                          'conv_ci': [fmt(conv_ci[0]), fmt(conv_ci[1])],
@@ -521,7 +518,7 @@ def discrepancy_context(report, out_dir):
                                           f'{_words(s["effect"])}), as an image'}
               for s in steps if s['plot']]
     model_terms = sorted({t for terms in report.get('final_model', {}).values() for t in terms},
-                         key=lambda t: list(TERM_LETTERS).index(t) if t in TERM_LETTERS else 99)
+                         key=lambda t: list(TERMS).index(t) if t in TERMS else 99)
     model_rows = [{'axis': axis, 'cells': [_model_cell(axis, t, terms.get(t))
                                            for t in model_terms]}
                   for axis, terms in report.get('final_model', {}).items()]

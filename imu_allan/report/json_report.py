@@ -16,7 +16,6 @@ import numpy as np
 
 from .advice import advice_sentence, advice_to_json
 from .dynamic_report import dynamic_json, dynamic_sentence
-from .export_values import motion_withheld
 from .fit_quality import (
     adequacy_lines,
     fit_json,
@@ -28,6 +27,7 @@ from .fit_quality import (
 from .kalibr import kalibr_values
 from .temperature_report import temperature_json, temperature_sentence
 from ..core.checks.warmup import warmup_sentence
+from ..core.export_values import motion_withheld
 from ..core.units import sample_unit
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
@@ -66,7 +66,7 @@ def analysis_to_json(analysis, samples=None):
                     'decided_by': analysis.fit.decided_by(axis),
                     **fit_json(analysis.fit, axis)},
         }
-        if getattr(analysis, 'deviations', None):
+        if analysis.deviations:
             axes[axis]['deviations'] = {
                 kind: {'tau': _floats(d.tau), 'dev': _floats(d.dev[:, d.axis_index(axis)]),
                        'ci_low': _floats(d.ci_low[:, d.axis_index(axis)]),
@@ -87,7 +87,7 @@ def analysis_to_json(analysis, samples=None):
             'static': bool(analysis.static),
             'motion': analysis.motion,
             'tau_max_s': float(res.tau[-1]),
-            'warmup_s': float(getattr(analysis, 'warmup_s', 0.0)),
+            'warmup_s': float(analysis.warmup_s),
             'warnings': list(analysis.warnings),
         },
         'timing': {'gaps': timing.n_gaps, 'missing_samples': timing.missing_samples,
@@ -155,7 +155,7 @@ def console_summary(analysis):
         kal = 'not given: the IMU moved (analyze --allow-motion gives the numbers anyway)'
     lines.append(f'Kalibr (continuous-time, worst axis): {kal}')
     lines.append('verdict: ' + ('static' if analysis.static else 'NOT static (moving)'))
-    if getattr(analysis, 'warmup_s', 0.0):
+    if analysis.warmup_s:
         lines.append(warmup_sentence(analysis.warmup_s))
     if analysis.outliers.total:
         lines.append(f'outliers beyond Tukey fences (F=3): {analysis.outliers.total}')
@@ -195,8 +195,6 @@ class OutFiles:
 
     #: the denoised bag folder (``DIR/denoised_bag``), None without one
     denoised_bag: str = None
-    #: the ``overbound`` block of the exports (:func:`~.exporters.write_exports`), None: none
-    overbound: dict = None
     #: the names written into DIR; None while report.json itself is being written
     files: list = None
 
@@ -206,21 +204,20 @@ def record_to_json(record, out=None):
     Return the report dictionary of a record's analysis (JSON-ready), the one place it is made.
 
     The estimate's blocks (:func:`analysis_to_json`, with ``recording``), the parts'
-    (:data:`BLOCKS`) and, with ``out`` (:class:`OutFiles`), ``denoised_bag``, ``overbound``
-    and ``out_files``.
+    (:data:`BLOCKS`), ``overbound`` (the exports' block, computed with the record) and, with
+    ``out`` (:class:`OutFiles`), ``denoised_bag`` before it and ``out_files`` after it.
     """
     report = analysis_to_json(record.analysis, record.samples)
     for key, name, render in BLOCKS:
         part = getattr(record, name)
         if part is not None:
             report[key] = render(part)
-    if out is not None:
-        if out.denoised_bag is not None:
-            report['denoised_bag'] = out.denoised_bag
-        if out.overbound:
-            report['overbound'] = out.overbound
-        if out.files is not None:
-            report['out_files'] = list(out.files)
+    if out is not None and out.denoised_bag is not None:
+        report['denoised_bag'] = out.denoised_bag
+    if record.overbound is not None and record.overbound.block is not None:
+        report['overbound'] = record.overbound.block
+    if out is not None and out.files is not None:
+        report['out_files'] = list(out.files)
     return report
 
 

@@ -3,7 +3,7 @@
 import math
 from pathlib import Path
 
-from .export_values import ExportValues
+from ..core.export_values import ExportValues
 
 KEYS = (('gyro', 'gyroscope'), ('accel', 'accelerometer'))
 TERMS = (('noise_density', 'white_noise'), ('random_walk', 'rate_random_walk'))

@@ -55,8 +55,8 @@ def write_out_dir(out_dir, record, exports=None, input_path=None, input_format='
     Write every report file of a record's analysis into ``out_dir`` atomically.
 
     ``record``: a :class:`~imu_allan.core.record.RecordAnalysis`; ``exports``: an
-    :class:`~.exporters.ExportOptions` (its files go into ``export/``, and with ``overbound``
-    report.json gets their ``overbound`` block); ``input_path`` / ``input_format``: the input,
+    :class:`~.exporters.ExportOptions` (its files go into ``export/``; their ``overbound``
+    block came with the record); ``input_path`` / ``input_format``: the input,
     which a denoised record's bag copies (a bag input) or holds beside the denoised topic.
     Returns the :class:`~.json_report.OutFiles` written (``files``: the names in ``out_dir``).
     """
@@ -81,12 +81,7 @@ def _write_out_dir(out_dir, record, exports, input_path, input_format, topic):
             write_dynamic_plots(staging, record.dynamic)
         if exports is not None and exports.names:
             from .exporters import write_exports
-            overbound = {}
-            write_exports(staging, analysis, exports.names, inflate=exports.inflate,
-                          topic=topic, overbound=exports.overbound,
-                          horizon_s=exports.horizon_s, summary=overbound,
-                          fits=record.overbound)
-            out.overbound = overbound or None
+            write_exports(staging, analysis, exports, topic=topic, fits=record.overbound)
         report = record_to_json(record, out)
         (staging / 'report.json').write_text(strict_json.dumps(report, indent=1), encoding='utf-8')
         write_kalibr_yaml(staging / 'imu.yaml', analysis, topic)

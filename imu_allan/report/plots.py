@@ -189,7 +189,7 @@ def plot_adev(path, analysis, sensor, denoised=None):
     ax = fig.subplots()
     draw_adev(ax, analysis.result, analysis.fit, axes,
               None if denoised is None else denoised.result, legend_below=True,
-              deviations=getattr(analysis, 'deviations', None))
+              deviations=analysis.deviations)
     name = 'gyroscope' if sensor == 'gyro' else 'accelerometer'
     ax.set_title(f'{name}: overlapping Allan deviation, 68.3 % bands, fitted terms\n'
                  f'{analysis.source} ({analysis.duration_s / 3600:.2f} h at '

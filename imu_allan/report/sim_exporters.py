@@ -14,6 +14,7 @@ Both simulators model an axis as white noise plus ONE first-order Gauss-Markov b
 bounds every axis.  The factors in the header are against the file the raw fit would give.
 """
 
+import functools
 import math
 
 from .export_registry import Exporter
@@ -77,27 +78,34 @@ def _factors(values, raw, bounded, per_sensor):
                                   fit.tight_tau)
 
 
+def _made(write, per_axis, values):
+    """Return ``write``'s (values dict, file text) of ``values``: raw, or overbounded."""
+    source = _source(values)
+    if values.overbound is None:
+        return write(source, values.rate_hz, values.inflate, values.source)
+    bounded = _overbound_source(values, not per_axis)
+    raw = write(source, values.rate_hz, (1.0, 1.0), values.source)[0]
+    plain = write(bounded, values.rate_hz, (1.0, 1.0), values.source)[0]
+    _factors(values, raw, plain, not per_axis)
+    return write(bounded, values.rate_hz, values.inflate, values.source)
+
+
+def _build(write, per_axis, values):
+    return _made(write, per_axis, values)[0]
+
+
+def _render(write, per_axis, file_name, _data, header, values):
+    text = _made(write, per_axis, values)[1]
+    lines = ''.join(f'  {line.replace("--", "- -")}\n' for line in header)
+    return {file_name: f'<!--\n{lines}-->\n{text}'}
+
+
 def _exporter(name, file_name, consumer, conversion, write, per_axis):
-    def made(values):
-        source = _source(values)
-        if values.overbound is None:
-            return write(source, values.rate_hz, values.inflate, values.source)
-        bounded = _overbound_source(values, not per_axis)
-        raw = write(source, values.rate_hz, (1.0, 1.0), values.source)[0]
-        plain = write(bounded, values.rate_hz, (1.0, 1.0), values.source)[0]
-        _factors(values, raw, plain, not per_axis)
-        return write(bounded, values.rate_hz, values.inflate, values.source)
-
-    def build(values):
-        return made(values)[0]
-
-    def render(_data, header, values):
-        text = made(values)[1]
-        lines = ''.join(f'  {line.replace("--", "- -")}\n' for line in header)
-        return {file_name: f'<!--\n{lines}-->\n{text}'}
+    # (partials of module functions: picklable, as the record's overbound request must be)
     return Exporter(name, (file_name,), consumer, 'per sample' if per_axis else 'continuous',
-                    conversion, build, render, per_axis=per_axis, model=SIM_MODEL,
-                    overbound_over='axis' if per_axis else 'sensor')
+                    conversion, functools.partial(_build, write, per_axis),
+                    functools.partial(_render, write, per_axis, file_name), per_axis=per_axis,
+                    model=SIM_MODEL, overbound_over='axis' if per_axis else 'sensor')
 
 
 #: The simulators' exporters, in the order the registry lists them.

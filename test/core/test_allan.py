@@ -117,11 +117,14 @@ def test_greenhall_edf_oracle_values(alpha, n, m, expected):
 
 
 def test_edf_matches_allantools_where_both_are_exact():
-    for alpha in (1, 0, -1, -2):
+    for alpha in (2, 1, 0, -1, -2):
         for m in (1, 3, 10, 30):
             theirs = allantools.edf_greenhall(alpha=alpha, d=2, m=m, N=5000,
                                               overlapping=True, modified=False)
             assert edf_oadev(alpha, m, 5000) == pytest.approx(theirs, rel=1e-9)
+    # white PM on a record of M <= m second differences: no two share a phase point, so the
+    # EDF is M (the paper's short-record sum, which allantools leaves unimplemented)
+    assert edf_oadev(2, 1000, 3000) == 1000.0
 
 
 @pytest.mark.parametrize('alpha', [0, -1, -2])
@@ -131,14 +134,14 @@ def test_long_lag_sums_are_within_their_stated_accuracy_of_the_exact_sums(alpha)
     for m, tolerance in [(1366, 7e-7), (5000, 6e-8), (40_000, 6e-8)]:
         j_count = 3 * m
         j = np.arange(1.0, j_count)
-        sz_sq = _sz(j / m, math.inf, alpha) ** 2
+        sz_sq = _sz(j / m, math.inf, alpha, 2) ** 2
         exact = [np.sum(sz_sq), np.sum(j * sz_sq)]
-        got = _lag_sums(j_count, m, math.inf, alpha, (None, lambda j: j))
+        got = _lag_sums(j_count, m, math.inf, alpha, 2, (None, lambda j: j))
         np.testing.assert_allclose(got, exact, rtol=tolerance)
         m_short = int(2.5 * m)  # a record with M < 3m: the sum stops between the kinks
         w = 1.0 - j[:m_short - 1] / m_short
         exact = np.sum(w * sz_sq[:m_short - 1])
-        got = _lag_sums(m_short, m, math.inf, alpha,
+        got = _lag_sums(m_short, m, math.inf, alpha, 2,
                         (lambda j, big_m=m_short: 1.0 - j / big_m,))[0]
         assert got == pytest.approx(exact, rel=tolerance)
 

@@ -121,13 +121,3 @@ def test_white_overbound_is_the_largest_tau_times_bound(result):
         tau, bound = _bound(result, axis)
         # one term: the LP's optimum is the smallest N^2 with N^2 / tau >= bound everywhere
         assert value ** 2 == pytest.approx(float(np.max(bound * tau)), rel=1e-6)
-
-
-def test_factors_against_the_raw_fit(result):
-    raw = imu_allan.fit_noise_model(result).model.terms['gyro_x']
-    fit = overbound_axes(result, 'gyro_x', WHITE_WALK)
-    factors = fit.factors(raw)
-    assert factors['white_noise'] == pytest.approx(fit.value('white_noise')
-                                                   / raw['white_noise']['value'])
-    if 'rate_random_walk' not in raw:
-        assert math.isnan(factors['rate_random_walk'])

@@ -10,6 +10,7 @@ start, which the warm-up detector leaves out (about 3 time constants, 871 s with
 import math
 
 from imu_allan.core.analysis import AnalysisOptions
+from imu_allan.core.overbound import HorizonError
 from imu_allan.core.record import (
     analyze_record,
     OverboundRequest,
@@ -113,6 +114,6 @@ def test_an_overbound_that_cannot_be_made_is_kept_as_its_reason():
     options = RecordOptions(overbound=OverboundRequest(((WHITE_WALK, 'axis'),), 1e9))
     samples = warm_record(seed=3)
     rec = analyze_record(Samples(t=samples.t[:20000], data=samples.data[:20000]), options)
-    assert all(isinstance(v, str) for v in rec.overbound.fits.values())
+    assert all(isinstance(v, HorizonError) for v in rec.overbound.fits.values())
     with pytest.raises(ValueError, match='horizon'):
         rec.overbound.get('gyro_x', WHITE_WALK)

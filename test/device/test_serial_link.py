@@ -410,11 +410,11 @@ class _CountingParser(StreamParser):
 
 
 def _session(port_path, batches):
-    from imu_allan.device.serial_link import Gx3Session
+    from imu_allan.device.serial_link import Gx3Session, SessionHooks, SessionOptions
     session = Gx3Session(port_path, 115200, 'accel_rate', 100.0,
-                         on_batch=lambda code, rec, stamps: batches.append(rec.copy()),
-                         stall_timeout=2.0, poll_interval=0.002,
-                         backoff=Backoff(initial=0.05, maximum=0.2))
+                         SessionHooks(lambda code, rec, stamps: batches.append(rec.copy())),
+                         SessionOptions(stall_timeout=2.0, poll_interval=0.002,
+                                        backoff=Backoff(initial=0.05, maximum=0.2)))
     session.parser = _CountingParser()
     return session
 

@@ -409,10 +409,13 @@ def test_overbound_file_stays_above_the_bound(fitted, tmp_path, kind):
     """
     from imu_allan.core.allan.edf import chi2_interval
     from imu_allan.core.overbound import upper_bound
-    from imu_allan.report.exporters import write_exports
+    from imu_allan.core.record import overbound_values
+    from imu_allan.report.exporters import ExportOptions, write_exports
     res = fitted.result
-    summary = {}
-    written = write_exports(tmp_path, fitted, [kind], overbound=True, summary=summary)
+    request = ExportOptions((kind,), overbound=True)
+    fits = overbound_values(fitted, request.overbound_request())
+    summary = fits.block
+    written = write_exports(tmp_path, fitted, request, fits=fits)
     text = (tmp_path / written[0]).read_text()
     assert 'overbound: the values of this consumer' in text.split('-->')[0]
     if kind == 'gazebo':

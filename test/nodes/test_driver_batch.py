@@ -18,7 +18,7 @@ from conftest import SHARED_DATA
 from device.test_serial_link import same_message
 from imu_allan.device import gx3_protocol as p
 from imu_allan.device.gx3_stream import parse_bytes
-from imu_allan.device.serial_link import Gx3Session
+from imu_allan.device.serial_link import Gx3Session, SessionHooks
 import numpy as np
 import pytest
 
@@ -78,8 +78,8 @@ def replay(node, stream, sizes, vectorized):
         return 1_700_000_000.25 + 0.05 * reads[0] + 1e-4 * (reads[0] % 7)
 
     session = Gx3Session(os.ttyname(slave), 115200, 'accel_rate_mag', 10.0,
-                         on_batch=lambda code, rec, stamps: batches.append(
-                             node.serialize_batch(rec, stamps)), clock=clock)
+                         SessionHooks(lambda code, rec, stamps: batches.append(
+                             node.serialize_batch(rec, stamps)), clock=clock))
     session.vectorized = vectorized
     try:
         session.link.open()

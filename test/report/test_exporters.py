@@ -37,9 +37,10 @@ import imu_allan
 from imu_allan.core.allan.edf import chi2_interval
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.overbound import upper_bound
+from imu_allan.core.record import overbound_values
 from imu_allan.core.simulation.simulate import flicker_noise
 from imu_allan.errors import InputError
-from imu_allan.report.exporters import export, EXPORTERS, write_exports
+from imu_allan.report.exporters import export, EXPORTERS, ExportOptions, write_exports
 import numpy as np
 import pytest
 import yaml
@@ -68,7 +69,8 @@ def fitted():
 @pytest.fixture(scope='module')
 def files(fitted, tmp_path_factory):
     folder = tmp_path_factory.mktemp('exports')
-    written = write_exports(folder, fitted, list(EXPORTERS), source='simulated test record')
+    written = write_exports(folder, fitted, ExportOptions(tuple(EXPORTERS)),
+                            source='simulated test record')
     return {p.split('/')[-1]: (folder / p).read_text() for p in written}
 
 
@@ -431,9 +433,11 @@ def test_cli_writes_every_export_and_rejects_bad_names(tmp_path):
 @pytest.fixture(scope='module')
 def overbound_files(fitted, tmp_path_factory):
     folder = tmp_path_factory.mktemp('overbound')
-    summary = {}
-    written = write_exports(folder, fitted, list(EXPORTERS), source='simulated test record',
-                            overbound=True, summary=summary)
+    request = ExportOptions(tuple(EXPORTERS), overbound=True).overbound_request()
+    fits = overbound_values(fitted, request)
+    summary = fits.block
+    written = write_exports(folder, fitted, ExportOptions(tuple(EXPORTERS), overbound=True),
+                            source='simulated test record', fits=fits)
     return {p.split('/')[-1]: (folder / p).read_text() for p in written}, summary
 
 
@@ -583,7 +587,8 @@ def test_overbound_without_a_usable_bound_is_one_input_error(fitted, tmp_path):
     broken.result = copy.copy(fitted.result)
     broken.result.edf = np.full_like(fitted.result.edf, np.nan)
     with pytest.raises(InputError, match='usable bound') as exc:
-        write_exports(tmp_path, broken, ['kalibr'], overbound=True)
+        write_exports(tmp_path, broken, ExportOptions(('kalibr',), overbound=True))
     assert exc.value.where == '--overbound'
     with pytest.raises(InputError, match='horizon'):
-        write_exports(tmp_path, fitted, ['kalibr'], overbound=True, horizon_s=1e-6)
+        write_exports(tmp_path, fitted, ExportOptions(('kalibr',), overbound=True,
+                                                      horizon_s=1e-6))

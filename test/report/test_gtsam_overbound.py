@@ -61,7 +61,7 @@ import runpy
 import imu_allan
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.terms import model_avar, term_avar
-from imu_allan.report.exporters import write_exports
+from imu_allan.report.exporters import ExportOptions, write_exports
 import numpy as np
 import pytest
 
@@ -101,9 +101,9 @@ def snippets(tmp_path_factory):
     fitted = imu_allan.fit_noise_model(imu_allan.allan_deviation(data, RATE, axes=AXES))
     out = {}
     for kind, kwargs in (('raw', {}), ('overbound', {'overbound': True, 'horizon_s': HORIZON_S}),
-                         ('x10', {'inflate': 10.0})):
+                         ('x10', {'inflate': (10.0, 10.0)})):
         folder = tmp_path_factory.mktemp(kind)
-        write_exports(folder, fitted, ['gtsam'], source='simulated', **kwargs)
+        write_exports(folder, fitted, ExportOptions(('gtsam',), **kwargs), source='simulated')
         out[kind] = folder / 'export' / 'gtsam_imu.py'
     return out
 

@@ -50,15 +50,15 @@ def test_out_dir_computes_nothing_and_renders_the_record(record, tmp_path, monke
     from imu_allan.core import overbound
 
     reference = tmp_path / 'api'
-    write_exports(reference, record.analysis, EXPORTS.names, inflate=EXPORTS.inflate,
-                  overbound=True)
+    write_exports(reference, record.analysis, EXPORTS)
 
     def refuse(*_args, **_kwargs):
         raise AssertionError('an overbound was fitted while the files were written')
     monkeypatch.setattr(overbound, 'overbound_axes', refuse)
     out = write_out_dir(tmp_path / 'out', record, EXPORTS)
     assert 'report.json' in out.files and 'dynamic_gyro.png' in out.files
-    assert 'denoised_bag' in out.files and out.overbound['exports'].keys() == set(EXPORTERS)
+    assert 'denoised_bag' in out.files
+    assert record.overbound.block['exports'].keys() == set(EXPORTERS)
     written = json.loads((tmp_path / 'out' / 'report.json').read_text())
     printed = json.loads(json.dumps(record_to_json(record, out)))
     assert printed.pop('out_files') == out.files
@@ -88,5 +88,5 @@ def test_console_text_has_each_part_once(record):
     assert text.count('advice: ') == 1 and text.count('dynamic Allan deviation: ') == 1
     assert text.startswith('warm: ') and 'temperature (' not in text
     report = record_to_json(record, OutFiles())
-    assert 'denoised_bag' not in report and 'overbound' not in report
+    assert 'denoised_bag' not in report and report['overbound'] == record.overbound.block
     assert 'out_files' not in report and 'temperature' not in report

@@ -147,19 +147,15 @@ def _phase(data):
 
 def avar_reference(data, ms):
     """
-    Overlapping AVAR, plain numpy: the readable reference the fast path is tested against.
+    Overlapping AVAR (T, A) of rate samples ``data`` (n, A), in units of the samples squared.
 
-    ``data`` (n, A) rate samples, ``ms`` averaging factors; returns (T, A) in units of the
-    samples squared (the sample interval cancels: AVAR = sum d^2 / (2 m^2 (N - 2m)) with d the
-    second difference of the phase in sample units).
+    The readable numpy definition the compiled kernel is tested against, the one of the whole
+    Allan family (:func:`imu_allan.core.deviations.allan_family.variance_reference`) on the
+    phase: AVAR = sum d^2 / (2 m^2 (N - 2m)), d the second difference of the phase in sample
+    units (the sample interval cancels).
     """
-    x = _phase(data)
-    n_phase = x.shape[1]
-    out = np.empty((len(ms), x.shape[0]))
-    for i, m in enumerate(ms):
-        d = x[:, 2 * m:] - 2.0 * x[:, m:n_phase - m] + x[:, :n_phase - 2 * m]
-        out[i] = np.sum(d * d, axis=1) / (2.0 * m * m * (n_phase - 2 * m))
-    return out
+    from ..deviations.allan_family import variance_reference
+    return variance_reference('oadev', _phase(data), ms)
 
 
 #: Second differences (samples x axes x averaging times) below which the numpy reference is

@@ -6,7 +6,8 @@ The family of frequency-stability deviations (Stable32's): one module per family
 - :mod:`.total`: totdev, mtotdev, htotdev (SP1065 eqs 25, 27, 29)
 - :mod:`.theo`: theo1 (SP1065 eq 30); :mod:`.theobr`: its run-wide noise and bias (ThêoBR)
 - :mod:`.kinds`: one entry per kind (what the dispatch reads); :mod:`.grid`: averaging factors;
-  :mod:`.noise_id`: noise type per averaging time; :mod:`.greenhall`: Greenhall & Riley EDF;
+  :mod:`.noise_id`: noise type per averaging time (the Greenhall & Riley EDF is
+  :func:`imu_allan.core.allan.edf.edf_greenhall`);
   :mod:`.api`: :func:`deviation`.
 """
 

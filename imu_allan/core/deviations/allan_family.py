@@ -13,7 +13,7 @@ the variance (T, A) in the rate's units squared, for averaging factors m (tau = 
 - OHVAR, overlapping Hadamard (SP1065 eq 20): stride 1, M = N - 3m terms.
 
 EDF: Greenhall & Riley 2004 with d = 2 (Allan) or 3 (Hadamard), F = m, S = 1 or m
-(:func:`.greenhall.edf_greenhall`); no bias correction (Stable32 applies none).
+(:func:`imu_allan.core.allan.edf.edf_greenhall`); no bias correction (Stable32 applies none).
 """
 
 import numpy as np
@@ -57,6 +57,6 @@ def terms(kind, n_phase, m):
 
 
 def edf_args(kind):
-    """(d, overlapping, modified) of :func:`.greenhall.edf_greenhall` for ``kind``."""
+    """(d, overlapping, modified) of :func:`~..allan.edf.edf_greenhall` for ``kind``."""
     d, overlapping, _ = SPEC[kind]
     return d, overlapping, False

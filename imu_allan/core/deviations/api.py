@@ -120,7 +120,7 @@ def phase(data, ms):
     """
     Phase (A, n + 1) of the samples (n, A) that every kind and the noise identification share.
 
-    Integrated once per call: compiled (:func:`..allan_kernel.phase_exact`) when the deviation
+    Integrated once per call: compiled (:func:`..allan.kernel.phase_exact`) when the deviation
     runs compiled, numpy (``allan._phase``) otherwise; the two are equal bit for bit.
     """
     if _compiled(data.size * len(ms)):

@@ -4,7 +4,7 @@ Compiled sums of the O(N)-per-tau kinds (numba): adev, hdev, ohdev, mdev/tdev, t
 No temporaries (numpy makes three to five full-length arrays per averaging time), jobs run on
 the package's thread pool (:func:`imu_allan.core.jit.map_threads`).  adev and hdev (stride
 m: N / m terms), ohdev and totdev (N terms per m) are summed block by block over the phase,
-every averaging time per 32 KiB block, as the Allan kernel (:mod:`..allan_kernel`): each
+every averaging time per 32 KiB block, as the Allan kernel (:mod:`..allan.kernel`): each
 phase point comes from memory once per axis.  mdev is Stable32's recursion, blocked the
 same way, four factors per loop.  The numpy versions in
 :mod:`.allan_family`, :mod:`.modified` and :mod:`.total` are the oracles these are tested
@@ -97,7 +97,7 @@ def _modified_blocks(xa, ms, s):  # pragma: no cover - compiled; tested vs numpy
                 t += 1
 
 
-#: Phase points per block of the overlapping sums (as :data:`..allan_kernel.BLOCK`: 32 KiB).
+#: Phase points per block of the overlapping sums (as :data:`..allan.kernel.BLOCK`: 32 KiB).
 BLOCK = 4096
 
 
@@ -236,7 +236,7 @@ def _hadamard_blocks(xa, ms, k_lo, k_hi, acc):  # pragma: no cover - compiled
 
 @jit(fastmath=True, nogil=True, inline='never')
 def _centred_four(xa, ma, mb, mc, md, i0, i1):  # pragma: no cover - compiled
-    # Four factors in one loop, as allan_kernel._sum_four: x_c loaded once for the four.
+    # Four factors in one loop, as allan.kernel._sum_four: x_c loaded once for the four.
     mid = xa[i0:]
     la, ha = xa[i0 - ma:], xa[i0 + ma:]
     lb, hb = xa[i0 - mb:], xa[i0 + mb:]

@@ -10,7 +10,7 @@ import functools
 from typing import Callable, Optional
 
 from . import allan_family, modified, theo, theobr, total
-from .greenhall import edf_greenhall
+from ..allan.edf import edf_greenhall
 
 
 def _no_bias(alpha, m, n_phase):
@@ -90,7 +90,7 @@ class Kind:
 
 
 def _greenhall(d, overlapping, modif):
-    """EDF of a d-th difference variance (:func:`.greenhall.edf_greenhall`) as (alpha, m, N)."""
+    """EDF of a d-th difference variance (:func:`~..allan.edf.edf_greenhall`) as (alpha, m, N)."""
     def edf(alpha, m, n_phase):
         return edf_greenhall(int(alpha), d, int(m), int(n_phase), overlapping, modif)
     return edf

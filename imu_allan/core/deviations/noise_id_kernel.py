@@ -20,7 +20,7 @@ import numpy as np
 from .noise_id import b1_alpha, MAX_POINTS, MIN_ACF_POINTS
 from ..jit import jit, map_threads
 
-#: Phase points per block of the gathering pass (32 KiB, as :data:`..allan_kernel.BLOCK`).
+#: Phase points per block of the gathering pass (32 KiB, as :data:`..allan.kernel.BLOCK`).
 BLOCK = 4096
 
 

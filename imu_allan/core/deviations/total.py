@@ -195,7 +195,7 @@ def bias_factor(kind, alpha, m, n_phase):
 
 def edf(kind, alpha, m, n_phase):
     """EDF of the total variances (SP1065 tables 7-9; module docstring)."""
-    from .greenhall import edf_greenhall
+    from ..allan.edf import edf_greenhall
     alpha = int(alpha)
     ratio = n_phase / m
     if kind == 'totdev':

@@ -36,11 +36,47 @@ seconds of windows before it was raw-moving (settling after motion).
 Each decision therefore waits for the next window: the gate delays samples by one to two windows.
 """
 
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
 
 _FLOOR_EVERY = 8
+
+
+@dataclass(frozen=True)
+class GateOptions:
+    """
+    The tunables of :class:`StationarityGate` (see the module docstring); SI: rad/s, m/s^2, s.
+
+    ``window_s``, ``std_factor``, ``step_factor``, ``gyro_max`` (rad/s), ``hold_s``,
+    ``floor_windows``, ``floor_quantile``: the window tests; ``gyro_delta_max`` (rad/s),
+    ``accel_delta_max`` (m/s^2), ``reference_s``, ``settle_s``, ``reacquire_s``: the
+    still-reference test; ``min_floor``: lower bound of the floor (units of the samples) so
+    constant or coarsely quantized signals do not divide by zero.  ValueError if out of range.
+    """
+
+    window_s: float = 0.2
+    std_factor: float = 3.0
+    step_factor: float = 8.0
+    gyro_max: float = 0.1
+    hold_s: float = 1.0
+    floor_windows: int = 256
+    floor_quantile: float = 0.2
+    min_floor: float = 1e-9
+    gyro_delta_max: float = 0.01
+    accel_delta_max: float = 0.05
+    reference_s: float = 30.0
+    settle_s: float = 2.0
+    reacquire_s: float = 60.0
+
+    def __post_init__(self):
+        """Refuse values the tests cannot use."""
+        if (self.window_s <= 0 or self.std_factor <= 1 or self.step_factor <= 0
+                or self.gyro_max <= 0):
+            raise ValueError('window_s, step_factor and gyro_max must be > 0, std_factor > 1')
+        if not 0 < self.floor_quantile < 1 or self.floor_windows < 4 or self.hold_s < 0:
+            raise ValueError('need 0 < floor_quantile < 1, floor_windows >= 4, hold_s >= 0')
 
 
 class StationarityGate:
@@ -55,55 +91,39 @@ class StationarityGate:
         Number of columns (6: gyro x/y/z rad/s, accel x/y/z m/s^2).
     gyro_columns : sequence of int
         Columns holding angular rate (used for the ``gyro_max`` test).
-    window_s, std_factor, step_factor, gyro_max, hold_s, floor_windows, floor_quantile : float
-        See the module docstring.  ``gyro_max`` in rad/s, times in s.
-    gyro_delta_max, accel_delta_max, reference_s, settle_s, reacquire_s : float
-        Still-reference test (rad/s, m/s^2, s); see the module docstring.
-    min_floor : float
-        Lower bound of the floor (units of the samples) so constant or coarsely quantized
-        signals do not divide by zero.
+    options : GateOptions, optional
+        The tunables (default: :class:`GateOptions`'s); keyword arguments of the same names
+        change single ones (``window_s=0.1``).
 
     """
 
-    def __init__(self, rate_hz, n_axes=6, gyro_columns=(0, 1, 2), window_s=0.2,
-                 std_factor=3.0, step_factor=8.0, gyro_max=0.1, hold_s=1.0,
-                 floor_windows=256, floor_quantile=0.2, min_floor=1e-9, gyro_delta_max=0.01,
-                 accel_delta_max=0.05, reference_s=30.0, settle_s=2.0, reacquire_s=60.0):
+    def __init__(self, rate_hz, n_axes=6, gyro_columns=(0, 1, 2), options=None, **changes):
         if not rate_hz or rate_hz <= 0:
             raise ValueError('rate_hz must be > 0')
-        if window_s <= 0 or std_factor <= 1 or step_factor <= 0 or gyro_max <= 0:
-            raise ValueError('window_s, step_factor and gyro_max must be > 0, std_factor > 1')
-        if not 0 < floor_quantile < 1 or floor_windows < 4 or hold_s < 0:
-            raise ValueError('need 0 < floor_quantile < 1, floor_windows >= 4, hold_s >= 0')
+        self.options = opt = replace(options or GateOptions(), **changes)
         self.rate_hz = float(rate_hz)
         self.n_axes = int(n_axes)
         self.gyro_columns = [c for c in gyro_columns if c < self.n_axes]
         self.accel_columns = [c for c in range(self.n_axes) if c not in self.gyro_columns]
-        self.gyro_delta_max = float(gyro_delta_max)
-        self.accel_delta_max = float(accel_delta_max)
-        self.w = max(4, int(round(window_s * rate_hz)))
-        self.std_factor = float(std_factor)
-        self.step_factor = float(step_factor)
-        self.gyro_max = float(gyro_max)
-        self.hold_windows = int(math.ceil(hold_s * rate_hz / self.w))
-        self.floor_quantile = float(floor_quantile)
-        self.min_floor = float(min_floor)
+        self.w = max(4, int(round(opt.window_s * rate_hz)))
+        self.hold_windows = int(math.ceil(opt.hold_s * rate_hz / self.w))
         # Fixed-size state: the partial window, the window awaiting its decision, the ring of
         # window standard deviations for the floor.
         self._part = np.zeros((self.w, self.n_axes))
         self._part_n = 0
         self._held = np.zeros((self.w, self.n_axes))
         self._held_raw = None  # raw-moving flag of the held window; None when none is held
-        self._ring = np.full((int(floor_windows), self.n_axes), np.nan)
+        self._ring = np.full((int(opt.floor_windows), self.n_axes), np.nan)
         self._ring_i = 0
         self._prev_mean = None
         self._since_raw = 10 ** 9  # windows since the last raw-moving one
         self._n_windows = 0
         self._floor_cache = None
         self._ref = None  # still reference (window means)
-        self._ref_alpha = min(1.0, self.w / (reference_s * rate_hz)) if reference_s > 0 else 1.0
-        self._settle_windows = max(1, int(math.ceil(settle_s * rate_hz / self.w)))
-        self._reacquire_windows = max(1, int(math.ceil(reacquire_s * rate_hz / self.w)))
+        self._ref_alpha = (min(1.0, self.w / (opt.reference_s * rate_hz))
+                           if opt.reference_s > 0 else 1.0)
+        self._settle_windows = max(1, int(math.ceil(opt.settle_s * rate_hz / self.w)))
+        self._reacquire_windows = max(1, int(math.ceil(opt.reacquire_s * rate_hz / self.w)))
         self._deviant = 0  # consecutive quiet windows away from the reference
         self.n_decided = 0
         self.n_excluded = 0
@@ -146,20 +166,21 @@ class StationarityGate:
             filled = self._ring[np.isfinite(self._ring[:, 0])]
             if filled.shape[0] == 0:
                 return None
-            self._floor_cache = np.maximum(
-                np.quantile(filled, self.floor_quantile, axis=0), self.min_floor)
+            self._floor_cache = np.maximum(np.quantile(filled, self.options.floor_quantile,
+                                                       axis=0), self.options.min_floor)
         return self._floor_cache
 
     def _raw_moving(self, mean, std):
+        opt = self.options
         floor = self._floor()
         quiet = True
-        if self.gyro_columns and np.linalg.norm(mean[self.gyro_columns]) > self.gyro_max:
+        if self.gyro_columns and np.linalg.norm(mean[self.gyro_columns]) > opt.gyro_max:
             quiet = False
         if floor is not None:
-            if np.any(std > self.std_factor * floor):
+            if np.any(std > opt.std_factor * floor):
                 quiet = False
             if self._prev_mean is not None:
-                limit = self.step_factor * floor * math.sqrt(2.0 / self.w)
+                limit = opt.step_factor * floor * math.sqrt(2.0 / self.w)
                 if np.any(np.abs(mean - self._prev_mean) > limit):
                     quiet = False
         if self._ref is None:
@@ -168,13 +189,13 @@ class StationarityGate:
         # never stricter than the window means' own scatter (step_factor sigmas of the vector
         # norm): a noisy accelerometer's 0.2-s means wander by more than 0.05 m/s^2 when still
         noise = (np.zeros(self.n_axes) if floor is None
-                 else self.step_factor * floor / math.sqrt(self.w))
+                 else opt.step_factor * floor / math.sqrt(self.w))
         gyro_off = bool(self.gyro_columns) and (
             np.linalg.norm(dev[self.gyro_columns])
-            > max(self.gyro_delta_max, np.linalg.norm(noise[self.gyro_columns])))
+            > max(opt.gyro_delta_max, np.linalg.norm(noise[self.gyro_columns])))
         accel_off = bool(self.accel_columns) and (
             np.linalg.norm(dev[self.accel_columns])
-            > max(self.accel_delta_max, np.linalg.norm(noise[self.accel_columns])))
+            > max(opt.accel_delta_max, np.linalg.norm(noise[self.accel_columns])))
         moving = not quiet or gyro_off or accel_off
         if quiet and (gyro_off or accel_off):
             self._deviant += 1

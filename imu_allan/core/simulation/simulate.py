@@ -31,6 +31,7 @@ import math
 import numpy as np
 
 from ..model import NoiseModel
+from ..units import discrete_random_walk_step, discrete_white_std
 
 #: The flicker series is generated this many times longer than asked for and cut, so that
 #: frequencies down to 1/(FLICKER_SPAN T) are present: a real 1/f process has power below 1/T
@@ -154,7 +155,8 @@ def simulate_axis(terms, n_samples, rate_hz, rng, state=None):
     index = np.arange(n_samples) + (state.get('n', 0) if stream else 0)
     # Fixed draw order (not dict order) so a seed gives the same series for the same model.
     if 'white_noise' in terms:
-        out += terms['white_noise']['value'] * math.sqrt(rate_hz) * rng.standard_normal(n_samples)
+        out += (discrete_white_std(terms['white_noise']['value'], rate_hz)
+                * rng.standard_normal(n_samples))
     if 'quantization' in terms:
         q = terms['quantization']['value']
         if stream and 'phase' in state:
@@ -169,7 +171,8 @@ def simulate_axis(terms, n_samples, rate_hz, rng, state=None):
         out += flicker_bank(rng, n_samples, b, state) if stream \
             else flicker_noise(rng, n_samples, rate_hz, b)
     if 'rate_random_walk' in terms:
-        steps = terms['rate_random_walk']['value'] * math.sqrt(dt) * rng.standard_normal(n_samples)
+        steps = (discrete_random_walk_step(terms['rate_random_walk']['value'], rate_hz)
+                 * rng.standard_normal(n_samples))
         walk = np.cumsum(steps)
         if stream:
             walk += state.get('walk', 0.0)

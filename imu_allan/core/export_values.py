@@ -1,7 +1,8 @@
 """
 The numbers every exporter starts from: a fitted term per axis, inflated, or its upper limit.
 
-One place for the rules the Kalibr file introduced and every exporter shares:
+One place for the rules the Kalibr file introduced and every exporter shares (the exporters in
+:mod:`imu_allan.report.exporters` only name and convert what :class:`ExportValues` gives):
 
 * values are the fitted continuous-time coefficients (SI, :mod:`imu_allan.core.units`);
 * a term the fit did not select is replaced by its 95 % upper limit
@@ -12,11 +13,12 @@ One place for the rules the Kalibr file introduced and every exporter shares:
   ``walk`` the bias terms (random walk K, bias instability B);
 * a single-valued key takes the worst (largest) axis of its sensor; which axis, and whether it
   was an upper limit, is recorded per key for the file header;
-* with ``overbound`` (``{'horizon_s': H or None}``) the terms of the consumer's own model
-  (:attr:`ExportValues.model`) take the values of :func:`imu_allan.core.overbound.overbound`
-  instead (AVAR at or above the measured upper 95 % bound from tau0 to the horizon), the
-  inflation multiplying on top; per key the factor against the raw value (fit or upper limit)
-  and the averaging times where the bound is tight are recorded for the header and the report.
+* with ``overbound`` (the :class:`~imu_allan.core.record.OverboundValues` computed with the
+  record) the terms of the consumer's own model (:attr:`ExportValues.model`) take the values of
+  :func:`imu_allan.core.overbound.overbound` instead (AVAR at or above the measured upper 95 %
+  bound from tau0 to the horizon), the inflation multiplying on top; per key the factor against
+  the raw value (fit or upper limit) and the averaging times where the bound is tight are
+  recorded for the header and the report (:func:`overbound_block`);
 * an analysis whose motion verdict says the IMU moved gives no values (its curve measures the
   motion, not the sensor noise) unless it was run with ``allow_motion``
   (``analyze --allow-motion``).
@@ -24,9 +26,9 @@ One place for the rules the Kalibr file introduced and every exporter shares:
 
 import math
 
-from .export_registry import WHITE_WALK
-from .fit_quality import inadequate
-from ..core.units import AXES, sensor_of
+from .analysis import Analysis
+from .overbound import OVERBOUND_LEVEL, WHITE_WALK
+from .units import AXES, sensor_of
 
 #: Which inflation factor (index into ``inflate``) scales each term; others are not inflated.
 INFLATED_BY = {'white_noise': 0, 'rate_random_walk': 1, 'bias_instability': 1}
@@ -45,10 +47,14 @@ def check_inflate(inflate):
     return white, walk
 
 
+def fit_of(fitted):
+    """Return the FittedModel of ``fitted`` (a FittedModel, or an Analysis: its ``fit``)."""
+    return fitted.fit if isinstance(fitted, Analysis) else fitted
+
+
 def motion_withheld(analysis):
-    """Return whether ``analysis`` moved (motion verdict) without ``allow_motion``."""
-    return (analysis is not None and not getattr(analysis, 'static', True)
-            and not getattr(analysis, 'allow_motion', False))
+    """Return whether ``analysis`` (an Analysis or None) moved without ``allow_motion``."""
+    return analysis is not None and not analysis.static and not analysis.allow_motion
 
 
 class ExportValues:
@@ -56,71 +62,56 @@ class ExportValues:
     Per-axis values of a fitted model, ready for an exporter (SI, continuous time).
 
     ``fitted`` is a :class:`~imu_allan.core.fit.FittedModel` or an
-    :class:`~imu_allan.core.analysis.Analysis` (its ``fit`` is used).
+    :class:`~imu_allan.core.analysis.Analysis` (its ``fit``, motion verdict and source).
     """
 
     def __init__(self, fitted, rate_hz=None, inflate=1.0, source=None, topic='/imu/data_raw',
-                 overbound=None, model=WHITE_WALK, fits=None):
+                 overbound=None, model=WHITE_WALK):
         """
-        Collect from ``fitted``; ``rate_hz`` defaults to the rate the model was fitted at.
+        Collect from ``fitted``; ``rate_hz`` (Hz) defaults to the rate the model was fitted at.
 
-        ``overbound``: None (raw values) or ``{'horizon_s': seconds or None}``; ``model``: the
-        consumer's terms (what is overbounded); ``fits``: the overbounds computed with the
-        record (:class:`~imu_allan.core.record.OverboundValues`, same horizon), else each is
-        fitted when first asked for.
+        ``overbound``: None (raw values) or the :class:`~imu_allan.core.record.OverboundValues`
+        holding the fits of ``model`` (the consumer's terms, what is overbounded).
         """
-        analysis = fitted if hasattr(fitted, 'fit') else None
-        #: the Analysis when one was given (its band and upper limits), else None
-        self.analysis = analysis
-        self.fit = fitted.fit if analysis is not None else fitted
+        #: the Analysis when one was given (its motion verdict and source), else None
+        self.analysis = fitted if isinstance(fitted, Analysis) else None
+        self.fit = fit_of(fitted)
         self.fitted_rate_hz = float(self.fit.rate_hz)
         self.rate_hz = float(rate_hz) if rate_hz else self.fitted_rate_hz
         if not (math.isfinite(self.rate_hz) and self.rate_hz > 0):
             raise ValueError(f'rate {rate_hz!r} Hz must be a positive number')
         self.inflate = check_inflate(inflate)
-        self.source = source or getattr(analysis, 'source', None) or 'fitted model'
+        self.source = source or (self.analysis.source if self.analysis else None) or 'fitted model'
         self.topic = topic
-        #: key -> {'axes': [axis, ...], 'upper': [axis, ...]} for the header
+        #: key -> {'axes': [axis, ...], 'upper': [axis, ...], 'inadequate': [...]} for the header
         self.used = {}
-        self.overbound = None if overbound is None else dict(overbound)
+        self.overbound = overbound
         self.model = tuple(model)
         #: key -> {'factor': {axis: x}, 'tight_tau_s': {axis: [s, ...]}} (overbound only)
         self.overbound_used = {}
-        self._overbound_fits = {}
-        self._computed_fits = fits
         self._last_overbound = {}
         #: the record moved and motion was not allowed: nothing is exported
-        self.motion_withheld = motion_withheld(analysis)
-        if self.overbound is not None and getattr(self.fit, 'result', None) is None:
-            raise ValueError('overbound needs the measured Allan deviation (a FittedModel from '
-                             'fit_noise_model, or an Analysis)')
+        self.motion_withheld = motion_withheld(self.analysis)
 
     @property
     def horizon_s(self):
         """Return the overbound horizon (s): as asked, else the longest measured tau; None: raw."""
         if self.overbound is None:
             return None
-        horizon = self.overbound.get('horizon_s')
+        horizon = self.overbound.horizon_s
         return float(self.fit.result.tau[-1]) if horizon is None else float(horizon)
 
     def overbound_fit(self, axes, shapes=None):
         """
         :class:`~imu_allan.core.overbound.OverboundFit` of ``shapes`` (default: the model).
 
-        ``axes``: one axis, or several whose envelope one model must bound (cached).  Taken
-        from the record's computed fits when given; ValueError if it cannot be made.
+        ``axes``: one axis, or several whose envelope one model must bound.  Raises the
+        :class:`~imu_allan.core.overbound.OverboundError` it could not be made for.
         """
-        shapes = tuple(shapes or self.model)
-        key = (axes if isinstance(axes, str) else tuple(axes), shapes)
-        if key not in self._overbound_fits and self._computed_fits is not None:
-            found = self._computed_fits.get(*key)
-            if found is not None:
-                self._overbound_fits[key] = found
-        if key not in self._overbound_fits:  # the Python API: fitted where first asked for
-            from ..core.overbound import overbound_axes
-            self._overbound_fits[key] = overbound_axes(
-                self.fit.result, axes, shapes, self.overbound.get('horizon_s'))
-        return self._overbound_fits[key]
+        fit = self.overbound.get(axes, shapes or self.model)
+        if fit is None:
+            raise KeyError(f'no overbound of {shapes or self.model} over {axes} was computed')
+        return fit
 
     def note_overbound(self, key, axis, factor, tight_tau):
         """Record, for ``key`` on ``axis``, the factor against the raw value and the tight taus."""
@@ -194,8 +185,34 @@ class ExportValues:
 
     def inadequate(self, axis):
         """Return whether the adequacy test rejects the model of ``axis`` (p < 0.001)."""
-        return inadequate(self.fit, axis) is not None
+        adequacy = self.fit.adequacy(axis)
+        return adequacy is not None and not adequacy.adequate
 
     def inadequate_keys(self):
         """Keys (with axes) taken from an axis whose model the adequacy test rejects."""
-        return {k: u['inadequate'] for k, u in self.used.items() if u.get('inadequate')}
+        return {k: u['inadequate'] for k, u in self.used.items() if u['inadequate']}
+
+    def overbound_summary(self):
+        """Return this consumer's ``exports.<name>`` entry of the ``overbound`` block."""
+        return {key: {'factor': {a: (f if math.isfinite(f) else None)
+                                 for a, f in entry['factor'].items()},
+                      'tight_tau_s': entry['tight_tau_s']}
+                for key, entry in self.overbound_used.items()}
+
+
+def overbound_block(fitted, overbound, consumers, inflate=1.0):
+    """
+    Return the ``overbound`` block of report.json: horizon (s), level, inflation, per consumer.
+
+    ``fitted``: FittedModel or Analysis; ``overbound``: its OverboundValues; ``consumers``:
+    ``(name, model, build)`` triples, ``build(values)`` the exporter's (what it asks of an
+    :class:`ExportValues` decides the keys).  ``exports.<name>.<key>`` holds per axis the
+    factor against the raw fit (its upper limit where not detected) and the tight taus.
+    """
+    exports, horizon = {}, None
+    for name, model, build in consumers:
+        values = ExportValues(fitted, inflate=inflate, overbound=overbound, model=model)
+        build(values)
+        exports[name], horizon = values.overbound_summary(), values.horizon_s
+    return {'horizon_s': horizon, 'level': OVERBOUND_LEVEL,
+            'inflate': list(check_inflate(inflate)), 'exports': exports}
