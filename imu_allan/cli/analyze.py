@@ -21,7 +21,7 @@ from .export_args import add_arguments as add_export_arguments
 from .export_args import check_overbound_args
 from .one_input import run_one
 from .progress import Progress
-from ..core.units import ALL_TERMS, IEEE_TERMS
+from ..core.units import IEEE_TERMS, parse_terms
 from ..errors import InputError
 from ..formats import FORMATS
 from ..report import strict_json
@@ -105,16 +105,11 @@ def build_parser():
 
 def _options(args):
     """Return the :class:`~imu_allan.core.record.RecordOptions` of parsed arguments."""
-    terms = None
-    if args.terms:
-        terms = [t.strip() for t in args.terms.split(',') if t.strip()]
+    terms = parse_terms(args.terms or '', '--terms')
     if args.export and not args.out:
         raise InputError('--export', 'needs --out DIR (the files go into DIR/export/)')
     check_overbound_args(args)
     from ..core.analysis import AnalysisOptions
-    for term in terms or []:
-        if term not in ALL_TERMS:
-            raise InputError('--terms', f'unknown term {term!r} (known: {", ".join(ALL_TERMS)})')
     from ..core.fit.advisor import parse_targets
     targets = parse_targets(args.target, '--target')
     from .export_args import export_options

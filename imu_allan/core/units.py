@@ -10,6 +10,7 @@ coefficients in the IEEE Std 952 / 1293 units of the term registry
 import math
 
 from .terms import DEG, HOUR, STANDARD_GRAVITY, TERMS  # noqa: F401 - re-exported
+from ..errors import InputError
 
 #: Axis order everywhere (topics, arrays, JSON, CSV).
 AXES = ('gyro_x', 'gyro_y', 'gyro_z', 'accel_x', 'accel_y', 'accel_z')
@@ -24,6 +25,21 @@ assert ALL_TERMS[:len(IEEE_TERMS)] == IEEE_TERMS
 
 #: Noise-term parameter names (single-parameter terms use ``value``), from the registry.
 TERM_PARAMETERS = {name: spec.params for name, spec in TERMS.items()}
+
+
+def check_terms(names, where):
+    """Raise InputError naming ``where`` when a name in ``names`` is not a known term."""
+    unknown = [t for t in names if t not in TERMS]
+    if unknown:
+        raise InputError(where, f'unknown term(s) {", ".join(repr(t) for t in unknown)} '
+                                f'(known: {", ".join(ALL_TERMS)})')
+
+
+def parse_terms(text, where):
+    """Parse a comma-separated term list: None when empty (automatic), else the names."""
+    names = [t.strip() for t in str(text).split(',') if t.strip()]
+    check_terms(names, where)
+    return names or None
 
 
 #: Largest magnitude a sample of a real IMU can have, SI (rad/s, m/s^2): far beyond the full

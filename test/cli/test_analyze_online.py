@@ -11,10 +11,11 @@ import json
 from conftest import run_command
 from imu_allan import simulate, thesis_gx3_25_model
 from imu_allan.core.live.online import OnlineAllan
+from imu_allan.core.live.session import pipeline_options
 from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.formats.csv_samples import write_csv
 from imu_allan.formats.samples import Samples
-from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
+from imu_allan.nodes.allan_parameters import _DEFAULTS
 from imu_allan.report.coeffs_layout import coefficient_table
 import numpy as np
 import pytest

@@ -13,10 +13,11 @@ import time
 
 from conftest import DOMAIN, executable, ros_env, spin_until
 from imu_allan.core.live.online import OnlineAllan
+from imu_allan.core.live.session import pipeline_options
 from imu_allan.core.model import NoiseModel
 from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.units import AXES, IEEE_TERMS
-from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
+from imu_allan.nodes.allan_parameters import _DEFAULTS
 from imu_allan.report.coeffs_layout import coefficient_table, decode_adequacy
 from nodes.allan_feed import AllanClient, imu_messages
 import numpy as np
@@ -219,7 +220,7 @@ def test_allan_help_without_ros():
 @pytest.mark.parametrize('param, words', [('rate_hz:=-5.0', 'rate_hz'),
                                           ('budget_file:=/nonexistent/b.yaml',
                                            '/nonexistent/b.yaml: cannot read budget file'),
-                                          ('terms:=white,bias', 'unknown noise term(s) white'),
+                                          ('terms:=white,bias', "unknown term(s) 'white', 'bias'"),
                                           ('targets:=bias_instability=7',
                                            'targets: bias_instability: relative half-width 7 '
                                            'outside')])

@@ -17,9 +17,10 @@ import subprocess
 from conftest import DOMAIN, executable, ros_env, spin_until
 from imu_allan import deviation
 from imu_allan.core.live.online import OnlineAllan
+from imu_allan.core.live.session import pipeline_options
 from imu_allan.core.units import AXES
 from imu_allan.formats.imu_adapter import imus_to_arrays
-from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
+from imu_allan.nodes.allan_parameters import _DEFAULTS
 from imu_allan.report.coeffs_layout import decode_deviation
 from nodes.allan_feed import AllanFeed, RATE
 import numpy as np

@@ -12,10 +12,11 @@ real time with RELIABLE QoS so that every sample arrives.
 
 from conftest import executable
 from imu_allan.core.live.online import OnlineAllan
+from imu_allan.core.live.session import pipeline_options
 from imu_allan.core.simulation.simulate import simulate
 from imu_allan.core.units import AXES, IEEE_TERMS
 from imu_allan.formats.imu_adapter import imus_to_arrays
-from imu_allan.nodes.allan import _DEFAULTS, pipeline_options
+from imu_allan.nodes.allan_parameters import _DEFAULTS
 from imu_allan.report.coeffs_layout import coefficient_table, decode_coefficients
 from nodes.allan_feed import AllanClient, imu_messages, MODEL, RATE, status_values
 import numpy as np

@@ -11,7 +11,7 @@ from ..allan.estimate import allan_deviation, avar_fast
 from ..model import ModelError, NoiseModel
 from ..simulation.simulate import simulate
 from ..terms import model_avar, TERMS
-from ..units import ALL_TERMS, AXES
+from ..units import ALL_TERMS, AXES, check_terms
 
 #: Default starting terms: the thesis's own model (white noise + bias instability).
 DEFAULT_START = ('white_noise', 'bias_instability')
@@ -350,10 +350,7 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
         fixed = set(work_axes)
     else:
         terms = list(terms) if terms else list(DEFAULT_START)
-        unknown = [t for t in terms if t not in ALL_TERMS]
-        if unknown:
-            raise ModelError(f'--terms: unknown term(s) {", ".join(unknown)} '
-                             f'(known: {", ".join(ALL_TERMS)})')
+        check_terms(terms, '--terms')
         work_axes = axes_all
         initial = start_model(measured, work_axes, terms, alpha)
         start = 'terms:' + ','.join(terms)

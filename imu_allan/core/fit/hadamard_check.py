@@ -46,7 +46,7 @@ from .axis import (
     two_sided_z,
 )
 from .tau_range import TauRange
-from ..deviations.greenhall import edf_greenhall
+from ..allan.edf import edf_greenhall
 from ..terms import hadamard_shape, ID_ALPHA
 
 #: Criterion gain of K on the Hadamard curve that contradicts a term set without K.

@@ -7,9 +7,9 @@ kind's raw variance must agree to 1e-9 relative (float64 rounding of sums of ~1e
 """
 
 import allantools
+from imu_allan.core.allan.edf import edf_greenhall
 from imu_allan.core.allan.estimate import _phase
 from imu_allan.core.deviations import allan_family, api, modified, noise_id, theo, total
-from imu_allan.core.deviations.greenhall import edf_greenhall
 import numpy as np
 import pytest
 
