@@ -184,9 +184,9 @@ class ExportValues:
         return {k: u['upper'] for k, u in self.used.items() if u['upper']}
 
     def inadequate(self, axis):
-        """Return whether the adequacy test rejects the model of ``axis`` (p < 0.001)."""
+        """Return whether the adequacy test rejects the model of ``axis`` (not: untested)."""
         adequacy = self.fit.adequacy(axis)
-        return adequacy is not None and not adequacy.adequate
+        return adequacy is not None and adequacy.rejected
 
     def inadequate_keys(self):
         """Keys (with axes) taken from an axis whose model the adequacy test rejects."""

@@ -69,11 +69,7 @@ from .common import (
     take_batch,
     validate_on_set,
 )
-from ..core.live.session import (
-    check_parameters,
-    LiveSession,
-    pipeline_options,  # noqa: F401 - tests build the same pipeline
-)
+from ..core.live.session import check_parameters, LiveSession
 from ..core.live.streaming import parse_estimators
 from ..core.units import AXES
 from ..formats.imu_cdr import cdr_to_arrays, set_covariance_diagonals
@@ -149,12 +145,12 @@ class AllanNode(Node):
 
     @property
     def pipeline(self):
-        """The session's estimator (:class:`~imu_allan.core.live.online.OnlineAllan`)."""
+        """Return the session's estimator (:class:`~imu_allan.core.live.online.OnlineAllan`)."""
         return self.session.pipeline
 
     @property
     def last_cycle(self):
-        """CPU and wall time of the last publish cycle (s; its /diagnostics values)."""
+        """Return the CPU and wall time of the last publish cycle (s; /diagnostics values)."""
         return self.session.last_cycle
 
     def close(self):

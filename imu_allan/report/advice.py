@@ -63,7 +63,7 @@ def _time_entry(entry, **extra):
 def advice_to_json(advice):
     """Return the ``advice`` block (JSON-ready, strict: no NaN)."""
     undetected = [_time_entry(lim, axis=axis, term=term, upper_limit=_num(lim.upper_limit),
-                              unit=si_unit(axis, term), open=bool(lim.open))
+                              unit=si_unit(axis, term), open=bool(lim.in_open_set))
                   for axis, limits in advice.limits.items() for term, lim in limits.items()]
     return {'targets': dict(advice.targets),
             'axes': {axis: {term: _time_entry(e, rel_halfwidth=_num(e.rel_halfwidth))

@@ -40,8 +40,7 @@ NOT_TESTED = 'adequacy not tested: too few averaging times yet'
 def inadequate(fitted, axis):
     """Return the adequacy of ``axis`` when the test rejects its model, else None."""
     adequacy = fitted.adequacy(axis) if fitted is not None else None
-    return adequacy if adequacy is not None and adequacy.tested and not adequacy.adequate \
-        else None
+    return adequacy if adequacy is not None and adequacy.rejected else None
 
 
 def misfit_sentence(axis, adequacy):

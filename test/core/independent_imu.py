@@ -90,7 +90,7 @@ class _AR1:
         self.state = np.atleast_1d(np.asarray(sigma, dtype=float)) * rng.standard_normal(
             self.phi.size)  # stationary start
 
-    def next(self, n):
+    def take(self, n):
         out = np.zeros(n)
         for k in range(self.phi.size):
             e = self.sd[k] * self.rng.standard_normal(n)
@@ -157,7 +157,7 @@ class IndependentAxis:
         means = (c[dev.taps:] - c[:-dev.taps]) / dev.taps  # mean of taps ending at each input
         return means[dev.decimation - 1::dev.decimation]
 
-    def next(self, n):
+    def take(self, n):
         """Return the next ``n`` output samples."""
         dt = 1.0 / self.rate
         y = self._fast(n)
@@ -167,9 +167,9 @@ class IndependentAxis:
             self.angle = angles[-1]
             y += np.diff(angles) / dt
         if self.flicker is not None:
-            y += self.flicker.next(n)
+            y += self.flicker.take(n)
         if self.markov is not None:
-            y += self.markov.next(n)
+            y += self.markov.take(n)
         k = self.truth.get('rate_random_walk', 0.0)
         if k > 0:
             walk = self.walk + np.cumsum(k * math.sqrt(dt) * self.rng.standard_normal(n))

@@ -137,7 +137,7 @@ def offline_group(args):
     rng = np.random.default_rng(seed)
     axes = [draw_axis(unit, rng, device, length) for _ in AXES]
     n = int(round(length * RATE))
-    data = np.column_stack([a.next(n) for a in axes])
+    data = np.column_stack([a.take(n) for a in axes])
     samples = Samples(np.arange(n) / RATE, data, AXES, f'{unit} seed {seed}')
     fitted = analyze_samples(samples).fit
     return [(unit, device, length, score(fitted, name, a)) for name, a in zip(AXES, axes)]
@@ -156,7 +156,7 @@ def online_group(args):
         n = int(round(length * RATE))
         while made < n:
             k = min(block, n - made)
-            data = np.column_stack([a.next(k) for a in axes])
+            data = np.column_stack([a.take(k) for a in axes])
             pipeline.feed((made + np.arange(k)) / RATE, data)
             made += k
         fitted = pipeline.fit(pipeline.result())

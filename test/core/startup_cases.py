@@ -61,7 +61,7 @@ def startup(args):
     block = int(PUBLISH_S * RATE)
     out = []
     for k in range(int(seconds / PUBLISH_S)):
-        data = np.column_stack([a.next(block) for a in axes])
+        data = np.column_stack([a.take(block) for a in axes])
         pipeline.feed((k * block + np.arange(block)) / RATE, data)
         fitted = pipeline.fit(pipeline.result())
         if fitted is None:

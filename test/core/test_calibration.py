@@ -67,19 +67,21 @@ REALISTIC = [(s, 'realistic', 1.0, 100.0) for s in ('N B K', 'N B', 'N K', 'N B 
 
 @pytest.fixture(scope='module')
 def realistic():
-    return summary(run(REALISTIC, n_axes=10, seed=8))
+    return summary(run(REALISTIC, n_axes=25, seed=8))
 
 
 @pytest.mark.slow
 def test_realistic_records_meet_the_goals(realistic):
     """
-    On realistic records: selection, alternatives and coverage as on clean ones (40 axes).
+    On realistic records: selection, alternatives and coverage as on clean ones (100 axes).
 
     The full table (docs/method.md, 192 axes at 100 Hz and 192 at 200 Hz) meets the goals;
     here the tolerances are those of :func:`test_selection_and_alternatives` and
-    :func:`test_interval_coverage` widened for 40 axes: selection >= 80 %, truth among the
-    alternatives >= 92 % (one axis short of 97 % is 2.5 points), pooled 68.3 % coverage within
-    8 points (its binomial SE over ~110 cases is 4.4), per term within 3 SE.
+    :func:`test_interval_coverage` widened for 100 axes: selection >= 80 %, truth among the
+    alternatives >= 92 %, pooled 68.3 % coverage within 8 points (its binomial SE over ~220
+    cases is 3.1; measured 71.9 %), per term within 3 SE.  With the choice of terms in the
+    intervals (issue 35) 40 axes were too few: 80 % on 85 cases there, 2.6 SE from a true
+    ~72 % by chance of the draw.
     """
     assert realistic['exact'] >= 0.80, realistic
     assert realistic['among'] >= 0.92, realistic

@@ -47,10 +47,13 @@ def test_round_trip_six_axes_two_hours(name, model, seed):
     0.9973^12 = 97 % if the intervals are honest; two half-widths would pass only 57 %) and at
     least a third of them inside the 68.3 % interval itself (with the measured ~65 % coverage,
     fewer than 4 of 12 happens with probability 0.5 %; "at least half" would fail 10 % of
-    seeds for honest intervals).
+    seeds for honest intervals).  A 95 % upper limit misses 5 % of the time: at most two of the
+    terms not resolved may lie above theirs (three misses of up to 12 limits happen with
+    probability 2 % for honest limits; one was seen on this seed, accel_y's random walk).
     """
     fitted = _round_trip(model, seed)
     inside = total = 0
+    limit_misses = []
     for axis in model.axes:
         truth = model.terms[axis]
         # every term reported is the unit's; one it has but the record does not resolve (a
@@ -62,7 +65,8 @@ def test_round_trip_six_axes_two_hours(name, model, seed):
             if term == 'white_noise':
                 continue
             if term not in fitted.model.terms[axis]:
-                assert params['value'] <= fitted.upper_limit(axis, term), (axis, term)
+                if params['value'] > fitted.upper_limit(axis, term):
+                    limit_misses.append((axis, term))
                 continue
             value = fitted.value(axis, term)
             lo, hi = fitted.interval(axis, term)
@@ -72,6 +76,7 @@ def test_round_trip_six_axes_two_hours(name, model, seed):
             inside += lo <= params['value'] <= hi
             total += 1
     assert inside >= total / 3, f'{name}: only {inside} of {total} inside their 68.3 % intervals'
+    assert len(limit_misses) <= 2, limit_misses
 
 
 @pytest.mark.slow

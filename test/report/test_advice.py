@@ -25,8 +25,8 @@ def _advice():
                              'bias_instability': TermAdvice(0.2, 5400.0)}
         advice.limits[axis] = {'rate_ramp': Limit(1e-6, 120.0)}
     advice.axes['accel_x'].pop('bias_instability')
-    advice.limits['accel_x'].update({'bias_instability': Limit(2e-4, 1800.0, open=True),
-                                     'rate_random_walk': Limit(3e-5, 1800.0, open=True)})
+    advice.limits['accel_x'].update({'bias_instability': Limit(2e-4, 1800.0, in_open_set=True),
+                                     'rate_random_walk': Limit(3e-5, 1800.0, in_open_set=True)})
     advice.unresolved.append(Unresolved('accel_x', ('bias_instability', 'rate_random_walk'),
                                         1800.0, sets=(NB, NK)))
     return advice

@@ -11,10 +11,10 @@ import functools
 import math
 
 import numpy as np
-from scipy.special import digamma, polygamma
 from scipy.stats import chi2
 
 from ..allan.edf import edf_oadev
+from ..allan.log_chi2 import log_bias, log_sd
 from ..fit import correlation_matrix
 from ..terms import TERMS
 
@@ -110,9 +110,8 @@ def model_band(axis_terms, tau, ms, n_samples, rate_hz):
             best = np.maximum(best, value)
     # a purely deterministic curve still has rounding-level scatter: cap the EDF
     nu = 1.0 / np.maximum(inv_nu, 1e-9)
-    half = nu / 2.0
-    center = 0.5 * np.log(total) + 0.5 * (digamma(half) - np.log(half))
-    sd = 0.5 * np.sqrt(polygamma(1, half))
+    center = 0.5 * (np.log(total) + log_bias(nu))
+    sd = 0.5 * log_sd(nu)
     return Band(tau, total, nu, alpha, center, sd)
 
 
@@ -124,10 +123,9 @@ def measured_band(measured, j):
     implies: the first pass of a fit, before a model gives its own band.
     """
     nu = np.maximum(measured.edf[:, j], 1.0)
-    half = nu / 2.0
-    center = np.log(measured.adev[:, j]) + 0.5 * (digamma(half) - np.log(half))
+    center = np.log(measured.adev[:, j]) + 0.5 * log_bias(nu)
     return Band(measured.tau, measured.avar[:, j], nu, measured.alpha[:, j], center,
-                0.5 * np.sqrt(polygamma(1, half)))
+                0.5 * log_sd(nu))
 
 
 def pool_simulations(band, sims):

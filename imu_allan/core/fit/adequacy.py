@@ -11,7 +11,7 @@ Each AVAR estimate is chi-square distributed with its EDF nu, so in the log doma
 r_i = ln(AVAR_i / model_i) - (psi(nu_i / 2) - ln(nu_i / 2)) has mean 0 and variance
 psi'(nu_i / 2) (psi: digamma, psi': trigamma; the logarithm makes even the few-EDF estimates at
 long tau nearly normal).  Neighbouring averaging times correlate strongly; the fit's own
-correlation model (:func:`.fit.correlation_matrix`) gives W = D C D, D = diag(sqrt(psi')).
+correlation model (:func:`.axis.correlation_matrix`) gives W = D C D, D = diag(sqrt(psi')).
 After the fit (GLS in the coefficients, sensitivities G_ij = shape_j(tau_i) / model_i) the
 residuals have covariance W - G (G' W^-1 G)^-1 G'.
 
@@ -108,6 +108,11 @@ class Adequacy:
         return self.tested and not self.p < ADEQUACY_LEVEL
 
     @property
+    def rejected(self):
+        """Return True when the test ran and rejected the model (neither adequate nor untested)."""
+        return self.tested and self.p < ADEQUACY_LEVEL
+
+    @property
     def scale(self):
         """
         Factor the intervals of an inadequate fit are widened by: sqrt(chi2 / dof), else 1.
@@ -117,7 +122,7 @@ class Adequacy:
         with inconsistent measurements).  It does not make a biased number right; the verdict
         and the misfit spans say that.
         """
-        if self.adequate or not self.tested:
+        if not self.rejected:
             return 1.0
         return math.sqrt(max(self.chi2 / (self.dof * STATISTIC_SCALE), 1.0))
 
@@ -220,7 +225,7 @@ def assess(tau, avar, edf, corr, model, columns, name_effect=None, deterministic
     t, dof, p = smooth_statistic(r, sd, corr, g / model[:, None],
                                  smooth_basis(tau, min(SMOOTH_MODES, tau.size // 4 or 1)))
     out = Adequacy(t, dof, p)
-    if out.adequate:
+    if not out.rejected:
         return out
     z = r / sd
     for first, last, worst in misfit_runs(tau, z):

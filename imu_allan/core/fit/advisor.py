@@ -55,7 +55,12 @@ from .bisection import bisection, guided, log_ratio
 from .bounded_min import bounded_minimum
 from .. import terms as _terms
 from ..allan.edf import CI_LEVEL, edf_oadev
-from ..allan.estimate import DEFAULT_MIN_CLUSTERS, DEFAULT_POINTS_PER_DECADE, identify_noise
+from ..allan.estimate import (
+    DEFAULT_MIN_CLUSTERS,
+    DEFAULT_POINTS_PER_DECADE,
+    identify_noise,
+    min_record,
+)
 from ..units import ALL_TERMS, IEEE_TERMS, TERM_PARAMETERS
 from ...errors import InputError
 
@@ -130,7 +135,7 @@ class Limit:
     upper_limit: float
     more_s: float
     reason: str = None
-    open: bool = False
+    in_open_set: bool = False
 
 
 @dataclass
@@ -188,7 +193,7 @@ def analysis_grid(points_per_decade=DEFAULT_POINTS_PER_DECADE,
     point is the longest factor itself.
     """
     def grid(n):
-        top = int(n // max(int(min_clusters), 2))
+        top = int(n // min_record(min_clusters))
         top = top if m_max is None else min(top, int(m_max))
         if top < 1:
             return np.zeros(0, dtype=np.int64)
@@ -418,7 +423,8 @@ class _AxisAdvisor:
         for term in IEEE_TERMS:  # some open sets hold it, others do not
             if term in held and term not in resolved:
                 n_sep = [n for sets, n in times if term in sets]
-                self.limits[term] = Limit(self._limit(term), *self._latest(n_sep), open=True)
+                self.limits[term] = Limit(self._limit(term), *self._latest(n_sep),
+                                          in_open_set=True)
         if self.undetected:
             yield from self._absent(n_max)
 
@@ -603,8 +609,7 @@ class StagedAdvice:
         grid = grid or analysis_grid()
         self.advice = Advice(targets, result.n_samples / result.rate_hz)
         self.advice.inadequate = [a for a in fitted.axes
-                                  if (ad := fitted.adequacy(a)) is not None
-                                  and ad.tested and not ad.adequate]
+                                  if (ad := fitted.adequacy(a)) is not None and ad.rejected]
         self._axes = [_AxisAdvisor(result, fitted, axis, targets, grid, undetected)
                       for axis in fitted.axes if fitted.fits[axis].terms]
         self._gen = self._run()

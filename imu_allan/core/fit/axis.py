@@ -46,6 +46,13 @@ CORRELATION_WIDTH = {2: 0.41, 1: 0.41, 0: 0.41, -1: 0.58, -2: 1.08}
 #: long-range exponential component exp(-|d log10 tau| / 3) per noise exponent.
 CORRELATION_TAIL = {-1: 0.1}
 _MIN_EDF = 1.0
+
+
+def usable_points(avar, edf):
+    """Return the mask of averaging times a fit can use: a finite AVAR > 0 with EDF >= 1."""
+    return np.isfinite(avar) & (avar > 0) & np.isfinite(edf) & (edf >= _MIN_EDF)
+
+
 #: Multiple of ln(T) charged per term in the selection criterion (BIC uses 1).  Measured on
 #: 16 simulated 2-h records x 6 axes (thesis and ADIS16448-like models): 1 -> 91 of 96 axes get
 #: exactly the true terms (4 spurious random walks from flicker drift), 2 -> 95 of 96.
@@ -167,7 +174,7 @@ class Problem:
         """
         self.duration_s = duration_s
         tau = np.asarray(tau, dtype=float)
-        ok = np.isfinite(avar) & (avar > 0) & np.isfinite(edf) & (edf >= _MIN_EDF)
+        ok = usable_points(avar, edf)
         if span is not None:
             ok &= (tau >= span.lo * (1.0 - 1e-9)) & (tau <= span.hi * (1.0 + 1e-9))
         self.tau = tau[ok]

@@ -24,6 +24,7 @@ from .axis import (
     problem_upper_limit,
     ramp_cross_sd,
     two_sided_z,
+    usable_points,
     widen,
 )
 from .tau_range import choose, TauRange
@@ -345,7 +346,7 @@ def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=N
 
 def _span(tau, avar, edf, rate_hz, processing, tau_range):
     """Return the :class:`TauRange` of one axis: its usable points, cut as asked or chosen."""
-    ok = (avar > 0) & (edf >= 1.0)
+    ok = usable_points(avar, edf)
     if not ok.any():
         return TauRange(math.nan, math.nan)
     span = choose(processing, tau[ok], avar[ok], edf[ok], rate_hz)
