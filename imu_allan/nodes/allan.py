@@ -140,18 +140,8 @@ class AllanNode(Node):
             f'waiting for imu/data_raw at {f"{rate:g} Hz" if rate else "a measured rate"}; '
             f'publishing every {self.params["publish_period"]:g} s; budget '
             f'{self.session.budget.source}'
-            + (f'; estimator memory {self.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)'
+            + (f'; estimator memory {self.session.pipeline.memory_bytes() / 1024:.0f} KiB (fixed)'
                if rate else ''))
-
-    @property
-    def pipeline(self):
-        """Return the session's estimator (:class:`~imu_allan.core.live.online.OnlineAllan`)."""
-        return self.session.pipeline
-
-    @property
-    def last_cycle(self):
-        """Return the CPU and wall time of the last publish cycle (s; /diagnostics values)."""
-        return self.session.last_cycle
 
     def close(self):
         """Stop the figure's worker thread (run_node calls this before destroy_node)."""

@@ -9,6 +9,7 @@ the whole file runs in a few seconds.
 
 import shutil
 
+from formats.flip_cases import flipped
 from imu_allan.errors import InputError
 from imu_allan.formats.bag_reader import read_bag
 from imu_allan.formats.bag_writer import encode_imu, write_imu_bag
@@ -26,14 +27,6 @@ N = 3000
 def _samples():
     rng = np.random.default_rng(0)
     return Samples(t=1.7e9 + np.arange(N) / 100.0, data=rng.normal(0.0, 1e-3, (N, 6)))
-
-
-def _flipped(raw, seed, flips=20):
-    rng = np.random.default_rng(seed)
-    buf = bytearray(raw)
-    for pos in rng.integers(0, len(buf), flips):
-        buf[pos] ^= 1 << int(rng.integers(0, 8))
-    return bytes(buf)
 
 
 def _outcome(path, ref):
@@ -90,7 +83,7 @@ def test_byte_flips_never_change_the_result_silently(tmp_path, storage):
     outcomes = []
     for seed in range(40):
         path = tmp_path / f'damaged{seed}{src.suffix}'
-        path.write_bytes(_flipped(raw, seed))
+        path.write_bytes(flipped(raw, seed))
         outcomes.append(_outcome(path, ref))
     if storage == 'mcap':
         assert 'no checksums' not in ref.integrity
@@ -133,7 +126,7 @@ def test_ros1_flips_inside_chunks_warn_or_are_declared_unverifiable(tmp_path):
     assert 'no checksums' in ref.integrity
     for seed in range(20):
         bad = tmp_path / f'bad{seed}.bag'
-        bad.write_bytes(_flipped(raw, seed, flips=5))
+        bad.write_bytes(flipped(raw, seed, flips=5))
         _outcome(bad, ref)
 
 

@@ -9,9 +9,9 @@ misses the truth more often than it says: 0 of 7 bias instabilities from 10 s of
 white noise of a 10-s quantized gyro on 42 % instead of 68 %.
 
 Each candidate set S (every subset the selection fitted, less those another curve rejected)
-gets the weight w_S = exp(-(crit_S - crit_best) / 2) / sum (the criterion chi^2 + k x penalty
-of :func:`.axis.fit_axis`: a Schwarz weight, Buckland, Burnham & Augustin 1997, "Model
-selection: an integral part of inference", Biometrics 53, 603), and its fit a confidence
+gets the weight w_S = exp(-(crit_S - crit_best) / 2) / sum with crit_S = chi^2_S + 2 k_S (k_S
+its terms: an Akaike weight, :data:`AVERAGING_PENALTY`; Buckland, Burnham & Augustin 1997,
+"Model selection: an integral part of inference", Biometrics 53, 603), and its fit a confidence
 distribution for the squared coefficient c: the one its own interval inverts
 (:func:`.axis.coefficient_interval`: c_hat nu / chi^2_nu, or normal), a point mass at zero
 where S lacks the term.  The interval is the mixture's quantiles, the model-averaged tail area
@@ -34,6 +34,8 @@ _erf = function('special', '_special_ufuncs', 'erf')
 #: quantiles can see).
 _NEGLIGIBLE = 1e-10
 _BISECTIONS = 80
+#: Criterion charge per term of the weights: 2, Akaike's (the selection's own 2 ln T per term
+#: would put nearly all weight on the selected set and give back its selection-blind width).
 AVERAGING_PENALTY = 2.0
 
 
@@ -44,10 +46,12 @@ def weights(fit, rejected=()):
     ``rejected``: term sets (frozensets) another curve contradicts, left out.  A fit without
     candidates (named terms, a remedy's set) is the one set, weight 1.
     """
-    fits = getattr(fit, 'candidate_fits', None) or {}
-    scored = [(fits[frozenset(names)].chi2 + AVERAGING_PENALTY * len(fits[frozenset(names)].terms),
-               fits[frozenset(names)]) for _, names in fit.candidates
-              if frozenset(names) in fits and frozenset(names) not in rejected]
+    scored = []
+    for _, names in fit.candidates:
+        key = frozenset(names)
+        if key in fit.candidate_fits and key not in rejected:
+            f = fit.candidate_fits[key]
+            scored.append((f.chi2 + AVERAGING_PENALTY * len(f.terms), f))
     if not scored:
         return [(1.0, fit)]
     best = min(crit for crit, _ in scored)
