@@ -698,22 +698,53 @@ def _serialize(root, fragment):
 # Writers (exporters ``gazebo`` and ``px4``)
 
 
+@dataclass
+class ModelInput:
+    """
+    What the writers read: a noise model, where it was measured, and its upper limits.
+
+    ``upper_limits``: ``{axis: {term: value}}`` (SI, 95 %) of terms not resolved; else
+    ``upper_limit(axis, term)`` gives them (a FittedModel's); ``result``: the Allan curve
+    whose averaging times the header names (None: 1/rate to the default horizon).
+    """
+
+    model: NoiseModel
+    rate_hz: float = None
+    result: object = None  # AllanResult or None
+    upper_limits: dict = field(default_factory=dict)
+    upper_limit: object = None  # callable (axis, term) -> float, or None
+    source: str = None
+
+    @classmethod
+    def of(cls, fitted):
+        """Return the input of an Analysis, a FittedModel, a NoiseModel or a ModelInput."""
+        from ..core.analysis import Analysis
+        from ..core.fit.fitted_model import FittedModel
+        if isinstance(fitted, cls):
+            return fitted
+        if isinstance(fitted, Analysis):
+            return cls(fitted.fit.model, fitted.rate_hz, fitted.result, fitted.upper_limits,
+                       fitted.fit.upper_limit, fitted.source)
+        if isinstance(fitted, FittedModel):
+            return cls(fitted.model, fitted.rate_hz, fitted.result,
+                       upper_limit=fitted.upper_limit)
+        if isinstance(fitted, NoiseModel):
+            return cls(fitted, fitted.rate_hz)
+        raise TypeError('expected an Analysis, a FittedModel or a NoiseModel')
+
+
 def _model_input(fitted, rate_hz, source=None):
     """
     (terms per axis, rate, tau range, upper limits, source) of an Analysis / fit / model.
 
     95 % upper limits of undetected white noise and random walk come from an Analysis's
-    ``upper_limits`` or a fit's ``upper_limit(axis, term)`` method, whichever exists.
+    ``upper_limits``, else from a FittedModel's :meth:`upper_limit`; a NoiseModel has none.
     """
-    upper = getattr(fitted, 'upper_limits', None) or {}
-    source = source or getattr(fitted, 'source', None)
-    fit = getattr(fitted, 'fit', fitted)
-    limit_of = getattr(fit, 'upper_limit', None)
-    result = getattr(fitted, 'result', None) or getattr(fit, 'result', None)
-    model = getattr(fit, 'model', fit)
-    if not isinstance(model, NoiseModel):
-        raise TypeError('expected an Analysis, a FittedModel or a NoiseModel')
-    rate = rate_hz or getattr(fitted, 'rate_hz', None) or model.rate_hz
+    given = ModelInput.of(fitted)
+    model, result, upper, limit_of = (given.model, given.result, given.upper_limits or {},
+                                      given.upper_limit)
+    source = source or given.source
+    rate = rate_hz or given.rate_hz or model.rate_hz
     if not rate:
         raise ValueError('the sample rate is needed (rate_hz)')
     if result is not None and len(result.tau):
@@ -724,7 +755,7 @@ def _model_input(fitted, rate_hz, source=None):
     for axis in model.axes:
         axis_terms = copy.deepcopy(model.terms[axis])
         limits = dict(upper.get(axis, {}))
-        if callable(limit_of) and not limits:
+        if limit_of is not None and not limits:
             for term in ('white_noise', 'rate_random_walk'):
                 value = limit_of(axis, term) if term not in axis_terms else math.nan
                 if math.isfinite(value):

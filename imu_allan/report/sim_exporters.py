@@ -19,7 +19,14 @@ import math
 
 from .export_registry import Exporter
 from ..core.model import NoiseModel
-from ..formats.gazebo_sdf import export_gazebo, export_px4, GAZEBO_FILE, PX4_FILE, PX4_KEYS
+from ..formats.gazebo_sdf import (
+    export_gazebo,
+    export_px4,
+    GAZEBO_FILE,
+    ModelInput,
+    PX4_FILE,
+    PX4_KEYS,
+)
 
 #: The simulators' noise model: white noise plus one Gauss-Markov bias per axis.
 SIM_MODEL = ('white_noise', 'gauss_markov')
@@ -27,19 +34,6 @@ SIM_MODEL = ('white_noise', 'gauss_markov')
 
 def _source(values):
     return values.analysis if values.analysis is not None else values.fit
-
-
-class _Overbounded:
-    """What the SDF writers read of an Analysis, the overbounding model in place of the fit."""
-
-    upper_limits = None
-    upper_limit = None
-
-    def __init__(self, terms, values):
-        self.fit = self
-        self.model = NoiseModel(terms, values.fitted_rate_hz)
-        self.result = values.fit.result
-        self.source = values.source
 
 
 def _overbound_source(values, per_sensor):
@@ -53,7 +47,9 @@ def _overbound_source(values, per_sensor):
             if fit.value('gauss_markov', 'sigma') > 0:
                 terms[axis]['gauss_markov'] = {k: float(v) for k, v in
                                                fit.terms['gauss_markov'].items()}
-    return _Overbounded(terms, values)
+    # the overbounding model in place of the fit: no upper limits (every term is set)
+    return ModelInput(NoiseModel(terms, values.fitted_rate_hz), values.fitted_rate_hz,
+                      values.fit.result, source=values.source)
 
 
 def _factors(values, raw, bounded, per_sensor):

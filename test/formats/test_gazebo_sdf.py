@@ -256,15 +256,11 @@ def test_export_header_and_upper_limits(fitted):
     """
     from imu_allan import __version__
 
-    class Analysis:  # the fields export_* reads from an Analysis
-        source = 'still.bag'
-        rate_hz = RATE
-        result = fitted.result
-        fit = NoiseModel({'gyro_x': fitted.model.terms['gyro_x'],
-                          'gyro_z': {'white_noise': {'value': 1e-3}}})
-        upper_limits = {'gyro_z': {'rate_random_walk': 2e-5}}
-
-    values, text = gazebo_sdf.export_gazebo(Analysis, inflate=(2.0, 10.0))
+    given = gazebo_sdf.ModelInput(NoiseModel({'gyro_x': fitted.model.terms['gyro_x'],
+                                              'gyro_z': {'white_noise': {'value': 1e-3}}}),
+                                  RATE, fitted.result,
+                                  {'gyro_z': {'rate_random_walk': 2e-5}}, source='still.bag')
+    values, text = gazebo_sdf.export_gazebo(given, inflate=(2.0, 10.0))
     head = text.split('-->')[0]
     for phrase in ('still.bag', '100 Hz', 'PER SAMPLE', 'DRIVING density', 'per axis',
                    f'imu_allan {__version__}', 'white noise x 2', 'x 10'):
@@ -274,21 +270,18 @@ def test_export_header_and_upper_limits(fitted):
     assert gz['stddev'] == pytest.approx(2.0 * 1e-3 * math.sqrt(RATE))
     assert gz['dynamic_bias_stddev'] == pytest.approx(10.0 * 2e-5)
     assert 'gyro_z: rate_random_walk not detected: its 95 % upper limit' in text
-    values, text = gazebo_sdf.export_px4(Analysis)
+    values, text = gazebo_sdf.export_px4(given)
     assert 'worst axis' in text and 'upper limit' in text
     # gyro_x's detected random walk is worse than gyro_z's limit: one value per sensor
     assert values['gyroscopeRandomWalk'] == pytest.approx(fitted.value('gyro_x',
                                                                        'rate_random_walk'))
 
-    class FitWithLimits:  # a fit offering upper_limit(axis, term), as the exporters' path does
-        model = NoiseModel({'gyro_x': {'white_noise': {'value': 1e-3}}})
-        rate_hz = RATE
-        result = fitted.result
+    def upper_limit(axis, term):  # a fit's upper_limit(axis, term), as a FittedModel has
+        return 3e-5 if term == 'rate_random_walk' else math.nan
 
-        def upper_limit(self, axis, term):
-            return 3e-5 if term == 'rate_random_walk' else math.nan
-
-    values, text = gazebo_sdf.export_gazebo(FitWithLimits(), source='other.bag')
+    with_limits = gazebo_sdf.ModelInput(NoiseModel({'gyro_x': {'white_noise': {'value': 1e-3}}}),
+                                        RATE, fitted.result, upper_limit=upper_limit)
+    values, text = gazebo_sdf.export_gazebo(with_limits, source='other.bag')
     assert values['upper_limits'] == {'gyro_x': ['rate_random_walk']} and 'other.bag' in text
 
 
