@@ -376,6 +376,63 @@ def count_tests(models, recordings):
     return _TESTS_PER_AXIS * len(axes) + 2 * terms + 2
 
 
+def _measure_all(recordings, models, z_crit, alpha, points_per_decade, min_clusters):
+    """Return each axis's evidence over the recordings and one summary per recording."""
+    per_axis = {}
+    summaries = []
+    for rec, m in zip(recordings, models):
+        evidence = measure_recording(rec, m, z_crit, alpha, points_per_decade, min_clusters)
+        summaries.append({'source': rec.source, 'sample_rate_hz': float(rec.rate_hz),
+                          'n_samples': int(rec.data.shape[0]),
+                          'duration_s': float(rec.duration_s),
+                          'axes': {a: {'gap_stated': e.gap_stated, 'gap_fitted': e.gap_fitted,
+                                       'consistent_fitted': e.consistent_fitted}
+                                   for a, e in evidence.items() if e.fitted}})
+        for axis, ev in evidence.items():
+            per_axis.setdefault(axis, []).append(ev)
+    return per_axis, summaries
+
+
+def _per_axis_findings(per_axis, turn_on_bias, z_crit, p_crit):
+    """
+    Return the findings each axis shows on its own and what the drive test needs.
+
+    Returns ``(findings, decaying, few_runs)``: ``decaying`` the axes whose turn-on bias
+    decays (left out of the drive test), ``few_runs`` those with a stated turn-on bias but
+    fewer than :data:`.runs.MIN_RUNS` recordings.
+    """
+    findings = []
+    decaying = set()
+    few_runs = []
+    for axis, evs in per_axis.items():
+        axis_found, scales = _axis_findings(axis, evs, z_crit, p_crit)
+        findings += _zeroed_findings(axis, evs, axis_found, scales.get('white_noise'))
+        turn_on = turn_on_bias.get(axis)
+        if turn_on is not None:
+            runs, decays = _run_findings(axis, evs, turn_on, p_crit)
+            findings += runs
+            if decays:
+                decaying.add(axis)
+            if len(evs) < MIN_RUNS:
+                few_runs.append(axis)
+        meta = _metadata_finding(axis, evs, z_crit)
+        if meta is not None:
+            findings.append(meta)
+    return findings, decaying, few_runs
+
+
+def _with_drive_findings(findings, per_axis, decaying, p_crit):
+    """Return ``findings`` with each sensor's biased_drive findings (:func:`_drive_findings`)."""
+    stated_terms = {axis: evs[0].stated for axis, evs in per_axis.items()}
+    for sensor in ('gyro', 'accel'):
+        group = {a: evs for a, evs in per_axis.items()
+                 if sensor_of(a) == sensor and a not in decaying}
+        p, axes = drive_test(group, stated_terms)
+        if p < p_crit:
+            findings = _drive_findings(findings, axes, stated_terms, p)
+    return findings
+
+
 def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
                        min_clusters=10, materiality=None):
     """
@@ -408,50 +465,18 @@ def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
     n_tests = count_tests(models, recordings)
     z_crit = z_critical(alpha, n_tests)
     p_crit = alpha / n_tests
-    per_axis = {}
-    summaries = []
     notes = []
-    for rec, m in zip(recordings, models):
-        evidence = measure_recording(rec, m, z_crit, alpha, points_per_decade, min_clusters)
-        summaries.append({'source': rec.source, 'sample_rate_hz': float(rec.rate_hz),
-                          'n_samples': int(rec.data.shape[0]),
-                          'duration_s': float(rec.duration_s),
-                          'axes': {a: {'gap_stated': e.gap_stated, 'gap_fitted': e.gap_fitted,
-                                       'consistent_fitted': e.consistent_fitted}
-                                   for a, e in evidence.items() if e.fitted}})
-        for axis, ev in evidence.items():
-            per_axis.setdefault(axis, []).append(ev)
+    per_axis, summaries = _measure_all(recordings, models, z_crit, alpha, points_per_decade,
+                                       min_clusters)
     skipped = sorted({a for r in recordings for a in r.axes} - set(per_axis))
     if skipped:
         notes.append(f'the model states nothing for {", ".join(skipped)}: not compared')
-    findings = []
-    decaying = set()
-    stated_terms = {}
-    few_runs = []
-    for axis, evs in per_axis.items():
-        stated_terms[axis] = evs[0].stated
-        axis_found, scales = _axis_findings(axis, evs, z_crit, p_crit)
-        findings += _zeroed_findings(axis, evs, axis_found, scales.get('white_noise'))
-        turn_on = models[0].turn_on_bias.get(axis)
-        if turn_on is not None:
-            runs, decays = _run_findings(axis, evs, turn_on, p_crit)
-            findings += runs
-            if decays:
-                decaying.add(axis)
-            if len(evs) < MIN_RUNS:
-                few_runs.append(axis)
-        meta = _metadata_finding(axis, evs, z_crit)
-        if meta is not None:
-            findings.append(meta)
+    findings, decaying, few_runs = _per_axis_findings(per_axis, models[0].turn_on_bias,
+                                                      z_crit, p_crit)
     if few_runs:
         notes.append(f'turn-on bias of {", ".join(few_runs)}: compared across runs from '
                      f'{MIN_RUNS} recordings on ({len(recordings)} given)')
-    for sensor in ('gyro', 'accel'):
-        group = {a: evs for a, evs in per_axis.items()
-                 if sensor_of(a) == sensor and a not in decaying}
-        p, axes = drive_test(group, stated_terms)
-        if p < p_crit:
-            findings = _drive_findings(findings, axes, stated_terms, p)
+    findings = _with_drive_findings(findings, per_axis, decaying, p_crit)
     findings.sort(key=lambda f: (CLASSES.index(f.cls), f.axis))
     materiality = materiality or Materiality()
     for f in findings:

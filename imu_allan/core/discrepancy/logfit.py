@@ -104,28 +104,48 @@ def _nnls_start(prob, names, positions):
     return np.sqrt(coef), float(z @ z)
 
 
-def fit_terms(prob, names, init=None, hints=None, fixed_positions=None, ranges=None):
+@dataclass(frozen=True)
+class _Layout:
     """
-    Fit ``names`` (all amplitudes and positions free) to a :class:`FitProblem`.
+    The parameter vector of one fit: ln amplitude per term, then ln position per free hump.
 
-    ``init`` ({term: params}) and ``hints`` ({term: position}) seed the search; hump terms are
-    started from a grid of positions over the measured span plus the hints.
-    ``fixed_positions`` ({term: position}) holds those hump terms' positions (tau_c, s;
-    frequency_hz, Hz) at the given values, so only their amplitudes are fitted; ``ranges``
-    ({term: (lo, hi)}) replaces a free position's default range (peak inside the span).
+    ``names`` the terms in package order, ``free`` the hump terms whose position is fitted,
+    ``fixed`` the held positions ({term: position}: tau_c, s; frequency_hz, Hz), ``ranges``
+    ({term: (lo, hi)}) a free position's range where it replaces the default one.
     """
-    names = [t for t in ALL_TERMS if t in names]
-    init = init or {}
-    hints = hints or {}
-    fixed = dict(fixed_positions or {})
-    ranges = ranges or {}
 
-    def span_of(t):
-        return ranges[t] if t in ranges else position_range(t, prob.tau)
-    nl = [t for t in names if TERMS[t].position and t not in fixed]
+    names: list
+    free: list
+    fixed: dict
+    ranges: dict
+    tau: np.ndarray
+
+    def span(self, term):
+        """Return the allowed positions (lo, hi) of a free hump term."""
+        return self.ranges[term] if term in self.ranges else position_range(term, self.tau)
+
+    def split(self, theta):
+        """Return the amplitudes and the ``{term: position}`` (held ones too) of ``theta``."""
+        amps = np.exp(theta[:len(self.names)])
+        return amps, {**self.fixed, **dict(zip(self.free, np.exp(theta[len(self.names):])))}
+
+    def labels(self):
+        """Return ``(term, 'amp' or 'pos')`` per entry of the parameter vector."""
+        return [(t, 'amp') for t in self.names] + [(t, 'pos') for t in self.free]
+
+
+def _starts(prob, layout, init, hints):
+    """
+    Return the starting points ``(Q, positions, amplitudes)`` of the search.
+
+    The two best (least Q) of a grid of positions, 14 log-spaced over each free hump's span
+    plus the hints and ``init``'s own position, with amplitudes by NNLS; then ``init`` itself
+    when it has every term (Q unknown: inf).
+    """
+    names, nl, fixed = layout.names, layout.free, layout.fixed
     grids = []
     for t in nl:
-        lo, hi = span_of(t)
+        lo, hi = layout.span(t)
         grid = list(np.geomspace(lo, hi, 14))
         for extra in (hints.get(t), TERMS[t].unpack(init[t])[1] if t in init else None):
             if extra is not None and lo <= extra <= hi:
@@ -142,14 +162,18 @@ def fit_terms(prob, names, init=None, hints=None, fixed_positions=None, ranges=N
         positions = {**fixed, **{t: TERMS[t].unpack(init[t])[1] for t in nl}}
         amps = np.array([TERMS[t].unpack(init[t])[0] for t in names])
         starts.append((math.inf, positions, amps))
+    return starts
 
-    # parameter vector: ln amplitude per term, then ln position per free hump term
+
+def _bounds(prob, layout):
+    """Return the lower and upper bounds of the parameter vector (ln units)."""
     bounds_lo, bounds_hi = [], []
-    for t in names:
-        if t in fixed:
-            shape = prob.shape(t, fixed[t])
+    for t in layout.names:
+        if t in layout.fixed:
+            shape = prob.shape(t, layout.fixed[t])
         else:
-            shape = prob.shape(t, math.sqrt(np.prod(span_of(t))) if t in nl else None)
+            shape = prob.shape(t, math.sqrt(np.prod(layout.span(t)))
+                               if t in layout.free else None)
         if TERMS[t].position:  # amplitude bound from the hump's peak level, position-independent
             peak = float(np.max(shape))
             top = math.sqrt(float(np.max(prob.target)) / peak)
@@ -158,27 +182,28 @@ def fit_terms(prob, names, init=None, hints=None, fixed_positions=None, ranges=N
             lo, hi = prob.amplitude_bounds(shape)
         bounds_lo.append(math.log(lo))
         bounds_hi.append(math.log(hi))
-    for t in nl:
-        lo, hi = span_of(t)
+    for t in layout.free:
+        lo, hi = layout.span(t)
         bounds_lo.append(math.log(lo))
         bounds_hi.append(math.log(hi))
-    bounds_lo, bounds_hi = np.array(bounds_lo), np.array(bounds_hi)
+    return np.array(bounds_lo), np.array(bounds_hi)
 
-    def model(theta):
-        amps = np.exp(theta[:len(names)])
-        pos = {**fixed, **dict(zip(nl, np.exp(theta[len(names):])))}
-        avar = np.zeros(prob.tau.shape)
-        for t, a in zip(names, amps):
-            avar = avar + a * a * prob.shape(t, pos.get(t))
-        return avar
+
+def _best_solution(prob, layout, starts, bounds):
+    """Return ``(Q, solution)`` of the bounded least squares from the start with least Q."""
+    bounds_lo, bounds_hi = bounds
 
     def fun(theta):
-        return prob.residual(model(theta))
+        amps, pos = layout.split(theta)
+        avar = np.zeros(prob.tau.shape)
+        for t, a in zip(layout.names, amps):
+            avar = avar + a * a * prob.shape(t, pos.get(t))
+        return prob.residual(avar)
 
     best = None
     for _, positions, amps in starts:
         x0 = np.concatenate([np.log(np.maximum(amps, 1e-300)),
-                             np.log([positions[t] for t in nl])]) if nl else \
+                             np.log([positions[t] for t in layout.free])]) if layout.free else \
             np.log(np.maximum(amps, 1e-300))
         span = bounds_hi - bounds_lo
         x0 = np.clip(x0, bounds_lo + 1e-3 * span, bounds_hi - 1e-3 * span)
@@ -187,16 +212,20 @@ def fit_terms(prob, names, init=None, hints=None, fixed_positions=None, ranges=N
         q = float(sol.fun @ sol.fun)
         if best is None or q < best[0]:
             best = (q, sol)
-    q, sol = best
+    return best
+
+
+def _axis_fit(prob, layout, q, sol, bounds):
+    """Return the :class:`AxisFit` of a solution: parameters, covariance, intervals, bounds."""
+    bounds_lo, bounds_hi = bounds
     theta = sol.x
     jac = sol.jac
     params = {}
-    amps = np.exp(theta[:len(names)])
-    pos = {**fixed, **dict(zip(nl, np.exp(theta[len(names):])))}
-    for t, a in zip(names, amps):
+    amps, pos = layout.split(theta)
+    for t, a in zip(layout.names, amps):
         params[t] = TERMS[t].pack(float(a), float(pos[t]) if t in pos else None)
     cov = _sandwich(jac, prob.corr)
-    labels = [(t, 'amp') for t in names] + [(t, 'pos') for t in nl]
+    labels = layout.labels()
     fit = AxisFit(params, q, sol.fun, jac, labels, cov)
     span = bounds_hi - bounds_lo
     for i, (t, kind) in enumerate(labels):
@@ -207,6 +236,26 @@ def fit_terms(prob, names, init=None, hints=None, fixed_positions=None, ranges=N
         fit.at_bound.setdefault(t, {})[pname] = bool(
             theta[i] - bounds_lo[i] < 1e-2 * span[i] or bounds_hi[i] - theta[i] < 1e-2 * span[i])
     return fit
+
+
+def fit_terms(prob, names, init=None, hints=None, fixed_positions=None, ranges=None):
+    """
+    Fit ``names`` (all amplitudes and positions free) to a :class:`FitProblem`.
+
+    ``init`` ({term: params}) and ``hints`` ({term: position}) seed the search; hump terms are
+    started from a grid of positions over the measured span plus the hints.
+    ``fixed_positions`` ({term: position}) holds those hump terms' positions (tau_c, s;
+    frequency_hz, Hz) at the given values, so only their amplitudes are fitted; ``ranges``
+    ({term: (lo, hi)}) replaces a free position's default range (peak inside the span).
+    """
+    names = [t for t in ALL_TERMS if t in names]
+    fixed = dict(fixed_positions or {})
+    free = [t for t in names if TERMS[t].position and t not in fixed]
+    layout = _Layout(names, free, fixed, ranges or {}, prob.tau)
+    starts = _starts(prob, layout, init or {}, hints or {})
+    bounds = _bounds(prob, layout)
+    q, sol = _best_solution(prob, layout, starts, bounds)
+    return _axis_fit(prob, layout, q, sol, bounds)
 
 
 def _log_interval(log_value, half_width):

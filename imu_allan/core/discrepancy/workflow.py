@@ -279,6 +279,213 @@ def start_model(measured, axes, terms, alpha=ALPHA):
     return NoiseModel(out, measured.rate_hz)
 
 
+@dataclass(frozen=True)
+class DiscrepancyOptions:
+    """
+    Options of one discrepancy run (:func:`run_discrepancy`'s keywords of the same names).
+
+    ``n_sims`` simulated runs per round pooled into the spread (0: analytic spread only),
+    ``seed`` of those simulations, ``max_steps`` most effects added per axis, ``alpha``
+    significance level for "inconsistent" and for adding an effect; ``points_per_decade`` and
+    ``min_clusters`` set the estimator's averaging-time grid.
+    """
+
+    n_sims: int = 4
+    seed: int = 0
+    max_steps: int = 4
+    alpha: float = ALPHA
+    points_per_decade: int = 10
+    min_clusters: int = 10
+
+
+@dataclass(frozen=True)
+class _Start:
+    """The model the workflow starts from and the axes it works on."""
+
+    axes: list  # analysed axes, in the measured curve's order
+    model: NoiseModel
+    label: str  # DiscrepancyResult.start: 'model' or 'terms:<name>,...'
+    fixed: frozenset  # axes whose terms come from a model file (a refit may compete)
+
+
+def _measure(data, rate_hz, axes, options):
+    """Return the measured Allan deviation of rate samples ``data`` (SI) at ``rate_hz`` (Hz)."""
+    if data.ndim == 1:
+        data = data[:, None]
+    axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]
+    return allan_deviation(data, rate_hz, points_per_decade=options.points_per_decade,
+                           min_clusters=options.min_clusters, axes=axes)
+
+
+def _usable_axes(measured, notes):
+    """Return the measured axes that have noise to compare; note the constant ones."""
+    axes = list(measured.axes)
+    if measured.tau.size < 6:
+        raise ValueError(f'only {measured.tau.size} averaging times: the record is too short '
+                         'for a discrepancy analysis')
+    dead = [a for j, a in enumerate(axes)
+            if not np.all(np.isfinite(measured.adev[:, j]) & (measured.adev[:, j] > 0))]
+    if dead:  # a constant (stuck or absent) channel has no noise to compare
+        notes.append(f'{", ".join(dead)}: Allan deviation is zero (constant signal): skipped')
+        axes = [a for a in axes if a not in dead]
+        if not axes:
+            raise ValueError('every axis is constant: no noise to analyse')
+    return axes
+
+
+def _starting_point(measured, axes, model, terms, alpha, notes):
+    """
+    Return the :class:`_Start`: ``model``'s terms as given, else ``terms`` fitted to ``axes``.
+
+    Axes the model states nothing for are left out (with a note); ``terms`` defaults to
+    :data:`DEFAULT_START`.
+    """
+    if model is not None:
+        if isinstance(model, dict):
+            model = NoiseModel.from_dict(model)
+        work_axes = [a for a in axes if model.terms.get(a)]
+        skipped = [a for a in axes if a not in work_axes]
+        if not work_axes:
+            raise ModelError('model: no terms for any axis of the data '
+                             f'({", ".join(axes)})')
+        if skipped:
+            notes.append(f'model has no terms for {", ".join(skipped)}: skipped')
+        initial = NoiseModel({a: model.terms[a] for a in work_axes}, measured.rate_hz)
+        return _Start(work_axes, initial, 'model', frozenset(work_axes))
+    terms = list(terms) if terms else list(DEFAULT_START)
+    check_terms(terms, '--terms')
+    return _Start(axes, start_model(measured, axes, terms, alpha), 'terms:' + ','.join(terms),
+                  frozenset())
+
+
+def _choose_winner(candidates):
+    """
+    Return the candidate to add (None when none is significant).
+
+    The largest AIC gain per added parameter among the significant new effects (``candidates``
+    come best first); a pure recalibration of a model file's own terms only when no new effect
+    is needed.
+    """
+    return next((c for c in candidates if c.significant and c.effect != 'recalibration'),
+                None) or next((c for c in candidates if c.significant), None)
+
+
+def _candidate_report(candidates):
+    """Return the JSON-ready evidence of every candidate of a step (``Step.candidates``)."""
+    return [{'effect': c.effect, 'ic': c.ic, 'aic_gain_per_parameter': c.gain,
+             'delta_q': c.delta_q, 'p_value': c.p_value, 'significant': c.significant}
+            for c in candidates]
+
+
+class _Search:
+    """
+    State of the workflow across rounds: every axis's terms, band and gap, and the steps.
+
+    Each round proposes one step per open axis (:meth:`propose`), then re-measures the bands
+    and gaps of the changed axes and takes back the steps that raised their axis's gap
+    (:meth:`remeasure`).
+    """
+
+    def __init__(self, measured, start, options, notes):
+        self.measured = measured
+        self.options = options
+        self.notes = notes
+        self.axes = start.axes
+        self.fixed = set(start.fixed)
+        cols = [list(measured.axes).index(a) for a in self.axes]
+        self.ys = {a: np.log(measured.adev[:, j]) for a, j in zip(self.axes, cols)}
+        self.rng = np.random.default_rng(options.seed)
+        self.current = {a: dict(start.model.terms.get(a, {})) for a in self.axes}
+        self.bands = _bands(self.current, self.axes, measured, options.n_sims, self.rng)
+        self.gaps = self._measure_gaps()
+        self.initial_gaps = dict(self.gaps)
+        self.snapshots = [self._snapshot()]
+        self.steps = []
+        self.rejected = []
+        self.refused = {a: set() for a in self.axes}  # effects whose step raised the gap
+        self.open_axes = set(self.axes)
+
+    def _measure_gaps(self):
+        """Return every axis's gap to its current band."""
+        return {a: measure_gap(self.ys[a], self.bands[a], self.options.alpha)
+                for a in self.axes}
+
+    def _snapshot(self):
+        """Return the current terms, bands and gaps of every axis (for plots)."""
+        return Snapshot({a: dict(self.current[a]) for a in self.axes}, self.bands, self.gaps)
+
+    def run(self):
+        """Run up to ``max_steps`` rounds, until no open axis has a significant candidate."""
+        for _ in range(self.options.max_steps):
+            pending = [s for s in (self.propose(a) for a in self.axes if a in self.open_axes)
+                       if s is not None]
+            if not pending:
+                break
+            self.remeasure(pending)
+
+    def propose(self, axis):
+        """
+        Return the next :class:`Step` of one axis, its model already updated (None: done).
+
+        An axis without a significant candidate is closed.
+        """
+        tau, rate = self.measured.tau, self.measured.rate_hz
+        y, band, g = self.ys[axis], self.bands[axis], self.gaps[axis]
+        cands, _ = evaluate_candidates(y, tau, rate, band, self.current[axis],
+                                       self.options.alpha, axis in self.fixed, g)
+        was_fixed = axis in self.fixed
+        self.fixed.discard(axis)
+        cands = [c for c in cands if c.effect not in self.refused[axis]]
+        winner = _choose_winner(cands)
+        if winner is None:
+            self.open_axes.discard(axis)
+            return None
+        params = (_param_report(axis, winner.effect, winner.fit)
+                  if winner.effect in winner.fit.terms else
+                  {t: _param_report(axis, t, winner.fit) for t in winner.fit.terms})
+        shows = _effect_band(tau, band, winner.fit.terms, winner.effect, rate) or g.tau_range
+        step = Step(axis, winner.effect, shows, g.value, math.nan, params, winner.fit.terms,
+                    winner.p_value, _excess_slope(tau, y, band, g.tau_range),
+                    _candidate_report(cands), index=sum(s.axis == axis for s in self.steps) + 1,
+                    excursion=g.tau_range, snapshot=len(self.snapshots) - 1,
+                    was_fixed=was_fixed)
+        self.current[axis] = {t: dict(p) for t, p in winner.fit.terms.items()}
+        return step
+
+    def remeasure(self, pending):
+        """Re-measure bands and gaps after the ``pending`` steps; keep those that help."""
+        previous = {a: (self.snapshots[-1].terms[a], self.bands[a]) for a in self.axes}
+        old_gaps = self.gaps
+        self.bands = _bands(self.current, self.axes, self.measured, self.options.n_sims,
+                            self.rng, previous)
+        self.gaps = self._measure_gaps()
+        for step in pending:
+            step.gap_after = self.gaps[step.axis].value
+            if step.gap_after > step.gap_before:
+                self._take_back(step, previous[step.axis], old_gaps[step.axis])
+            else:
+                self.steps.append(step)
+        self.snapshots.append(self._snapshot())
+
+    def _take_back(self, step, previous, old_gap):
+        """
+        Put a step's axis back to its ``previous`` (terms, band) and gap; refuse its effect.
+
+        The refit lowered the fit's Q with the old spread, but against the band of the new
+        model the data sit further out: the step is not kept and the axis's next candidate
+        gets its turn.
+        """
+        axis = step.axis
+        self.current[axis] = {t: dict(p) for t, p in previous[0].items()}
+        self.bands[axis], self.gaps[axis] = previous[1], old_gap
+        self.refused[axis].add(step.effect)
+        if step.was_fixed:
+            self.fixed.add(axis)
+        self.rejected.append(step)
+        self.notes.append(f'{axis}: adding {step.effect} raised the gap from '
+                          f'{step.gap_before:.2f} to {step.gap_after:.2f}: not kept')
+
+
 def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, seed=0,
                     max_steps=4, alpha=ALPHA, points_per_decade=10, min_clusters=10,
                     measured=None):
@@ -316,124 +523,20 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
     DiscrepancyResult
 
     """
+    options = DiscrepancyOptions(n_sims, seed, max_steps, alpha, points_per_decade,
+                                 min_clusters)
     data = None if data is None else np.asarray(data, dtype=float)
     if measured is None:
-        if data.ndim == 1:
-            data = data[:, None]
-        axes = tuple(axes) if axes is not None else AXES[:data.shape[1]]
-        measured = allan_deviation(data, rate_hz, points_per_decade=points_per_decade,
-                                   min_clusters=min_clusters, axes=axes)
-    axes_all = list(measured.axes)
-    if measured.tau.size < 6:
-        raise ValueError(f'only {measured.tau.size} averaging times: the record is too short '
-                         'for a discrepancy analysis')
+        measured = _measure(data, rate_hz, axes, options)
     notes = []
-    dead = [a for j, a in enumerate(axes_all)
-            if not np.all(np.isfinite(measured.adev[:, j]) & (measured.adev[:, j] > 0))]
-    if dead:  # a constant (stuck or absent) channel has no noise to compare
-        notes.append(f'{", ".join(dead)}: Allan deviation is zero (constant signal): skipped')
-        axes_all = [a for a in axes_all if a not in dead]
-        if not axes_all:
-            raise ValueError('every axis is constant: no noise to analyse')
-    if model is not None:
-        if isinstance(model, dict):
-            model = NoiseModel.from_dict(model)
-        work_axes = [a for a in axes_all if model.terms.get(a)]
-        skipped = [a for a in axes_all if a not in work_axes]
-        if not work_axes:
-            raise ModelError('model: no terms for any axis of the data '
-                             f'({", ".join(axes_all)})')
-        if skipped:
-            notes.append(f'model has no terms for {", ".join(skipped)}: skipped')
-        initial = NoiseModel({a: model.terms[a] for a in work_axes}, measured.rate_hz)
-        start = 'model'
-        fixed = set(work_axes)
-    else:
-        terms = list(terms) if terms else list(DEFAULT_START)
-        check_terms(terms, '--terms')
-        work_axes = axes_all
-        initial = start_model(measured, work_axes, terms, alpha)
-        start = 'terms:' + ','.join(terms)
-        fixed = set()
-    cols = [list(measured.axes).index(a) for a in work_axes]
-    ys = {a: np.log(measured.adev[:, j]) for a, j in zip(work_axes, cols)}
-    tau = measured.tau
-    rng = np.random.default_rng(seed)
-    current = {a: dict(initial.terms.get(a, {})) for a in work_axes}
-    bands = _bands(current, work_axes, measured, n_sims, rng)
-    gaps = {a: measure_gap(ys[a], bands[a], alpha) for a in work_axes}
-    initial_gaps = dict(gaps)
-    snapshots = [Snapshot({a: dict(current[a]) for a in work_axes}, bands, gaps)]
-    steps = []
-    rejected = []
-    refused = {a: set() for a in work_axes}  # effects whose step raised the axis's gap
-    open_axes = set(work_axes)
-    pending = []
-    for _ in range(max_steps):
-        pending = []
-        for axis in work_axes:
-            if axis not in open_axes:
-                continue
-            cands, _ = evaluate_candidates(ys[axis], tau, measured.rate_hz, bands[axis],
-                                           current[axis], alpha, axis in fixed, gaps[axis])
-            was_fixed = axis in fixed
-            fixed.discard(axis)
-            # largest AIC gain per added parameter among the significant new effects; a pure
-            # recalibration of a model file's own terms only when no new effect is needed
-            cands = [c for c in cands if c.effect not in refused[axis]]
-            winner = next((c for c in cands if c.significant and c.effect != 'recalibration'),
-                          None)
-            if winner is None:
-                winner = next((c for c in cands if c.significant), None)
-            if winner is None:
-                open_axes.discard(axis)
-                continue
-            g = gaps[axis]
-            params = (_param_report(axis, winner.effect, winner.fit)
-                      if winner.effect in winner.fit.terms else
-                      {t: _param_report(axis, t, winner.fit) for t in winner.fit.terms})
-            shows = _effect_band(tau, bands[axis], winner.fit.terms, winner.effect,
-                                 measured.rate_hz) or g.tau_range
-            step = Step(axis, winner.effect, shows, g.value, math.nan, params,
-                        winner.fit.terms, winner.p_value,
-                        _excess_slope(tau, ys[axis], bands[axis], g.tau_range),
-                        [{'effect': c.effect, 'ic': c.ic, 'aic_gain_per_parameter': c.gain,
-                          'delta_q': c.delta_q,
-                          'p_value': c.p_value, 'significant': c.significant}
-                         for c in cands],
-                        index=len([s for s in steps if s.axis == axis]) + 1,
-                        excursion=g.tau_range, snapshot=len(snapshots) - 1)
-            step.was_fixed = was_fixed
-            current[axis] = {t: dict(p) for t, p in winner.fit.terms.items()}
-            pending.append(step)
-        if not pending:
-            break
-        previous = {a: (snapshots[-1].terms[a], bands[a]) for a in work_axes}
-        old_gaps = gaps
-        bands = _bands(current, work_axes, measured, n_sims, rng, previous)
-        gaps = {a: measure_gap(ys[a], bands[a], alpha) for a in work_axes}
-        kept = []
-        for step in pending:
-            step.gap_after = gaps[step.axis].value
-            if step.gap_after > step.gap_before:
-                # the refit lowered the fit's Q with the old spread, but against the band of
-                # the new model the data sit further out: the step is not kept, the axis goes
-                # back to its previous model and the next candidate gets its turn
-                axis = step.axis
-                current[axis] = {t: dict(p) for t, p in previous[axis][0].items()}
-                bands[axis], gaps[axis] = previous[axis][1], old_gaps[axis]
-                refused[axis].add(step.effect)
-                if step.was_fixed:
-                    fixed.add(axis)
-                rejected.append(step)
-                notes.append(f'{axis}: adding {step.effect} raised the gap from '
-                             f'{step.gap_before:.2f} to {step.gap_after:.2f}: not kept')
-            else:
-                kept.append(step)
-        steps.extend(kept)
-        snapshots.append(Snapshot({a: dict(current[a]) for a in work_axes}, bands, gaps))
-    return DiscrepancyResult(measured, work_axes, initial, NoiseModel(current, measured.rate_hz),
-                             steps, initial_gaps, gaps, snapshots, n_sims, start, notes, rejected)
+    start = _starting_point(measured, _usable_axes(measured, notes), model, terms,
+                            options.alpha, notes)
+    search = _Search(measured, start, options, notes)
+    search.run()
+    return DiscrepancyResult(measured, search.axes, start.model,
+                             NoiseModel(search.current, measured.rate_hz), search.steps,
+                             search.initial_gaps, search.gaps, search.snapshots, n_sims,
+                             start.label, notes, search.rejected)
 
 
 def sample_rate(t):
@@ -492,8 +595,7 @@ def gap_summary(model, result, alpha=ALPHA):
         if not gap.consistent:
             cands, _ = evaluate_candidates(y, tau, result.rate_hz, band, axis_terms, alpha,
                                            fixed=True, gap=gap)
-            winner = next((c for c in cands if c.significant and c.effect != 'recalibration'),
-                          None) or next((c for c in cands if c.significant), None)
+            winner = _choose_winner(cands)
             if winner is not None:
                 effect = winner.effect
         out[axis] = {'gap': gap.value, 'effect': effect, 'consistent': gap.consistent,
