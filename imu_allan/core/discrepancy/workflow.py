@@ -12,6 +12,7 @@ from ..model import ModelError, NoiseModel
 from ..simulation.simulate import simulate
 from ..terms import model_avar, TERMS
 from ..units import ALL_TERMS, AXES, check_terms
+from ...errors import InputError
 
 #: Default starting terms: the thesis's own model (white noise + bias instability).
 DEFAULT_START = ('white_noise', 'bias_instability')
@@ -353,7 +354,10 @@ def _starting_point(measured, axes, model, terms, alpha, notes):
         initial = NoiseModel({a: model.terms[a] for a in work_axes}, measured.rate_hz)
         return _Start(work_axes, initial, 'model', frozenset(work_axes))
     terms = list(terms) if terms else list(DEFAULT_START)
-    check_terms(terms, '--terms')
+    try:
+        check_terms(terms, '--terms')
+    except InputError as exc:  # a bad start is a model error, as a bad model file is
+        raise ModelError(str(exc)) from None
     return _Start(axes, start_model(measured, axes, terms, alpha), 'terms:' + ','.join(terms),
                   frozenset())
 
