@@ -148,7 +148,11 @@ class AllanNode(Node):
         self._plot.close()
 
     def _log(self, level, text):
-        getattr(self.get_logger(), level)(text)
+        # one call site per severity: rclpy refuses a second severity from the same line
+        if level == 'warn':
+            self.get_logger().warn(text)
+        else:
+            self.get_logger().info(text)
 
     def _post_set(self, params):
         self._feed_pending()  # the samples taken before the change go where they went before

@@ -100,11 +100,13 @@ def test_online_and_offline_give_the_same_answer_within_its_interval(record_csv)
     The same selection rules and sensor processing on both paths; the curves differ only
     where the streaming estimator thins its longest averaging times (docs/online.md), so the
     white noise, fixed by the short ones, agrees on every axis: the two estimates differ by
-    at most two standard errors of their difference (the 68.3 % half-widths added in
-    quadrature; a 95 % test).  Not the 68.3 % intervals overlapping: on run 3's accel_x (the
-    0.57 Hz line) offline selects a Gauss-Markov the thinned online curve does not, and the
-    two N differ by 5.6 %, 2.3 such standard errors, both within 8 % of the PSD level.  No
-    term is reported on one path that the other's 95 % upper limit excludes.
+    at most three standard errors of their difference (the 68.3 % half-widths added in
+    quadrature): twelve axes compared at two would fail one by chance on about 40 % of
+    honest record pairs; three is the Bonferroni bound for twelve at 3 %.  Not the 68.3 %
+    intervals overlapping: on run 3's accel_x (the 0.57 Hz line) offline adds a Gauss-Markov
+    (the adequacy remedy, outside the averaged term sets) that the thinned online curve does
+    not need, and the two N differ by 5.6 %, 2.3 such standard errors, both within 8 % of the
+    PSD level.  No term is reported on one path that the other's 95 % upper limit excludes.
     """
     path, _ = record_csv
     offline, online = _report(path, False), _report(path, True)
@@ -112,7 +114,7 @@ def test_online_and_offline_give_the_same_answer_within_its_interval(record_csv)
         a = offline['axes'][axis]['terms']['white_noise']['ci']
         b = online['axes'][axis]['terms']['white_noise']['ci']
         gap = abs(sum(a) - sum(b)) / 2.0
-        assert gap <= 2.0 * math.hypot(a[1] - a[0], b[1] - b[0]) / 2.0, (axis, a, b)
+        assert gap <= 3.0 * math.hypot(a[1] - a[0], b[1] - b[0]) / 2.0, (axis, a, b)
         for one, other in ((offline, online), (online, offline)):
             for term, entry in one['axes'][axis]['terms'].items():
                 limit = other['axes'][axis]['limits'].get(term, {}).get('upper_limit')
