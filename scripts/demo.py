@@ -82,9 +82,10 @@ def live_part(env):
         print(f'demo: monitor --duration {SECONDS:g} (the first estimate after about 5 s)')
         # the budget checks compare with the data sheet's typical values (data/gx3_25_budget.yaml)
         print('demo: the simulated device carries the noise the thesis measured on its own '
-              "unit, above the data sheet's typical values (bias instability: gyro about 1.7x, "
-              'accel 1.6x-2.5x), so a budget check may end in WARN or ERROR: the check working, '
-              'not the demo failing')
+              "unit, above the data sheet's typical values (white noise about 1.1x: WARN from "
+              'the first estimate; bias instability gyro about 1.7x, accel 1.6x-2.5x, checked '
+              'once the record resolves it, after about 10 min; until then it is an upper '
+              'limit): the check working, not the demo failing')
         subprocess.run([exes['monitor'], '--duration', f'{SECONDS:g}'], env=env, check=False)
     finally:
         stop(procs)

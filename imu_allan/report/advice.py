@@ -127,8 +127,11 @@ def open_sets_words(entry):
         what = f'{term_words(differ[0])} or none'
         why = _MAYBE.get(differ[0], 'the curve does not yet tell')
     else:
-        what = 'which of ' + ', '.join(term_words(t) for t in differ)
-        why = '; '.join(_WHY[p] for p in pairs) if pairs else 'the curve does not yet tell'
+        what = ('which of ' + ', '.join(term_words(t) for t in differ[:-1])
+                + f' or {term_words(differ[-1])}')
+        # each reason once, said of all of them ("both" is for two)
+        reasons = list(dict.fromkeys(_WHY[p].replace('both', 'they') for p in pairs))
+        why = '; '.join(reasons) if reasons else 'the curve does not yet tell'
     beside = (' beside ' + ', '.join(term_words(t) for t in sorted(common))) if common else ''
     return f'cannot tell yet {what}{beside} ({why}); {_when(entry)}'
 
@@ -160,8 +163,7 @@ def axis_lines(doc):
                                f'{_when(e, "reaches it")})' if target else head)
         if axis in unresolved:
             clauses.append(open_sets_words(unresolved[axis]))
-        for entry in limits.get(axis, []):
-            clauses.append(_limit_words(axis, entry))
+        clauses += [w for w in (_limit_words(axis, e) for e in limits.get(axis, [])) if w]
         out[axis] = f'{axis}: ' + '; '.join(clauses)
     return out
 
@@ -175,8 +177,8 @@ def _limit_words(axis, entry):
     """'bias instability < 40 deg/h (95 %), resolved after about 20 min more if that large'."""
     limit = entry.get('upper_limit')
     name = term_words(entry['term'])
-    if limit is None:
-        return f'{name}: not bounded by these data'
+    if limit is None:  # nothing to say: the fit leaves it out here (quantization beside a filter)
+        return None
     value, unit = conventional(axis, entry['term'], limit)
     head = f'{name} < {value:.3g} {unit} (95 %)'
     if entry.get('open'):  # the open sets decide it: said once with them

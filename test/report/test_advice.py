@@ -124,3 +124,17 @@ def test_a_moving_record_is_told_to_record_at_rest():
                                            (5400, 'about 1.5 h'), (3 * 86400, 'about 3 days')])
 def test_format_duration(seconds, text):
     assert format_duration(seconds) == text
+
+
+def test_three_open_terms_are_one_clause_with_each_reason_once():
+    """B, K or R beside N (a 10-s record): one clause, each reason once, no 'both' for three."""
+    advice = Advice(dict(DEFAULT_TARGETS), 10.0)
+    advice.axes['gyro_y'] = {'white_noise': TermAdvice(0.08, 70.0)}
+    sets = (('white_noise', 'bias_instability'), ('white_noise', 'rate_random_walk'),
+            ('white_noise', 'rate_ramp'))
+    advice.unresolved.append(Unresolved('gyro_y', ('bias_instability', 'rate_random_walk',
+                                                   'rate_ramp'), None, 'a reason', sets))
+    line = axis_lines(advice_to_json(advice))['gyro_y']
+    assert line.count('cannot tell yet') == 1, line
+    assert 'which of bias instability, rate random walk or rate ramp beside white noise' in line
+    assert 'both' not in line and line.count('they lift the longest averaging times') == 1, line

@@ -482,7 +482,7 @@ class _AxisAdvisor:
     def _latest(self, ns):
         """``(more_s, reason)`` of the latest of several sample counts (None: never)."""
         if any(n is None for n in ns):
-            return None, f'not told apart within {HORIZON:g} x the record'
+            return None, f'not at their present sizes within {HORIZON:g} x this record'
         return self._more_s(max(ns, default=self.n)), None
 
     def _open_sets(self, n_max):
