@@ -482,13 +482,23 @@ def _settle_mask(bands, lags):
     return mask
 
 
+def _significant(fit, j):
+    """Return whether lag ``j``'s coefficient in ``fit`` is clear of 0 (its level's sigmas)."""
+    se = math.sqrt(max(fit.stat_cov[j, j], 0.0))
+    level = FIRST_LAG_SIGNIFICANCE if j == 1 else LAG_SIGNIFICANCE
+    return se > 0 and abs(fit.coef[j]) > level * se
+
+
 def _forward(bands, mask, lags):
     """
     Lags kept by forward selection; (filter_length, use_low, standard errors of rho_k).
 
-    Lag k joins when its coefficient in the fit with k lags is more than
-    :data:`LAG_SIGNIFICANCE` standard errors from 0 (:data:`FIRST_LAG_SIGNIFICANCE` for the
-    first) (from the band errors alone: a fit with
+    The fit with k lags is kept when any lag in it beyond those kept so far has a coefficient
+    more than :data:`LAG_SIGNIFICANCE` standard errors from 0 (:data:`FIRST_LAG_SIGNIFICANCE`
+    for the first), not only lag k: a window spanning two lags makes the one-lag fit
+    degenerate (a negative R_0 took the first lag's 0.53 to 0.06 on 10 s of a 22-tap window
+    decimated by 10, and the two-lag fit's second lag, 0.1, was below its level, so no filter
+    was found and a bias instability filled its deficit) (from the band errors alone: a fit with
     too few lags misses the data, and scaling the errors by that would hide the lag that
     mends it); two misses in a row stop.  The standard error of rho_k is that of the k-lag
     fit (misfit included), for k up to max(filter_length, 8) (:func:`fit_white` puts the
@@ -500,10 +510,8 @@ def _forward(bands, mask, lags):
         if fit.coef is None:
             break
         rho_se.append(fit.rho_se(k))
-        se = math.sqrt(max(fit.stat_cov[k, k], 0.0))
         if misses < 2:
-            level = FIRST_LAG_SIGNIFICANCE if k == 1 else LAG_SIGNIFICANCE
-            if se > 0 and abs(fit.coef[k]) > level * se:
+            if any(_significant(fit, j) for j in range(filter_length + 1, k + 1)):
                 filter_length, use_low, misses = k, fit.use_low, 0
             else:
                 misses += 1
