@@ -25,6 +25,7 @@ warning (or, where the schema no longer leads to the rows, one clean line).
 
 import sqlite3
 
+from formats.flip_cases import flipped
 from imu_allan.errors import InputError
 from imu_allan.formats import imu_cdr, scan_common, sqlite_pages
 from imu_allan.formats.bag_reader import read_bag
@@ -42,14 +43,6 @@ COPIES = 60
 def _samples():
     rng = np.random.default_rng(0)
     return Samples(t=1.7e9 + np.arange(N) / 100.0, data=rng.normal(0.0, 1e-3, (N, 6)))
-
-
-def _flipped(raw, seed, flips=20):
-    rng = np.random.default_rng(seed)
-    buf = bytearray(raw)
-    for pos in rng.integers(0, len(buf), flips):
-        buf[pos] ^= 1 << int(rng.integers(0, 8))
-    return bytes(buf)
 
 
 def integrity(path):
@@ -102,7 +95,7 @@ def test_damage_sqlite_can_see_is_reported(bag, tmp_path, walk, monkeypatch):
     counts = {'same': 0, 'warned': 0, 'refused': 0, 'unseen': 0}
     for seed in range(COPIES):
         path = tmp_path / f'damaged{seed}.db3'
-        path.write_bytes(_flipped(raw, seed))
+        path.write_bytes(flipped(raw, seed))
         damage = integrity(path)
         try:
             got = read_bag(path)
@@ -131,7 +124,7 @@ def test_compiled_index_digest_equals_the_numpy_one(bag, tmp_path, monkeypatch):
     raw, _ = bag
     for seed in range(-1, 30):
         path = tmp_path / f'c{seed}.db3'
-        path.write_bytes(raw if seed < 0 else _flipped(raw, seed, flips=40))
+        path.write_bytes(raw if seed < 0 else flipped(raw, seed, flips=40))
         got = []
         for threshold in (10**9, 0):   # numpy walk, then the compiled one
             monkeypatch.setattr(sqlite_pages, 'COMPILED_MIN_PAGES', threshold)
