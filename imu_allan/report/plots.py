@@ -137,7 +137,7 @@ def draw_adev(ax, result, fitted, axes, denoised=None, legend_below=False, devia
             named = True
             ax.plot(fine, total, '-', color=color, lw=1.2, label=f'{axis} model')
             lines.append((fine, total))
-            span = fitted.tau_range(axis) if hasattr(fitted, 'tau_range') else None
+            span = fitted.tau_range(axis)
             if span is not None and span.lo > tau[0] * 1.001:  # what the fit left out
                 ax.axvspan(tau[0], span.lo, color=color, alpha=0.07, lw=0)
         if denoised is not None:
