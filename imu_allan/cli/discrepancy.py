@@ -19,7 +19,6 @@ plots and ``corrected.sdf`` for a Gazebo / PX4 model, all at once (a staging fol
 Bad input: one line on stderr naming the file and the problem, exit status 2.
 """
 
-import json
 import os
 import sys
 
@@ -27,6 +26,7 @@ from .common import ArgumentParser, bounded_int, check_out_dir, emit, EXIT_BAD_I
 from ..core.model import NoiseModel
 from ..errors import InputError
 from ..formats import FORMATS
+from ..report import strict_json
 
 
 def build_parser():
@@ -165,7 +165,7 @@ def _one(args, model, sim, terms):
                 (folder / CORRECTED_FILE).write_text(sim.corrected(result, source),
                                                      encoding='utf-8')
         _write(args.out, report, files)
-    text = json.dumps(report, indent=2) if args.json else single_summary_text(
+    text = strict_json.dumps(report, indent=2) if args.json else single_summary_text(
         result, source, report)
     return text
 
@@ -211,7 +211,8 @@ def _several(args, model, sim):
     report = runs_report_dict(findings, models[0], [r.source for r in recordings])
     if args.out:
         _write(args.out, report, lambda folder: None)
-    return (json.dumps(report, indent=2) if args.json else runs_summary_text(report)), errors
+    text = strict_json.dumps(report, indent=2) if args.json else runs_summary_text(report)
+    return text, errors
 
 
 def _write(out, report, files):

@@ -9,7 +9,6 @@ Findings (:mod:`imu_allan.core.discrepancy.findings`) are said in one sentence e
 there (:func:`write_out_dir`).
 """
 
-import json
 import math
 import os
 from pathlib import Path
@@ -18,6 +17,7 @@ import tempfile
 
 import numpy as np
 
+from . import strict_json
 from ..core.terms import TERMS
 from ..core.units import conventional
 
@@ -297,7 +297,7 @@ def write_out_dir(out_dir, report, write_files):
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f'.{out_dir.name}.', dir=out_dir.parent))
     try:
-        (staging / 'report.json').write_text(json.dumps(report, indent=2), encoding='utf-8')
+        (staging / 'report.json').write_text(strict_json.dumps(report, indent=2), encoding='utf-8')
         write_files(staging)
         from .html import write_discrepancy_page  # last: it shows the files above
         write_discrepancy_page(staging, report)
