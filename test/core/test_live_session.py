@@ -15,7 +15,7 @@ from imu_allan.core.live.session import LiveSession, pipeline_options
 from imu_allan.core.model import thesis_gx3_25_model
 from imu_allan.core.simulation.simulate import simulate
 from imu_allan.nodes.allan_parameters import _DEFAULTS
-from imu_allan.report.coeffs_layout import coefficient_table
+from imu_allan.report.coeffs_layout import coefficient_table, limit_values
 from imu_allan.report.live_status import session_records
 import numpy as np
 import pytest
@@ -51,6 +51,11 @@ def test_a_cycle_in_steps_publishes_the_pipelines_own_fit(run):
     session, pub, reference, _ = run
     np.testing.assert_allclose(coefficient_table(pub.fitted), coefficient_table(reference),
                                rtol=1e-12, equal_nan=True)
+    # the upper limits were computed in the cycle's steps, not left to the publishing callback
+    for axis in session.pipeline.axes:
+        assert set(pub.fitted.fits[axis].upper_limits) == set(pub.fitted.limits(axis)), axis
+    np.testing.assert_allclose(limit_values(pub.fitted), limit_values(reference), rtol=1e-12,
+                               equal_nan=True)
     n = np.array([pub.fitted.value(a, 'white_noise') for a in session.pipeline.axes])
     np.testing.assert_allclose(pub.variance, n ** 2 * RATE)  # N^2 f, robot_localization's
 

@@ -91,6 +91,9 @@ class AxisFit:
     selection_penalty: float = 0.0
     #: what another curve said about the open term sets (:func:`.hadamard_check.check`)
     evidence: list = field(default_factory=list)
+    #: term -> its 95 % upper limit, filled on demand by ``FittedModel.upper_limit`` (kept
+    #: with the fit, so a model re-wrapping these fits reuses them)
+    upper_limits: dict = field(default_factory=dict)
     #: does the model describe the curve (:class:`.adequacy.Adequacy`; set by fit_noise_model)
     adequacy: object = None
     #: the measured curve as fitted (:class:`Problem`: span, weights, fixed line frequencies)

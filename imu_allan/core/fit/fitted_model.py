@@ -65,7 +65,6 @@ class FittedModel:
         self.intervals = {a: f.intervals for a, f in fits.items()}
         self.chi2 = {a: f.chi2 for a, f in fits.items()}
         self.dof = {a: f.dof for a, f in fits.items()}
-        self._upper_limits = {}
 
     @property
     def axes(self):
@@ -209,18 +208,18 @@ class FittedModel:
         was fitted, or the data do not bound it.  Exporters write it where a consumer needs a
         number.
         """
-        key = (axis, term)
-        if key not in self._upper_limits:
-            fit = self.fits.get(axis)
+        fit = self.fits.get(axis)
+        if fit is None:
+            return math.nan
+        if term not in fit.upper_limits:
             limits = []
-            if (fit is not None and fit.problem is not None and fit.terms
-                    and term not in self.resolved(axis)):
+            if fit.problem is not None and fit.terms and term not in self.resolved(axis):
                 for names in self.alternatives(axis)[:LIMIT_SETS]:
                     names = list(names) + ([] if term in names else [term])
                     limits.append(float(problem_upper_limit(fit.problem, names, term)))
-            self._upper_limits[key] = (max(limits) if limits and all(
+            fit.upper_limits[term] = (max(limits) if limits and all(
                 math.isfinite(v) for v in limits) else math.nan)
-        return self._upper_limits[key]
+        return fit.upper_limits[term]
 
     def limits(self, axis):
         """

@@ -311,11 +311,13 @@ class StagedEstimate:
     One estimate-and-fit cycle of an :class:`OnlineAllan`, in short steps.
 
     The sums are frozen when the cycle starts; each :meth:`step` then does one axis's EDF and
-    intervals or one axis's fit (a few tens of ms), so a node can interleave them with taking
-    messages instead of blocking for the whole cycle.  Axes are independent in both, so the
-    final :attr:`result` and :attr:`fitted` equal ``pipeline.result()`` and
-    ``pipeline.fit(...)`` on the frozen data.  :attr:`deviations` holds the extra kinds'
-    curves (``estimators``: mdev, ohdev) of the same frozen data, ready at once.
+    intervals, one axis's fit or one axis's upper limits of the terms it does not resolve (a
+    few tens of ms; the limits cost as much as the fit, and are published), so a node can
+    interleave them with taking messages instead of blocking for the whole cycle.  Axes are
+    independent in all three, so the final :attr:`result` and :attr:`fitted` equal
+    ``pipeline.result()`` and ``pipeline.fit(...)`` on the frozen data.  :attr:`deviations`
+    holds the extra kinds' curves (``estimators``: mdev, ohdev) of the same frozen data, ready
+    at once.
     """
 
     def __init__(self, pipeline, window=False):
@@ -330,10 +332,12 @@ class StagedEstimate:
         #: the sensor's processing, measured once for the cycle (every axis's fit uses it)
         self.processing = pipeline.processing() if self.snapshot is not None else None
         self._parts = {}
+        self._axis_fits = {}  # axis index -> its FittedModel (None: not fitted)
         self._fits = {}
         n_axes = len(pipeline.axes)
         self._queue = ([] if self.snapshot is None else
-                       [(kind, j) for j in range(n_axes) for kind in ('result', 'fit')])
+                       [(kind, j) for j in range(n_axes)
+                        for kind in ('result', 'fit', 'limits')])
 
     @property
     def done(self):
@@ -348,10 +352,13 @@ class StagedEstimate:
         est = self.pipeline.estimator
         if kind == 'result':
             self._parts[j] = est.result_from(self.snapshot, [j])
-        else:
-            fitted = self.pipeline.fit(self._parts[j], self.processing)
-            if fitted is not None:
-                self._fits.update(fitted.fits)
+        elif kind == 'fit':
+            self._axis_fits[j] = self.pipeline.fit(self._parts[j], self.processing)
+            if self._axis_fits[j] is not None:
+                self._fits.update(self._axis_fits[j].fits)
+        elif self._axis_fits.get(j) is not None:  # kept with the axis's fit (AxisFit)
+            for axis in self._axis_fits[j].axes:
+                self._axis_fits[j].limits(axis)
         if not self._queue:
             self._finish()
         return self.done
