@@ -40,6 +40,8 @@ _WHY = {
     frozenset(('gauss_markov', 'bias_instability')): 'a hump and a floor look alike over '
                                                      'one decade',
 }
+#: The terms that show at the longest averaging times (any of them lifts the curve there).
+_LONG_TAU = {'bias_instability', 'rate_random_walk', 'rate_ramp'}
 #: Why a term may or may not be there, in words.
 _MAYBE = {'quantization': 'the shortest averaging times do not yet show it apart from white '
                           'noise',
@@ -129,11 +131,17 @@ def open_sets_words(entry):
     else:
         what = ('which of ' + ', '.join(term_words(t) for t in differ[:-1])
                 + f' or {term_words(differ[-1])}')
-        # each reason once, said of all of them ("both" is for two)
-        reasons = list(dict.fromkeys(_WHY[p].replace('both', 'they') for p in pairs))
-        why = '; '.join(reasons) if reasons else 'the curve does not yet tell'
+        # one reason, said of all of them ("both" is for two)
+        why = ('they all lift the longest averaging times' if set(differ) <= _LONG_TAU else
+               '; '.join(dict.fromkeys(_WHY[p].replace('both', 'they') for p in pairs))
+               or 'the curve does not yet tell')
     beside = (' beside ' + ', '.join(term_words(t) for t in sorted(common))) if common else ''
-    return f'cannot tell yet {what}{beside} ({why}); {_when(entry)}'
+    # Fitted at near-zero sizes, open sets of a short record may never separate: the terms'
+    # upper limits then say when each would be resolved if that large.
+    when = (_when(entry) if entry.get('more_s') is not None or not entry.get('reason') else
+            'no record within reach decides at their fitted sizes (see each term at its '
+            'limit)')
+    return f'cannot tell yet {what}{beside} ({why}); {when}'
 
 
 def axis_lines(doc):
@@ -181,8 +189,6 @@ def _limit_words(axis, entry):
         return None
     value, unit = conventional(axis, entry['term'], limit)
     head = f'{name} < {value:.3g} {unit} (95 %)'
-    if entry.get('open'):  # the open sets decide it: said once with them
-        return head
     more = entry.get('more_s')
     if more:
         return f'{head}, resolved after {format_duration(more)} more if that large'

@@ -26,9 +26,12 @@ worse exceeds the better's by that margin (the rule the selection resolves terms
 turn is taken as the truth and its curve at n' is fitted with the other one (noise-free, so
 chi^2 is the non-centrality lambda of the criterion difference); told apart when
 lambda - 2 sqrt(lambda) (one standard deviation of the noisy difference below its mean)
-exceeds the margin in both directions.  A term that no open set holds, at its 95 % upper
-limit (delta chi^2 = 4 on the data), is resolved once that gain, grown as the noise-free
-forecast grows, exceeds the penalty of one term plus the margin.
+exceeds the margin in both directions.  Every term not resolved is also forecast at its
+95 % upper limit (delta chi^2 = 4 on the data): that term beside the selected set's others
+is the truth, resolved once each set without it that could stand in for it (the others
+alone, one other term in its place, the open sets without it) is told from it by the same
+rule.  On a short record the open sets' own sizes are often near zero and never separate;
+the time for a term as large as the data allow is the one a person can plan by.
 """
 
 import dataclasses
@@ -49,7 +52,6 @@ from .axis import (
     ramp_drift_variance,
     SELECTION_PENALTY,
     shape_columns,
-    UPPER_LIMIT_DELTA_CHI2,
 )
 from .bisection import bisection, guided, log_ratio
 from .bounded_min import bounded_minimum
@@ -125,11 +127,10 @@ class Limit:
     """
     A term the record does not resolve on one axis: its 95 % upper limit and when it would be.
 
-    ``upper_limit`` (SI, continuous-time; None: the data do not bound it); ``open``: some
-    open term set holds it (the data cannot tell whether it is there), else none does;
-    ``more_s``: additional recording after which it is resolved (an open term: when the open
-    sets that disagree on it are told apart; an absent one: when a term at its upper limit
-    would be resolved), None with a ``reason`` when no record within reach does.
+    ``upper_limit`` (SI, continuous-time; None: the data do not bound it); ``in_open_set``:
+    some open term set holds it (the data cannot tell whether it is there), else none does;
+    ``more_s``: additional recording after which a term as large as its upper limit would be
+    resolved, None with a ``reason`` when no record within reach would resolve it.
     """
 
     upper_limit: float
@@ -418,15 +419,8 @@ class _AxisAdvisor:
         resolved = self.fitted.resolved(self.axis)
         yield from self._precision({t: p for t, p in self.fit.terms.items() if t in resolved},
                                    n_max)
-        times = yield from self._open_sets(n_max)
-        held = set().union(*(set(s) for s in self.fitted.alternatives(self.axis)))
-        for term in IEEE_TERMS:  # some open sets hold it, others do not
-            if term in held and term not in resolved:
-                n_sep = [n for sets, n in times if term in sets]
-                self.limits[term] = Limit(self._limit(term), *self._latest(n_sep),
-                                          in_open_set=True)
-        if self.undetected:
-            yield from self._absent(n_max)
+        yield from self._open_sets(n_max)
+        yield from self._not_resolved(resolved, n_max)
 
     def _precision(self, axis_terms, n_max):
         """Relative half-width now and the time to each resolved term's target."""
@@ -482,7 +476,7 @@ class _AxisAdvisor:
     def _latest(self, ns):
         """``(more_s, reason)`` of the latest of several sample counts (None: never)."""
         if any(n is None for n in ns):
-            return None, f'not at their present sizes within {HORIZON:g} x this record'
+            return None, f'not at their fitted sizes within {HORIZON:g} x this record'
         return self._more_s(max(ns, default=self.n)), None
 
     def _open_sets(self, n_max):
@@ -557,38 +551,67 @@ class _AxisAdvisor:
         limit = self.fitted.upper_limit(self.axis, term)  # cached: exports use it too
         return limit if math.isfinite(limit) else None
 
-    def _absent(self, n_max):
-        """Upper limit of each IEEE term no open set holds, and when one that large shows."""
-        chosen = list(self.fit.terms)
-        held = set().union(*(set(s) for s in self.fitted.alternatives(self.axis)))
+    def _not_resolved(self, resolved, n_max):
+        """
+        Upper limit of each IEEE term not resolved, and when one that large would be.
+
+        A term at its upper limit (delta chi^2 = 4 on the data) beside the selected set's
+        other terms is taken as the truth of a new record; the term is resolved once every
+        set without it that could stand in for it is told from that truth by the rule of
+        :meth:`_open_sets` (:func:`_separated`): the other terms alone, each candidate set
+        with one other term in its place, and the open sets without it.  An open set's own
+        sizes are often near zero on a short record and never separate: the time is for the
+        term at the largest size the data allow ("if that large").  ``undetected=False``:
+        only the terms an open set holds.
+        """
+        sets = self.fitted.alternatives(self.axis)
+        held = set().union(*(set(s) for s in sets))
         for term in IEEE_TERMS:
-            if term in held or not chosen:
+            in_open = term in held
+            if term in resolved or not (in_open or self.undetected):
                 continue
             limit = self._limit(term)
             yield
             if limit is None:
-                self.limits[term] = Limit(None, None, 'no upper limit from these data')
+                self.limits[term] = Limit(None, None, 'no upper limit from these data',
+                                          in_open_set=in_open)
                 continue
-            truth = {**self.fit.terms, term: {'value': limit}}
+            base = [t for t in self.fit.terms if t != term]
+            truth = {**{t: self.fit.terms[t] for t in base}, term: {'value': limit}}
             key = 'with_' + term
-            # Scale the noise-free gain so that it is the measured 4 (the limit's delta chi^2)
-            # now: its growth with n is what the forecast knows.
-            gain0 = self.forecast.criterion_gap(self.n, truth, key, chosen) + self._penalty(
-                self.n, truth, key)
-            if not gain0 > 0:
+            if not self.forecast.criterion_gap(self.n, truth, key, base) + self._penalty(
+                    self.n, truth, key) > 0:
                 self.limits[term] = Limit(limit, None, 'the term does not change the model '
-                                                       'curve')
+                                                       'curve', in_open_set=in_open)
                 continue
-
-            def evaluate(n, truth=truth, key=key, gain0=gain0):
-                needed = self._penalty(n, truth, key) + ALTERNATIVE_MARGIN
-                gain = UPPER_LIMIT_DELTA_CHI2 * (self.forecast.criterion_gap(
-                    n, truth, key, chosen) + self._penalty(n, truth, key)) / gain0
-                return gain >= needed, log_ratio(gain, needed)
-            # the gain grows as n, the penalty as log of the number of averaging times
-            n_hit = yield from _crossing(evaluate, self.n, n_max, 1.0)
+            n_hit = yield from self._told_from(truth, key, self._stand_ins(term, base, sets),
+                                               n_max)
             self.limits[term] = Limit(limit, self._more_s(n_hit), None if n_hit else
-                                      f'not resolved within {HORIZON:g} x the record')
+                                      f'not resolved within {HORIZON:g} x the record',
+                                      in_open_set=in_open)
+
+    def _stand_ins(self, term, base, sets):
+        """Return the sets without ``term`` that could take its place (:meth:`_not_resolved`)."""
+        one_more = [list(n) for _, n in self.fit.candidates
+                    if term not in n and set(base) < set(n) and len(n) == len(base) + 1]
+        out = []
+        for names in [list(base)] + one_more + [list(s) for s in sets if term not in s]:
+            if set(names) not in [set(o) for o in out]:
+                out.append(names)
+        return out
+
+    def _told_from(self, truth, key, rivals, n_max):
+        """Return the samples until ``truth`` is told from every rival set (None: never)."""
+        n_hit = self.n
+        for rival in rivals:
+            def told(n, rival=rival):
+                gap = self.forecast.criterion_gap(n, truth, key, rival)
+                return _separated(gap), log_ratio(gap, _SEPARATED_GAP)
+            # the noise-free gap grows as n; a later rival starts where the last one ended
+            n_hit = yield from _crossing(told, n_hit, n_max, 1.0)
+            if n_hit is None:
+                return None
+        return n_hit
 
     def _penalty(self, n, truth, key):
         problem = self.forecast.problem(n, truth, key)
