@@ -72,8 +72,9 @@ PARAMETERS = [
     Param('targets', '', 'recording advice targets TERM=REL,...: relative 68.3 % half-widths '
                          'over the defaults (white_noise=0.02, bias_instability=0.10, others '
                          '0.25)'),
-    Param('advice_period', 60.0, 'seconds between recording-advice updates (each costs about '
-                                 'a second of CPU, run in steps between drains)',
+    Param('advice_period', 60.0, 'seconds between recording-advice updates, and one whenever '
+                                 'the record has doubled (each costs about a second of CPU, '
+                                 'run in steps between drains)',
           (0.1, 86400.0)),
     Param('drain_period', 0.0, 'seconds between taking the queued messages (read-only); 0 = '
                                '0.1, or 0.05 with covariance_topic set (its republish delay)',

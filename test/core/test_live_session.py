@@ -73,3 +73,20 @@ def test_records_name_every_part_and_unresolved_terms_raise_nothing(run):
                     assert rec.level == hm.OK or term not in rec.message, rec.message
     advice = next(r for r in records if r.name == 'allan: recording advice')
     assert advice.level in (hm.OK, hm.WARN) and advice.message  # not STALE: it ran
+
+
+def test_the_advice_follows_a_record_that_doubled_within_its_period():
+    """With advice_period an hour: advice at 10 s, again at 20 s (doubled), not at 30 s."""
+    params = dict(_DEFAULTS, rate_hz=RATE, advice_period=3600.0)
+    data = simulate(thesis_gx3_25_model(), 3000, RATE, seed=5)
+    t = np.arange(data.shape[0]) / RATE
+    session = LiveSession(params, lambda level, text: None)
+    seen = []
+    for k in range(0, 3000, 1000):
+        session.feed(t[k:k + 1000], data[k:k + 1000])
+        assert session.start_cycle()
+        while session.busy:
+            session.advance(0.01)
+        seen.append(session.advice.duration_s)
+    # (the record is the samples used: the gate's first 0.2 s are not)
+    assert seen[1] >= 2 * seen[0] - 0.5 and seen[2] == seen[1], seen

@@ -125,6 +125,7 @@ class LiveSession:
                            'cycle_wall_s': math.nan}
         self._cycle = self._staged_advice = None
         self._advice_due = 0.0
+        self._advice_samples = 0  # the record length of the last advice started
 
     def reconfigure(self, changed):
         """Apply the changed parameter names (``params`` already holds the new values)."""
@@ -224,11 +225,20 @@ class LiveSession:
         return pub
 
     def _start_advice(self, result, fitted):
-        """Start the recording advice on a finished estimate (at most every advice_period)."""
+        """
+        Start the recording advice on a finished estimate.
+
+        At most every ``advice_period``, and also whenever the record has doubled since the
+        last advice: a start-up's first advice (5 s of data) would otherwise stand for a
+        minute beside estimates four times as precise.
+        """
         now = time.monotonic()
-        if self._staged_advice is not None or fitted is None or now < self._advice_due:
+        grown = result is not None and result.n_samples >= 2 * self._advice_samples
+        if self._staged_advice is not None or fitted is None or (now < self._advice_due
+                                                                 and not grown):
             return
         self._advice_due = now + self.params['advice_period']
+        self._advice_samples = result.n_samples
         if self.params['window_s'] > 0:  # a sliding window does not grow with recording
             self.advice_note = 'no advice with a sliding window (window_s > 0)'
             return
