@@ -5,13 +5,12 @@ import math
 from imu_allan.core.allan.estimate import allan_deviation
 from imu_allan.core.discrepancy import (
     excursion_band,
-    fit_terms,
-    FitProblem,
     improvement_test,
     measure_gap,
     model_band,
     run_discrepancy,
 )
+from imu_allan.core.fit import fit_terms
 from imu_allan.core.model import ModelError, NoiseModel
 from imu_allan.core.simulation.simulate import simulate
 import numpy as np
@@ -82,7 +81,7 @@ def test_fit_recovers_gauss_markov_and_intervals():
     x = simulate(NoiseModel({'gyro_x': truth}, RATE), 4 * N, RATE, seed=5)
     r = allan_deviation(x, RATE)
     band = model_band(truth, r.tau, r.m, r.n_samples, RATE)
-    fit = fit_terms(FitProblem(np.log(r.adev[:, 0]), r.tau, RATE, band),
+    fit = fit_terms(band.problem(np.log(r.adev[:, 0]), RATE),
                     ['white_noise', 'bias_instability', 'gauss_markov'])
     lo, hi = fit.intervals95['gauss_markov']['tau_c']
     assert lo <= 0.5 <= hi and hi / lo < 2.0

@@ -37,7 +37,8 @@ stated, the turn-on bias across runs, the drift's sign, and the messages' covari
 disagreement is a :class:`Finding` of one class.
 
 Everything is SI (rad/s, m/s^2, s, Hz) and ROS-free.  Modules: :mod:`.band` (steps 2-4),
-:mod:`.logfit` (the fit of step 5), :mod:`.workflow` (steps 1, 5, 6 and the online summary);
+:mod:`.significance` (the tests of step 5, whose fit is :func:`imu_allan.core.fit.fit_terms` on
+:meth:`.band.Band.problem`), :mod:`.workflow` (steps 1, 5, 6 and the online summary);
 :mod:`.evidence` (one recording against a stated model), :mod:`.pooling` (factors over
 recordings and rates), :mod:`.runs` (turn-on bias and drift across runs), :mod:`.findings`
 (the classes and the decision).  ``docs/discrepancy.md`` explains the method and the
@@ -47,7 +48,7 @@ validation results.
 from .band import ALPHA, Band, excursion_band, Gap, measure_gap, model_band, pool_simulations
 from .evidence import Recording
 from .findings import find_discrepancies, Finding, FindingsResult
-from .logfit import AxisFit, fit_terms, FitProblem, improvement_test, position_range
+from .significance import improvement_test, satterthwaite
 from .workflow import (
     Candidate,
     DEFAULT_START,
@@ -61,9 +62,8 @@ from .workflow import (
     Step,
 )
 
-__all__ = ['ALPHA', 'AxisFit', 'Band', 'Candidate', 'DEFAULT_START', 'DiscrepancyResult',
+__all__ = ['ALPHA', 'Band', 'Candidate', 'DEFAULT_START', 'DiscrepancyResult',
            'evaluate_candidates', 'excursion_band', 'find_discrepancies', 'Finding',
-           'FindingsResult', 'fit_terms', 'FitProblem', 'Gap', 'gap_summary',
-           'improvement_test', 'measure_gap', 'model_band', 'pool_simulations',
-           'position_range', 'Recording', 'run_discrepancy', 'run_samples', 'sample_rate',
-           'start_model', 'Step']
+           'FindingsResult', 'Gap', 'gap_summary', 'improvement_test', 'measure_gap',
+           'model_band', 'pool_simulations', 'Recording', 'run_discrepancy', 'run_samples',
+           'sample_rate', 'satterthwaite', 'start_model', 'Step']

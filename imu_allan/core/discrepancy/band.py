@@ -15,7 +15,7 @@ from scipy.stats import chi2
 
 from ..allan.edf import edf_oadev
 from ..allan.log_chi2 import log_bias, log_sd
-from ..fit import correlation_matrix
+from ..fit import correlation_matrix, Problem
 from ..terms import TERMS
 
 #: Weight (pseudo-observations) of the analytic EDF spread when pooled with simulations.
@@ -79,13 +79,28 @@ class Band:
 
     def effective_count(self):
         """T_eff = T^2 / sum rho_ij^2: independent averaging times equivalent to the curve."""
-        r = self.corr
-        return self.tau.size ** 2 / float(np.sum(r * r))
+        return effective_count(self.corr)
+
+    def problem(self, y, rate_hz):
+        """
+        Return the fit :class:`~imu_allan.core.fit.Problem` of measured ln(adev) ``y`` here.
+
+        Its ln AVAR level is 2 (y - the band's log bias) and its spread 2 sd (ln AVAR is twice
+        ln adev), so its whitened residuals are the gap's z; ``rate_hz`` the sample rate (Hz).
+        """
+        bias = self.center - 0.5 * np.log(self.avar)
+        return Problem.from_log_level(self.tau, 2.0 * (y - bias), 2.0 * self.sd, self.corr,
+                                      self.alpha, rate_hz)
 
     def adev_band(self, z=Z95):
         """(low, centre, high) of the deviation at +-z spreads (unit of the samples)."""
         return (np.exp(self.center - z * self.sd), np.exp(self.center),
                 np.exp(self.center + z * self.sd))
+
+
+def effective_count(corr):
+    """T^2 / sum rho_ij^2 of a correlation matrix: the independent points it is worth."""
+    return corr.shape[0] ** 2 / float(np.sum(corr * corr))
 
 
 def model_band(axis_terms, tau, ms, n_samples, rate_hz):

@@ -3,8 +3,8 @@ What one recording says about each term of a stated (intended) noise model.
 
 For every axis the stated terms are refitted to the measured Allan deviation with their
 amplitudes free and their positions (Gauss-Markov tau_c, sinusoid frequency) held as stated, in
-the gap's own metric (:mod:`.logfit`); each amplitude's ratio to the stated one is a *factor*
-with a standard error in log space from the sandwich covariance.  Around that:
+the gap's own metric (:meth:`.band.Band.problem`); each amplitude's ratio to the stated one is a
+*factor* with a standard error in log space from the sandwich covariance.  Around that:
 
 * a stated term the data do not need (dropping it costs no significant Q) while its stated
   size is rejected is *absent*, with an upper limit on its factor (profile of Q);
@@ -29,10 +29,11 @@ import math
 
 import numpy as np
 
-from .band import ALPHA, measure_gap, model_band
-from .logfit import fit_terms, improvement_test, satterthwaite
+from .band import ALPHA, effective_count, measure_gap, model_band
+from .significance import improvement_test, satterthwaite
 from .workflow import evaluate_candidates, two_pass_fit
 from ..allan.estimate import allan_deviation
+from ..fit import fit_terms
 from ..simulation.gauss_markov import driving_density, stationary_sigma
 from ..terms import TERMS
 
@@ -152,8 +153,8 @@ class AxisEvidence:
 
 def _log_sd(fit, term, kind):
     """Return the standard error of a fitted log parameter (``kind`` 'amp', 'pos'), or inf."""
-    i = fit.names.index((term, kind))
-    v = fit.cov[i, i]
+    i = fit.labels.index((term, kind))
+    v = fit.log_cov[i, i]
     return math.sqrt(v) if np.isfinite(v) and v > 0 else math.inf
 
 
@@ -171,11 +172,12 @@ def _drop_test(prob, fit, names, term, fixed):
     rest = [t for t in names if t != term]
     if not rest:
         return 0.0
-    without = fit_terms(prob, rest, init={t: fit.terms[t] for t in rest},
-                        fixed_positions={t: p for t, p in fixed.items() if t != term})
-    cols = [i for i, (t, _) in enumerate(fit.names) if t == term]
-    others = [i for i, (t, _) in enumerate(fit.names) if t != term]
-    p, _ = improvement_test(without.q - fit.q, fit.jac[:, others], fit.jac[:, cols], prob.corr)
+    without = fit_terms(prob, rest, init=fit.terms,
+                        fixed={t: p for t, p in fixed.items() if t != term})
+    cols = [i for i, (t, _) in enumerate(fit.labels) if t == term]
+    others = [i for i, (t, _) in enumerate(fit.labels) if t != term]
+    p, _ = improvement_test(without.chi2 - fit.chi2, fit.jac[:, others], fit.jac[:, cols],
+                            prob.corr)
     return p
 
 
@@ -187,9 +189,9 @@ def _q_with_fixed(prob, names, term, amp, fit, fixed):
     # never empty: a lone term is needed (_drop_test gives it p = 0), so it is never absent
     rest = [t for t in names if t != term]
     sub = prob.with_offset(offset)
-    refit = fit_terms(sub, rest, init={t: fit.terms[t] for t in rest},
-                      fixed_positions={t: p for t, p in fixed.items() if t != term})
-    return refit.q
+    refit = fit_terms(sub, rest, init=fit.terms,
+                      fixed={t: p for t, p in fixed.items() if t != term})
+    return refit.chi2
 
 
 def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated, q_target):
@@ -222,13 +224,13 @@ def _absent(prob, fit, names, term, fixed, stated_amp, z_crit):
     from scipy.stats import norm
     scale = _q_scale(prob, fit, term)
     q_stated = _q_with_fixed(prob, names, term, stated_amp, fit, fixed)
-    p_stated = float(2.0 * norm.sf(math.sqrt(max(q_stated - fit.q, 0.0) / scale)))
+    p_stated = float(2.0 * norm.sf(math.sqrt(max(q_stated - fit.chi2, 0.0) / scale)))
     out = {'p_stated': p_stated, 'upper68': 1.0, 'upper_crit': 1.0}
     if p_stated < REJECTED_P:  # the stated size does not fit: how large could it be?
         out['upper68'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
-                                      fit.q + scale)
+                                      fit.chi2 + scale)
         out['upper_crit'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
-                                         fit.q + scale * z_crit ** 2)
+                                         fit.chi2 + scale * z_crit ** 2)
     return out
 
 
@@ -239,7 +241,7 @@ def _q_scale(prob, fit, term):
     A change of Q by c z^2 is a z-sigma change of that parameter (c = tr(PRPR) / tr(PR) for
     the projection P on its Jacobian column; 1 for independent averaging times).
     """
-    i = fit.names.index((term, 'amp'))
+    i = fit.labels.index((term, 'amp'))
     others = [k for k in range(fit.jac.shape[1]) if k != i]
     match = satterthwaite(fit.jac[:, others], fit.jac[:, [i]], prob.corr)
     return 1.0 if match is None else match[0]
@@ -254,11 +256,11 @@ def _position_p(prob, free, names, fit, fixed):
     span, where about T_eff distinguishable places exist: as for a hump candidate
     (:func:`.workflow.evaluate_candidates`) the Satterthwaite p-value is multiplied by T_eff.
     """
-    pos = [free.names.index(('gauss_markov', 'pos'))]
+    pos = [free.labels.index(('gauss_markov', 'pos'))]
     rest = [i for i in range(free.jac.shape[1]) if i not in pos]
-    q_fixed = fit_terms(prob, names, init=fit.terms, fixed_positions=fixed).q
-    p, _ = improvement_test(q_fixed - free.q, free.jac[:, rest], free.jac[:, pos], prob.corr)
-    return min(1.0, p * max(prob.t_eff, 1.0))
+    q_fixed = fit_terms(prob, names, init=fit.terms, fixed=fixed).chi2
+    p, _ = improvement_test(q_fixed - free.chi2, free.jac[:, rest], free.jac[:, pos], prob.corr)
+    return min(1.0, p * max(effective_count(prob.corr), 1.0))
 
 
 def _log_drive(fit):
@@ -269,8 +271,10 @@ def _log_drive(fit):
     tau_c: ln sigma - ln tau_c / 2 + const, its variance from the two logs' covariance.
     """
     sigma, tau_c = TERMS['gauss_markov'].unpack(fit.terms['gauss_markov'])
-    i, k = fit.names.index(('gauss_markov', 'amp')), fit.names.index(('gauss_markov', 'pos'))
-    c = fit.cov
+    if not sigma > 0:  # pinned at zero: no density to measure
+        return math.nan, math.inf
+    i, k = fit.labels.index(('gauss_markov', 'amp')), fit.labels.index(('gauss_markov', 'pos'))
+    c = fit.log_cov
     var = c[i, i] + 0.25 * c[k, k] - c[i, k]
     se = math.sqrt(var) if np.isfinite(var) and var > 0 else math.inf
     return math.log(driving_density(sigma, tau_c)), se
@@ -473,7 +477,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
         added = winner.effect
         ev.missing.append({'term': added, 'params': dict(winner.fit.terms[added]),
                            'p_value': winner.p_value,
-                           'ci': {k: list(v) for k, v in winner.fit.intervals68[added].items()}})
+                           'ci': {k: list(v) for k, v in winner.fit.intervals[added].items()}})
         names.append(added)
         if TERMS[added].position:
             position = TERMS[added].unpack(winner.fit.terms[added])[1]

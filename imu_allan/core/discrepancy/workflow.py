@@ -5,9 +5,10 @@ import math
 
 import numpy as np
 
-from .band import ALPHA, measure_gap, measured_band, model_band, pool_simulations
-from .logfit import AxisFit, fit_terms, FitProblem, improvement_test
+from .band import ALPHA, effective_count, measure_gap, measured_band, model_band, pool_simulations
+from .significance import improvement_test
 from ..allan.estimate import allan_deviation, avar_fast
+from ..fit import AxisFit, fit_terms
 from ..model import ModelError, NoiseModel
 from ..simulation.simulate import simulate
 from ..terms import model_avar, TERMS
@@ -96,10 +97,15 @@ def _param_report(axis, term, fit):
     for pname, value in fit.terms[term].items():
         unit = TERMS[term].param_unit(axis, pname)
         out[pname] = {'value': value, 'unit': unit,
-                      'ci': list(fit.intervals68[term][pname]),
+                      'ci': list(fit.intervals[term][pname]),
                       'ci95': list(fit.intervals95[term][pname]),
                       'at_bound': fit.at_bound[term][pname]}
     return out
+
+
+def _ordered(names):
+    """Return the terms ``names`` in the package's order (that of a fit's terms and labels)."""
+    return [t for t in ALL_TERMS if t in names]
 
 
 def _n_params(term):
@@ -114,39 +120,39 @@ def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False
     ``current`` is the axis's ``{term: params}``; with ``fixed`` the current parameters came
     from a model file and a pure refit ('recalibration') competes as well.
     """
-    prob = FitProblem(y, tau, rate_hz, band)
+    prob = band.problem(y, rate_hz)
+    t_eff = effective_count(prob.corr)
     gap = gap or measure_gap(y, band, alpha)
     hints = {t: TERMS[t].position_at_peak(gap.peak_tau) for t in ('gauss_markov', 'sinusoid')}
     base_names = list(current)
-    scale = prob.t_eff / tau.size
+    scale = t_eff / tau.size
     results = []
     if base_names:
-        base = fit_terms(prob, base_names, init=current)
+        base = fit_terms(prob, _ordered(base_names), init=current)
     else:
         base = None
-    q0 = base.q if base else float(np.sum(prob.residual(np.full(tau.shape, 1e-300)) ** 2))
+    q0 = base.chi2 if base else prob.chi2(np.full(tau.shape, 1e-300))
     others = [t for t in ALL_TERMS if t not in current]
     n_tests = len(others) + (1 if fixed and base_names else 0)
     for term in others:
-        fit = fit_terms(prob, base_names + [term], init=current, hints=hints)
-        delta = q0 - fit.q
+        fit = fit_terms(prob, _ordered(base_names + [term]), init=current, hints=hints)
+        delta = q0 - fit.chi2
         k = _n_params(term)
-        cols = [i for i, (t, _) in enumerate(fit.names) if t == term]
-        ncols = [i for i, (t, _) in enumerate(fit.names) if t != term]
+        cols = [i for i, (t, _) in enumerate(fit.labels) if t == term]
+        ncols = [i for i, (t, _) in enumerate(fit.labels) if t != term]
         p, _ = improvement_test(delta, fit.jac[:, ncols] if ncols else None,
                                 fit.jac[:, cols], prob.corr)
         if TERMS[term].position:  # the hump's position was searched over the whole span
-            p = min(1.0, p * max(prob.t_eff, 1.0))
+            p = min(1.0, p * max(t_eff, 1.0))
         p_adj = min(1.0, p * n_tests)
-        results.append(Candidate(term, fit, delta, k, scale * fit.q + 2.0 * k, p_adj,
+        results.append(Candidate(term, fit, delta, k, scale * fit.chi2 + 2.0 * k, p_adj,
                                  p_adj < alpha, (scale * delta - 2.0 * k) / k))
     if fixed and base is not None:
-        q_fixed = float(np.sum(prob.residual(band.avar) ** 2))
-        delta = q_fixed - base.q
+        delta = prob.chi2(band.avar) - base.chi2
         p, _ = improvement_test(delta, None, base.jac, prob.corr)
         p_adj = min(1.0, p * n_tests)
         k = sum(_n_params(t) for t in base_names)
-        results.append(Candidate('recalibration', base, delta, k, scale * base.q + 2.0 * k,
+        results.append(Candidate('recalibration', base, delta, k, scale * base.chi2 + 2.0 * k,
                                  p_adj, p_adj < alpha, (scale * delta - 2.0 * k) / k))
     # the effect that lowers the (effective) AIC most per added parameter ranks first
     results.sort(key=lambda c: -c.gain)
@@ -259,15 +265,13 @@ def two_pass_fit(y, measured, j, names, init=None, fixed=None, ranges=None):
 
     First against the measured curve's own band, then against the band the first fit's model
     implies (the problem returned).  ``init``, ``fixed`` and ``ranges`` are
-    :func:`.logfit.fit_terms`'s ``init``, ``fixed_positions`` and ``ranges``; the second pass
-    starts from the first.
+    :func:`~imu_allan.core.fit.fit_terms`'s; the second pass starts from the first.
     """
-    tau, rate = measured.tau, measured.rate_hz
-    first = fit_terms(FitProblem(y, tau, rate, measured_band(measured, j)), names, init=init,
-                      fixed_positions=fixed, ranges=ranges)
-    band = model_band(first.terms, tau, measured.m, measured.n_samples, rate)
-    prob = FitProblem(y, tau, rate, band)
-    return prob, fit_terms(prob, names, init=first.terms, fixed_positions=fixed, ranges=ranges)
+    tau, rate, names = measured.tau, measured.rate_hz, _ordered(names)
+    first = fit_terms(measured_band(measured, j).problem(y, rate), names, init=init,
+                      fixed=fixed, ranges=ranges)
+    prob = model_band(first.terms, tau, measured.m, measured.n_samples, rate).problem(y, rate)
+    return prob, fit_terms(prob, names, init=first.terms, fixed=fixed, ranges=ranges)
 
 
 def start_model(measured, axes, terms, alpha=ALPHA):

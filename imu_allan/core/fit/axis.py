@@ -26,6 +26,7 @@ Method (per axis)
   it.
 """
 
+import copy
 from dataclasses import dataclass, field
 from itertools import combinations
 import math
@@ -102,6 +103,18 @@ class AxisFit:
     lines: dict = field(default_factory=dict)
     #: the filter's deficit c (SI^2): AVAR - c tau0 / tau^2, 1.5 (D / S) N^2 (:mod:`.tau_range`)
     filter_deficit: float = 0.0
+    #: on a problem with a given spread (:meth:`Problem.from_log_level`; the discrepancy
+    #: workflow's) every named term is in ``terms`` and ``intervals`` (68.3 %), and the fit
+    #: keeps its evidence (:func:`_sandwich_uncertainty`): the Jacobian of the residuals z
+    #: (unit-norm columns: per squared coefficient, then per ln position of each free hump, as
+    #: ``labels`` (term, 'amp' or 'pos') says), the sandwich covariance of the log parameters
+    #: (ln amplitude, ln position; same order), the 95 % intervals and {term: {param: bool}}:
+    #: which parameters sit at a bound
+    jac: np.ndarray = None
+    labels: list = field(default_factory=list)
+    log_cov: np.ndarray = None
+    intervals95: dict = field(default_factory=dict)
+    at_bound: dict = field(default_factory=dict)
 
     @property
     def tau_range(self):
@@ -161,6 +174,10 @@ class Problem:
     #: correlation widths and long-range shares of the estimates (:func:`correlation_matrix`)
     correlation_widths = CORRELATION_WIDTH
     correlation_tails = CORRELATION_TAIL
+    #: level, spread and correlation given (:meth:`from_log_level`), not from the EDF
+    spread_given = False
+    #: a model part held at a fixed size (AVAR per tau, SI^2), added to every fitted curve
+    offset = 0.0
 
     def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None, span=None,
                  expected=False):
@@ -207,6 +224,39 @@ class Problem:
         self._floor = 1e-3 * self.level  # the smallest model AVAR a weight or log uses
         self._columns = {}
 
+    @classmethod
+    def from_log_level(cls, tau, log_level, log_spread, corr, alpha, rate_hz):
+        """
+        Return a problem whose ln AVAR, spread and correlation are given (a simulated band).
+
+        ``log_level``: ln AVAR (SI^2) the estimates stand for, bias-corrected; ``log_spread``:
+        its standard deviation per tau, fixed (it already holds the share of any deterministic
+        term); ``corr``: the estimates' correlation.  The fit is then working-independence,
+        chi^2 = sum z^2 with z = (log_level - ln a) / log_spread: the metric the discrepancy
+        gap is measured in, whose Satterthwaite tests take the correlation into account
+        (:mod:`..discrepancy.significance`); the correlation enters the covariance (a
+        sandwich, :func:`fit_terms`), not the weights.
+        """
+        self = cls.__new__(cls)
+        self.tau = np.asarray(tau, dtype=float)
+        self.alpha = np.asarray(alpha)
+        self.rate_hz = rate_hz
+        self.duration_s = self.span = self.edf = self.nuisance = self._l_inv = None
+        self.fixed, self.lines, self.filtered, self._columns = {}, (), False, {}
+        self.spread_given = True
+        self.corr = np.asarray(corr, dtype=float)
+        self._rel_sd = np.asarray(log_spread, dtype=float)
+        self.log_level = np.asarray(log_level, dtype=float)
+        self.level = self.avar = np.exp(self.log_level)
+        self._floor = 1e-300  # no floor: a far-off model's z grows as its log
+        return self
+
+    def with_offset(self, avar):
+        """Return a copy whose model AVAR gets ``avar`` (per tau, SI^2) added: a held term."""
+        other = copy.copy(self)  # shares the cache of fixed shapes
+        other.offset = self.offset + np.asarray(avar, dtype=float)
+        return other
+
     def column(self, name, position=None):
         """AVAR shape of a term at the averaging times (kept for terms without a position)."""
         if position is not None:
@@ -237,7 +287,8 @@ class Problem:
         sd = self._rel_sd * noise
         if not (isinstance(spread, float) and spread == 0.0):
             sd = np.hypot(sd, spread)
-        return self._l_inv @ (columns / sd[:, None])
+        scaled = columns / sd[:, None]
+        return scaled if self._l_inv is None else self._l_inv @ scaled
 
     def chi2(self, model, deterministic=0.0, spread=0.0):
         """Return the log-domain chi^2 of a model curve (AVAR per tau; see the class)."""
@@ -360,13 +411,15 @@ def drift_structure(coef, t_rec, w):
             + 4.0 * coef.get('quantization', 0.0) / w ** 2)
 
 
-def _nonlinear_range(problem, name, peaks=None):
-    """Log-position range of a hump term whose peak lies in ``peaks`` (s; default the span)."""
-    lo, hi = TERMS[name].position_range(*(peaks or (problem.tau[0], problem.tau[-1])))
+def _log_range(problem, name, ranges=None):
+    """Log-position range of a free hump term: ``ranges[name]`` or its peak inside the span."""
+    lo, hi = (ranges[name] if ranges and name in ranges
+              else TERMS[name].position_range(problem.tau[0], problem.tau[-1]))
     return math.log(lo), math.log(hi)
 
 
-def fit_terms(problem, names, profile_intervals=True, peaks=None):
+def fit_terms(problem, names, profile_intervals=True, fixed=None, ranges=None, init=None,
+              hints=None):
     """
     Fit the named terms; return an :class:`AxisFit` (profiling tau_c / f0 when present).
 
@@ -374,14 +427,21 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
 
     ``profile_intervals=False`` leaves the intervals of tau_c / f0 NaN: their profile
     bisection is most of the cost of such a fit, and a caller comparing criteria (the
-    recording advisor) does not need them.  ``peaks`` ``(lo, hi)`` (s): where the hump of a
-    profiled term may peak (default: anywhere in the span).
+    recording advisor) does not need them.  Positions (tau_c s, frequency_hz Hz):
+    ``fixed`` ({term: position}) holds those besides the problem's own lines; ``ranges``
+    ({term: (lo, hi)}) replaces a free one's default range (its hump's peak inside the
+    span); ``init`` (a previous fit's {term: params}) and ``hints`` ({term: position}) add
+    points to a profile's grid (:func:`_profile_positions`).  On a problem with a given
+    spread (:meth:`Problem.from_log_level`) the uncertainty is the sandwich one
+    (:func:`_sandwich_uncertainty`) and no profile interval is computed.
     """
     names = list(names)
-    nonlinear = {n: problem.fixed[n] for n in names if n in problem.fixed}
+    held = {**problem.fixed, **(fixed or {})}
+    nonlinear = {n: held[n] for n in names if n in held}
     nl_names = [n for n in names if TERMS[n].position and n not in nonlinear]
 
-    ramp = deterministic_index(names)
+    # a given spread already holds a deterministic term's share (no ramp weighting)
+    ramp = None if problem.spread_given else deterministic_index(names)
 
     def cross(coef):  # a ramp's cross term with the noise's drift, as scatter
         return ramp_cross_sd(problem, dict(zip(names, coef[:len(names)])))
@@ -389,19 +449,56 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
 
     def evaluate(nonlinear):
         return problem.solve(problem.with_nuisance(shape_columns(problem, names, nonlinear)),
-                             deterministic=ramp, spread=spread)
+                             offset=problem.offset, deterministic=ramp, spread=spread)
 
+    starts = {t: TERMS[t].unpack(p)[1] for t, p in (init or {}).items()
+              if t in nl_names}
+    profiles = _profile_positions(problem, nl_names, nonlinear, evaluate, ranges, starts,
+                                  hints or {})
+    coef, chi2, g = evaluate(nonlinear)
+    fit = AxisFit(chi2=chi2, n_points=problem.tau.size, problem=problem)
+    coef, extra = coef[:len(names)], coef[len(names):]
+    fit.lines = {f: math.sqrt(c) for f, c in zip(problem.lines, extra) if c > 0}
+    fit.filter_deficit = float(extra[-1]) if problem.filtered else 0.0
+    used = np.concatenate([coef > 0, extra > 0])  # the nuisance columns count for the covariance
+    if problem.spread_given:
+        _sandwich_uncertainty(fit, names, nonlinear, nl_names, coef, ranges)
+    else:
+        _gls_uncertainty(fit, names, nonlinear, coef, g, used,
+                         profiles if profile_intervals else None)
+    n_params = int(used.sum()) + sum(1 for n in nl_names if coef[names.index(n)] > 0)
+    fit.dof = max(problem.tau.size - n_params, 0)
+    return fit
+
+
+def _profile_positions(problem, free, nonlinear, evaluate, ranges, starts, hints):
+    """
+    Profile the position of each ``free`` hump term in turn; set it in ``nonlinear``.
+
+    A grid of 25 over the log range (plus the ``hints`` and ``starts`` positions, {term:
+    position}), then a bounded minimum between the best point's neighbours.  A hump not yet
+    profiled is held at its start (default the middle of its range), and the humps with a
+    start are profiled last: a new hump is placed beside the ones a previous fit placed.
+    ``evaluate(positions)`` is the fit at given positions.  Returns {term: (grid, chi^2 per
+    point, ln position, chi^2 as a function of ln position)}.
+    """
+    held = {}
+    for name in free:
+        lo, hi = _log_range(problem, name, ranges)
+        start = starts.get(name)
+        held[name] = (start if start is not None and lo <= math.log(start) <= hi
+                      else math.exp(np.mean((lo, hi))))
     profiles = {}
-    for name in nl_names:  # profile each nonlinear parameter with the others held
-        lo, hi = _nonlinear_range(problem, name, peaks)
+    for name in sorted(free, key=lambda n: n in starts):  # (stable: given order otherwise)
+        lo, hi = _log_range(problem, name, ranges)
         grid = np.linspace(lo, hi, 25)
+        extra = [math.log(p) for p in (hints.get(name), starts.get(name))
+                 if p is not None and lo <= math.log(p) <= hi]
+        if extra:
+            grid = np.unique(np.concatenate([grid, extra]))
 
         def chi2_at(logp, name=name):
-            trial = {**nonlinear, name: math.exp(logp)}
-            for other in nl_names:
-                trial.setdefault(other, math.exp(np.mean(_nonlinear_range(problem, other,
-                                                                          peaks))))
-            return evaluate(trial)[1]
+            return evaluate({**held, **nonlinear, name: math.exp(logp)})[1]
         values = np.array([chi2_at(v) for v in grid])
         k = int(np.argmin(values))
         a, b = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
@@ -409,13 +506,20 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
         logp = best[0] if best is not None and best[1] <= values[k] else grid[k]
         nonlinear[name] = math.exp(logp)
         profiles[name] = (grid, values, logp, chi2_at)
-    coef, chi2, g = evaluate(nonlinear)
-    fit = AxisFit(chi2=chi2, n_points=problem.tau.size, problem=problem)
-    coef, extra = coef[:len(names)], coef[len(names):]
-    fit.lines = {f: math.sqrt(c) for f, c in zip(problem.lines, extra) if c > 0}
-    fit.filter_deficit = float(extra[-1]) if problem.filtered else 0.0
+    return profiles
+
+
+def _gls_uncertainty(fit, names, nonlinear, coef, g, used, profiles):
+    """
+    Fill ``fit``'s terms, coefficients, GLS covariance and 68.3 % intervals.
+
+    ``g``: the whitened design at the solution (its nuisance columns after the terms'),
+    ``used`` its columns with a non-zero coefficient; ``profiles`` those of
+    :func:`_profile_positions` (None: position intervals NaN).  A term pinned at zero is left
+    out of the fit.
+    """
+    problem = fit.problem
     active = coef > 0
-    used = np.concatenate([active, extra > 0])  # the nuisance columns count for the covariance
     try:  # (the terms come first: their block of the inverse is their marginal covariance)
         cov = np.linalg.inv(g[:, used].T @ g[:, used])[:active.sum(), :active.sum()]
     except np.linalg.LinAlgError:
@@ -440,12 +544,76 @@ def fit_terms(problem, names, profile_intervals=True, peaks=None):
         if name in problem.fixed:  # known from elsewhere (a line's frequency): no interval
             position = (nonlinear[name],) * 2
         elif spec.position:
-            position = (_profile_interval(profiles[name], chi2) if profile_intervals
+            position = (_profile_interval(profiles[name], fit.chi2) if profiles is not None
                         else (math.nan, math.nan))
         fit.intervals[name] = spec.pack(interval, position)
-    n_params = int(used.sum()) + sum(1 for n in nl_names if n in fit.terms)
-    fit.dof = max(problem.tau.size - n_params, 0)
-    return fit
+
+
+def _sandwich_uncertainty(fit, names, nonlinear, free, coef, ranges):
+    """
+    Fill ``fit``'s terms and evidence on a problem with a given spread (working independence).
+
+    The Jacobian of z (d z / d c_j per squared coefficient, d z / d ln position per ``free``
+    hump; columns scaled to unit norm, :attr:`AxisFit.jac`) and the sandwich covariance
+    (J'J)^-1 J'RJ (J'J)^-1 of the estimate under the estimates' correlation R, mapped to ln
+    amplitude and ln position: 68.3 and 95 % intervals exp(ln value -+ z sd), asymmetric.
+    Every named term is kept, one pinned at zero too (its column still enters the tests of
+    :mod:`..discrepancy.significance`): its log is unbounded (infinite variance) and it
+    counts as at its bound, as does a free position within 1 % of its log range's ends.
+    """
+    problem = fit.problem
+    shapes = shape_columns(problem, names, nonlinear)
+    model = np.maximum(shapes @ coef + problem.offset, problem._floor)
+    step = 1e-5  # (ln position) of the central difference of a hump's shape
+    moves = [coef[names.index(t)] * (problem.column(t, nonlinear[t] * math.exp(step))
+                                     - problem.column(t, nonlinear[t] * math.exp(-step)))
+             / (2.0 * step) for t in free]
+    jac = -problem.whiten(model, np.column_stack([shapes] + moves))
+    norm = np.linalg.norm(jac, axis=0)
+    norm[norm == 0.0] = 1.0
+    fit.jac = jac / norm
+    fit.labels = [(t, 'amp') for t in names] + [(t, 'pos') for t in free]
+    inv = np.linalg.pinv(fit.jac.T @ fit.jac)
+    with np.errstate(over='ignore', invalid='ignore'):
+        cov = inv @ (fit.jac.T @ problem.corr @ fit.jac) @ inv / np.outer(norm, norm)
+    active = coef > 0
+    fit.coef = {t: float(c) for t, c in zip(names, coef) if c > 0}
+    fit.cov = cov[:len(names), :len(names)][np.ix_(active, active)]
+    pinned = np.array([not active[names.index(t)] for t, _ in fit.labels])
+    scale = np.concatenate([2.0 * coef, np.ones(len(free))])  # d c = 2 c d ln amplitude
+    scale[pinned] = 1.0
+    fit.log_cov = cov / np.outer(scale, scale)
+    fit.log_cov[pinned, :] = fit.log_cov[:, pinned] = math.inf
+    with np.errstate(divide='ignore'):
+        theta = np.concatenate([0.5 * np.log(coef), np.log([nonlinear[t] for t in free])])
+    for t in names:
+        fit.terms[t] = TERMS[t].pack(math.sqrt(coef[names.index(t)]), nonlinear.get(t))
+        if t in nonlinear and t not in free:  # a held position: a point, not at a bound
+            pname = TERMS[t].params[1]
+            for table in (fit.intervals, fit.intervals95):
+                table.setdefault(t, {})[pname] = (nonlinear[t],) * 2
+            fit.at_bound.setdefault(t, {})[pname] = False
+    z95 = two_sided_z(0.95)
+    for i, (t, kind) in enumerate(fit.labels):
+        pname = TERMS[t].params[0 if kind == 'amp' else 1]
+        var = fit.log_cov[i, i]
+        sd = math.sqrt(max(var, 0.0)) if np.isfinite(var) else math.inf
+        fit.intervals.setdefault(t, {})[pname] = _log_interval(theta[i], sd)
+        fit.intervals95.setdefault(t, {})[pname] = _log_interval(theta[i], z95 * sd)
+        edge = False
+        if kind == 'pos':
+            lo, hi = _log_range(problem, t, ranges)
+            edge = min(theta[i] - lo, hi - theta[i]) < 1e-2 * (hi - lo)
+        fit.at_bound.setdefault(t, {})[pname] = bool(pinned[i] or edge)
+
+
+def _log_interval(log_value, half_width):
+    """Interval exp(log_value -+ half_width), clipped to the float range (0 .. 1e300)."""
+    if not math.isfinite(half_width):
+        return 0.0, math.inf
+    lo = math.exp(max(log_value - half_width, -700.0))
+    hi = math.exp(min(log_value + half_width, 690.0))
+    return float(lo), float(hi)
 
 
 def _profile_interval(profile, chi2_min):
