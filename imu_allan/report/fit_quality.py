@@ -118,8 +118,9 @@ def span_line(fitted):
     parts = []
     if filtered:
         which = 'every axis' if len(filtered) == len(spans) else ', '.join(filtered)
-        parts.append(f"the sensor's filter correlates the samples on {which} (its deficit "
-                     'fitted)')
+        known = all(spans[a].filter_known for a in filtered)
+        how = "the device's window: its deficit N's" if known else 'its deficit fitted'
+        parts.append(f"the sensor's filter correlates the samples on {which} ({how})")
     by_reason = {}
     for axis, span in late.items():
         by_reason.setdefault(span.limited_by, []).append(f'{axis} from {span.lo:.2g} s')

@@ -101,7 +101,8 @@ class AxisFit:
     problem: object = None
     #: the span's nuisance lines, fitted: frequency (Hz) -> amplitude (SI, peak)
     lines: dict = field(default_factory=dict)
-    #: the filter's deficit c (SI^2): AVAR - c tau0 / tau^2, 1.5 (D / S) N^2 (:mod:`.tau_range`)
+    #: the filter's deficit c (SI^2): AVAR - c tau0 / tau^2, 1.5 (D / S) N^2 (:mod:`.tau_range`;
+    #: fitted for a measured filter, N's for a known one)
     filter_deficit: float = 0.0
     #: on a problem with a given spread (:meth:`Problem.from_log_level`; the discrepancy
     #: workflow's) every named term is in ``terms`` and ``intervals`` (68.3 %), and the fit
@@ -178,6 +179,9 @@ class Problem:
     spread_given = False
     #: a model part held at a fixed size (AVAR per tau, SI^2), added to every fitted curve
     offset = 0.0
+    #: no filter's deficit unless the span has one (:meth:`__init__`)
+    deficit_per_white = 0.0
+    deficit_fitted = False
 
     def __init__(self, tau, avar, edf, alpha, rate_hz, duration_s=None, span=None,
                  expected=False):
@@ -210,8 +214,13 @@ class Problem:
         #: per unit amplitude^2, the deficit -tau0 / tau^2 per unit (SI^2)
         self.lines = tuple(f for f, _ in span.lines) if span is not None else ()
         self.filtered = bool(span is not None and span.filter_moment > 0.0)
+        #: a known filter's deficit per unit N^2, 1.5 D / S, in white noise's column (0: none,
+        #: or a measured filter's, whose size is a nuisance column: ``deficit_fitted``)
+        self.deficit_per_white = (1.5 * span.filter_moment
+                                  if self.filtered and span.filter_known else 0.0)
+        self.deficit_fitted = self.filtered and not self.deficit_per_white
         shapes = [sinusoid_shape(self.tau, f) for f in self.lines]
-        if self.filtered:
+        if self.deficit_fitted:
             shapes.append(-1.0 / (self.rate_hz * self.tau * self.tau))
         self.nuisance = np.column_stack(shapes) if shapes else None
         self.corr = correlation_matrix(self.tau, self.alpha, self.correlation_widths,
@@ -258,11 +267,19 @@ class Problem:
         return other
 
     def column(self, name, position=None):
-        """AVAR shape of a term at the averaging times (kept for terms without a position)."""
+        """
+        AVAR shape of a term at the averaging times (kept for terms without a position).
+
+        White noise through a known filter carries its deficit: 1 / tau - 1.5 (D / S) tau0 /
+        tau^2 (:mod:`.tau_range`).
+        """
         if position is not None:
             return TERMS[name].shape(self.tau, self.rate_hz, position)
         if name not in self._columns:  # profiles and forecasts ask again for every trial
-            self._columns[name] = TERMS[name].shape(self.tau, self.rate_hz, None)
+            shape = TERMS[name].shape(self.tau, self.rate_hz, None)
+            if name == 'white_noise' and self.deficit_per_white:
+                shape = shape - self.deficit_per_white / (self.rate_hz * self.tau * self.tau)
+            self._columns[name] = shape
         return self._columns[name]
 
     def with_nuisance(self, columns):
@@ -459,7 +476,9 @@ def fit_terms(problem, names, profile_intervals=True, fixed=None, ranges=None, i
     fit = AxisFit(chi2=chi2, n_points=problem.tau.size, problem=problem)
     coef, extra = coef[:len(names)], coef[len(names):]
     fit.lines = {f: math.sqrt(c) for f, c in zip(problem.lines, extra) if c > 0}
-    fit.filter_deficit = float(extra[-1]) if problem.filtered else 0.0
+    fit.filter_deficit = (float(extra[-1]) if problem.deficit_fitted else
+                          problem.deficit_per_white * float(coef[names.index('white_noise')])
+                          if problem.deficit_per_white and 'white_noise' in names else 0.0)
     used = np.concatenate([coef > 0, extra > 0])  # the nuisance columns count for the covariance
     if problem.spread_given:
         _sandwich_uncertainty(fit, names, nonlinear, nl_names, coef, ranges)

@@ -387,11 +387,12 @@ def _nuisance_avar(fit, tau, deficit=False):
     """
     Return the AVAR (per tau) of each nuisance line the fit carries, a list of arrays.
 
-    ``deficit``: also the filter's deficit (for the fitted averaging times only: below the
-    filter's reach its closed form does not hold, so the drawn model leaves it out).
+    ``deficit``: also the filter's deficit where it is a nuisance column (for the fitted
+    averaging times only: below the filter's reach its closed form does not hold, so the drawn
+    model leaves it out); a known filter's is in white noise's own column.
     """
     out = [a * a * sinusoid_shape(tau, f) for f, a in fit.lines.items()]
-    if deficit and fit.filter_deficit:
+    if deficit and fit.filter_deficit and fit.problem.deficit_fitted:
         out.append(-fit.filter_deficit / (fit.problem.rate_hz * np.asarray(tau) ** 2))
     return out
 

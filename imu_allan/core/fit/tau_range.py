@@ -10,10 +10,14 @@ effect does at tau = m tau0:
 
 * a filter (band-limited white noise; sample-and-hold repeats are one): for m at or beyond its
   correlation length L the white part's AVAR is exactly N^2 / tau - 1.5 (D / S) N^2 / (fs tau^2)
-  (D / S the filter moment).  The fit adds the deficit's column -tau0 / tau^2, its size fitted
-  (:class:`~.axis.Problem`), and starts at m = L + 1 (one sample beyond the closed form's
-  reach, for a correlation the measurement cut short).  A negative moment is white phase
-  noise's own (quantization Q, a term of the fit): no correction then.
+  (D / S the filter moment).  The fit starts at m = L + 1 (one sample beyond the closed form's
+  reach, for a correlation the measurement cut short).  A measured moment only says there is
+  a deficit: the fit adds its column -tau0 / tau^2, its size fitted (:class:`~.axis.Problem`).
+  A known one (the device's moving average, ``filter_known``) gives the deficit exactly: white
+  noise's own shape is then N^2 (1 / tau - 1.5 (D / S) tau0 / tau^2), nothing more fitted (a
+  free deficit trades against N, doubles N's spread and lets N take an unresolved flicker
+  floor from the longer averaging times: issue 35).  A negative moment is white phase noise's
+  own (quantization Q, a term of the fit): no correction then.
 * a narrow line of amplitude A at f (aliased or not): A^2 sin^4(pi f tau) / (pi f tau)^2.  Every
   line visible in the curve is fitted at the frequency the spectrum shows, the most visible one
   as the ``sinusoid`` term (one per axis: the noise model holds one sinusoid), the others as
@@ -51,6 +55,8 @@ class Processing:
 
     ``filter_length``: output samples over which the white noise is correlated (0: none);
     ``filter_moment``: D / S of that correlation (samples; positive for a low-pass);
+    ``filter_known``: the moment is the device's own, exact (a known moving average), not a
+    measurement: the fit ties the deficit to N (:class:`~.axis.Problem`);
     ``lines``: ``((frequency_hz, amplitude), ...)`` narrow lines (peak amplitude, SI);
     ``humps``: ``((f_lo_hz, f_hi_hz, excess_variance), ...)`` broad resonances (SI^2).
     """
@@ -59,6 +65,7 @@ class Processing:
     filter_moment: float = 0.0
     lines: tuple = ()
     humps: tuple = ()
+    filter_known: bool = False
 
     @classmethod
     def moving_average(cls, window_samples):
@@ -73,7 +80,7 @@ class Processing:
         k = np.arange(1, max(math.ceil(w), 1))
         rho = np.maximum(0.0, 1.0 - k / w) if w > 1.0 else np.zeros(0)
         s = 1.0 + 2.0 * rho.sum()
-        return cls(int(k.size), float(2.0 * np.sum(k * rho) / s))
+        return cls(int(k.size), float(2.0 * np.sum(k * rho) / s), filter_known=True)
 
 
 @dataclass
@@ -91,6 +98,8 @@ class TauRange:
 
     #: D / S given to white noise's shape (0: none), samples
     filter_moment: float = 0.0
+    #: the moment is known exactly (the device's window): the deficit is tied to N, not fitted
+    filter_known: bool = False
 
     def to_json(self):
         """JSON-ready ``[lo, hi]`` (report.json ``axes.<axis>.fit.tau_range_s``)."""
@@ -125,7 +134,7 @@ def choose(processing, tau, avar, edf, rate_hz):
             start, limited_by = int(over[-1]) + 1, 'resonance'
     start = min(start, max(tau.size - MIN_POINTS, 0))
     return TauRange(float(tau[start]), float(tau[-1]), limited_by if start else None, line,
-                    others, moment)
+                    others, moment, bool(processing.filter_known and moment > 0.0))
 
 
 def _visible_lines(processing, tau, avar, sd, kappa):

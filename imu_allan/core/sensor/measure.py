@@ -254,7 +254,8 @@ class SensorReport:
             proc = ax.processing()
             if device is not None:
                 proc = dataclasses.replace(proc, filter_length=device.filter_length,
-                                           filter_moment=device.filter_moment)
+                                           filter_moment=device.filter_moment,
+                                           filter_known=True)
             out[name] = proc
         return out
 
