@@ -252,6 +252,9 @@ class _Forecast:
             return None
         tau = ms / self.rate_hz
         avar = _terms.model_avar(axis_terms, tau, self.rate_hz)
+        if self.span is not None and 'white_noise' in axis_terms:  # as the fit's white column
+            avar = avar - axis_terms['white_noise']['value'] ** 2 * self.span.known_deficit(
+                tau, self.rate_hz)
         alpha = identify_noise(tau, avar[:, None])[:, 0]
         edf = np.array([edf_oadev(int(a), int(m), int(n) + 1) for a, m in zip(alpha, ms)])
         problem = Problem(tau, avar, edf, alpha, self.rate_hz, n / self.rate_hz, self.span,
@@ -566,15 +569,18 @@ class _AxisAdvisor:
         """
         sets = self.fitted.alternatives(self.axis)
         held = set().union(*(set(s) for s in sets))
+        # the terms the selection considers (quantization is left out beside a filter)
+        chosen = set(self.fit.considered or self.fit.terms)
         for term in IEEE_TERMS:
             in_open = term in held
             if term in resolved or not (in_open or self.undetected):
                 continue
             limit = self._limit(term)
             yield
-            if limit is None:
-                self.limits[term] = Limit(None, None, 'no upper limit from these data',
-                                          in_open_set=in_open)
+            if limit is None or term not in chosen:
+                self.limits[term] = Limit(limit, None, 'no upper limit from these data'
+                                          if limit is None else "the sensor's processing has "
+                                          'its shape: not fitted', in_open_set=in_open)
                 continue
             base = [t for t in self.fit.terms if t != term]
             truth = {**{t: self.fit.terms[t] for t in base}, term: {'value': limit}}

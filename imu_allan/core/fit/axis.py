@@ -90,6 +90,8 @@ class AxisFit:
     candidate_fits: dict = field(default_factory=dict)
     #: the criterion's charge per term of that selection (chi^2 units)
     selection_penalty: float = 0.0
+    #: the terms that selection considered (quantization is not, beside a filter)
+    considered: tuple = ()
     #: what another curve said about the open term sets (:func:`.hadamard_check.check`)
     evidence: list = field(default_factory=list)
     #: term -> its 95 % upper limit, filled on demand by ``FittedModel.upper_limit`` (kept
@@ -216,8 +218,7 @@ class Problem:
         self.filtered = bool(span is not None and span.filter_moment > 0.0)
         #: a known filter's deficit per unit N^2, 1.5 D / S, in white noise's column (0: none,
         #: or a measured filter's, whose size is a nuisance column: ``deficit_fitted``)
-        self.deficit_per_white = (1.5 * span.filter_moment
-                                  if self.filtered and span.filter_known else 0.0)
+        self.deficit_per_white = span.deficit_per_white if span is not None else 0.0
         self.deficit_fitted = self.filtered and not self.deficit_per_white
         shapes = [sinusoid_shape(self.tau, f) for f in self.lines]
         if self.deficit_fitted:
@@ -278,7 +279,7 @@ class Problem:
         if name not in self._columns:  # profiles and forecasts ask again for every trial
             shape = TERMS[name].shape(self.tau, self.rate_hz, None)
             if name == 'white_noise' and self.deficit_per_white:
-                shape = shape - self.deficit_per_white / (self.rate_hz * self.tau * self.tau)
+                shape = shape - self.span.known_deficit(self.tau, self.rate_hz)
             self._columns[name] = shape
         return self._columns[name]
 
@@ -700,6 +701,7 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
     best.candidates = sorted(scored, key=lambda item: item[0])
     best.candidate_fits = fits
     best.selection_penalty = penalty
+    best.considered = base + tuple(candidates)
     return best
 
 

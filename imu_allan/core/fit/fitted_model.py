@@ -441,6 +441,7 @@ def _bounded_drift(fit, rate_hz, processing):
             best, best_gain = new, gain
     if best is not fit:
         best.candidates = [(best.chi2, tuple(best.terms))]
+        best.considered = fit.considered
     return best
 
 

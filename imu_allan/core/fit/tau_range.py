@@ -101,6 +101,21 @@ class TauRange:
     #: the moment is known exactly (the device's window): the deficit is tied to N, not fitted
     filter_known: bool = False
 
+    @property
+    def deficit_per_white(self):
+        """A known filter's AVAR deficit per unit N^2 and tau0 / tau^2: 1.5 D / S (0: none)."""
+        return 1.5 * self.filter_moment if self.filter_known and self.filter_moment > 0 else 0.0
+
+    def known_deficit(self, tau, rate_hz):
+        """
+        Return a known filter's AVAR deficit per unit N^2 at ``tau`` (s): 1.5 (D/S) tau0/tau^2.
+
+        White noise's shape in a fit on this span is 1 / tau less this (0 without a known
+        filter); a model curve compared with such a fit carries it too.
+        """
+        tau = np.asarray(tau, dtype=float)
+        return self.deficit_per_white / (rate_hz * tau * tau)
+
     def to_json(self):
         """JSON-ready ``[lo, hi]`` (report.json ``axes.<axis>.fit.tau_range_s``)."""
         return [float(self.lo), float(self.hi)]
