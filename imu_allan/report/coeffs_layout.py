@@ -75,6 +75,22 @@ def limit_values(fitted, axes=AXES):
     return out.ravel()
 
 
+def alarm_lows(fitted, axes=AXES):
+    """
+    Return the (axis, term) lower ends the budget levels rest on (not in the message; NaN).
+
+    :meth:`~imu_allan.core.fit.FittedModel.alarm_low`; None without a fit.
+    """
+    if fitted is None:
+        return None
+    out = np.full((len(axes), len(IEEE_TERMS)), np.nan)
+    for i, axis in enumerate(axes):
+        for j, term in enumerate(IEEE_TERMS):
+            if axis in fitted.fits:
+                out[i, j] = fitted.alarm_low(axis, term)
+    return out
+
+
 def decode_limits(source, dims=None):
     """
     Return the (6, 5) 95 % upper limits of ``imu/allan_coeffs`` (SI; NaN: resolved or none).

@@ -13,7 +13,7 @@ test and, with a reference model, the model-vs-data discrepancy.  The words are 
 import math
 
 from .advice import advice_statuses
-from .coeffs_layout import coefficient_table, limit_values
+from .coeffs_layout import alarm_lows, coefficient_table, limit_values
 from .fit_quality import adequacy_health
 from ..core.live import health as hm
 from ..core.live.streaming import parse_estimators
@@ -63,7 +63,8 @@ def session_records(session, silence_s, prefix, extra=None):
     table = coefficient_table(fitted, AXES) if fitted is not None else None
     limits = (limit_values(fitted, AXES).reshape(len(AXES), len(IEEE_TERMS))
               if fitted is not None else None)
-    records = [stream] + hm.budget_health(table, session.budget, AXES, prefix, limits)
+    records = [stream] + hm.budget_health(table, session.budget, AXES, prefix, limits,
+                                          alarm_lows(fitted, AXES))
     records += adequacy_health(fitted, AXES, prefix)
     name = f'{prefix}recording advice'
     if session.advice_note is not None:

@@ -8,8 +8,10 @@ its datasheet budget (the worst in-budget unit) and at twice it, fed to the node
 * in budget: no ERROR ever, in 16 start-ups of 3 minutes (288 gyro and accelerometer
   axis-publications per term and start-up); WARN on a share of publications no larger than the
   interval level implies.  A term exactly at budget has its 68.3 % interval's lower end above
-  the budget 15.9 % of the time; publications of one start-up are correlated, so the share is
-  held to <= 25 % (measured 0-8 %);
+  the budget 15.9 % of the time; the check rests on the lowest lower end over the open term
+  sets and the unresolved terms at their 68.3 % sizes (``FittedModel.alarm_low``), so the
+  share is held to <= 15.9 % (measured on 40 start-ups of 5 min: 4.9 % for white noise; it was
+  18-20 % with the averaged interval's lower end);
 * twice the budget: white noise flagged on every axis from the first publication (10 s) and
   for good (the bias instability, mostly unresolved in 3 minutes, is flagged where it is
   resolved: docs/online.md gives its times).
@@ -37,7 +39,7 @@ def test_an_in_budget_unit_never_raises_an_error(in_budget):
     for term, s in summary.items():
         assert s['publications'] == 16 * 6 * int(SECONDS / sc.PUBLISH_S), term
         assert s['error'] == 0, (term, s)
-        assert s['warn_share'] <= 0.25, (term, s)
+        assert s['warn_share'] <= 0.159, (term, s)
 
 
 def test_twice_the_budget_is_flagged_from_the_first_publication(over_budget):

@@ -97,6 +97,8 @@ class AxisFit:
     #: term -> its 95 % upper limit, filled on demand by ``FittedModel.upper_limit`` (kept
     #: with the fit, so a model re-wrapping these fits reuses them)
     upper_limits: dict = field(default_factory=dict)
+    #: term -> the lower end its budget alarm rests on (``FittedModel.alarm_low``, cached)
+    alarm_lows: dict = field(default_factory=dict)
     #: does the model describe the curve (:class:`.adequacy.Adequacy`; set by fit_noise_model)
     adequacy: object = None
     #: the measured curve as fitted (:class:`Problem`: span, weights, fixed line frequencies)

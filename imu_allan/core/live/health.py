@@ -111,7 +111,7 @@ def _fmt(value):
     return f'{value:.3g}' if math.isfinite(value) else 'nan'
 
 
-def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None):
+def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None, alarm_lows=None):
     """
     Compare a coefficient table with a budget; one :class:`Health` per axis.
 
@@ -122,7 +122,9 @@ def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None):
     error_ratio x budget: raised when the data show the budget is missed, not when a short
     record cannot yet show it is met.  The interval carries the choice of terms
     (:mod:`imu_allan.core.fit.averaging`): a term resolved just past its threshold has a low
-    lower end and raises nothing.
+    lower end and raises nothing.  With ``alarm_lows`` the level rests on those lower ends
+    instead (:meth:`~imu_allan.core.fit.FittedModel.alarm_low`: the lowest over the term
+    sets the data cannot reject).
 
     Parameters
     ----------
@@ -139,11 +141,14 @@ def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None):
     limits : numpy.ndarray, optional
         Shape (len(axes), 5): the 95 % upper limits of the terms not resolved (SI, NaN where
         resolved or unbounded; the ``imu/allan_coeffs`` limit block).
+    alarm_lows : numpy.ndarray, optional
+        Shape (len(axes), 5): the lower ends the levels rest on (SI; default the table's).
 
     Returns
     -------
     list of Health
         Values per budgeted term: ``<term>`` (measured), ``<term>.ci_low``, ``<term>.ci_high``,
+        ``<term>.alarm_low`` (the lower end the level rests on),
         ``<term>.budget``, ``<term>.ratio`` (measured / budget), ``<term>.upper_limit`` (not
         resolved), ``<term>.unit`` (SI) and ``<term>.conventional`` (value in datasheet units).
 
@@ -177,7 +182,9 @@ def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None):
                 continue
             conv, unit = conventional(axis, term, value)
             values[f'{term}.conventional'] = f'{conv:.4g} {unit}'
-            term_level = budget.level(axis, term, value, low)
+            alarm = low if alarm_lows is None else min(low, float(alarm_lows[i, j]))
+            values[f'{term}.alarm_low'] = alarm
+            term_level = budget.level(axis, term, value, alarm)
             if term_level > OK:
                 problems.append(f'{term} {_fmt(value)} [{_fmt(low)}, {_fmt(high)}] '
                                 f'{si_unit(axis, term)} exceeds budget {_fmt(limit)} '

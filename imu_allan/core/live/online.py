@@ -311,8 +311,9 @@ class StagedEstimate:
     One estimate-and-fit cycle of an :class:`OnlineAllan`, in short steps.
 
     The sums are frozen when the cycle starts; each :meth:`step` then does one axis's EDF and
-    intervals, one axis's fit or one axis's upper limits of the terms it does not resolve (a
-    few tens of ms; the limits cost as much as the fit, and are published), so a node can
+    intervals, one axis's fit or one axis's upper limits of the terms it does not resolve and
+    the lower ends its budget check rests on (:meth:`~imu_allan.core.fit.FittedModel.alarm_low`;
+    a few tens of ms; the limits cost as much as the fit, and are published), so a node can
     interleave them with taking messages instead of blocking for the whole cycle.  Axes are
     independent in all three, so the final :attr:`result` and :attr:`fitted` equal
     ``pipeline.result()`` and ``pipeline.fit(...)`` on the frozen data.  :attr:`deviations`
@@ -357,8 +358,11 @@ class StagedEstimate:
             if self._axis_fits[j] is not None:
                 self._fits.update(self._axis_fits[j].fits)
         elif self._axis_fits.get(j) is not None:  # kept with the axis's fit (AxisFit)
-            for axis in self._axis_fits[j].axes:
-                self._axis_fits[j].limits(axis)
+            fitted = self._axis_fits[j]
+            for axis in fitted.axes:
+                fitted.limits(axis)
+                for term in fitted.resolved(axis):  # what the budget check reads
+                    fitted.alarm_low(axis, term)
         if not self._queue:
             self._finish()
         return self.done
