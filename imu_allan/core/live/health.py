@@ -115,16 +115,12 @@ def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None, alarm_lows=
     """
     Compare a coefficient table with a budget; one :class:`Health` per axis.
 
-    Only a resolved term can raise a level: a term the record does not resolve is reported
-    as its upper limit, which says "within budget" once it lies below the budget and
-    nothing before (the data do not show the unit misses it).  A resolved term raises WARN
-    when the lower end of its 68.3 % interval lies above warn_ratio x budget, ERROR above
-    error_ratio x budget: raised when the data show the budget is missed, not when a short
-    record cannot yet show it is met.  The interval carries the choice of terms
-    (:mod:`imu_allan.core.fit.averaging`): a term resolved just past its threshold has a low
-    lower end and raises nothing.  With ``alarm_lows`` the level rests on those lower ends
-    instead (:meth:`~imu_allan.core.fit.FittedModel.alarm_low`: the lowest over the term
-    sets the data cannot reject).
+    Only a resolved term raises a level; one not resolved is its upper limit, "within
+    budget" once below it, nothing before.  WARN when the lower end (``alarm_lows``, else
+    the 68.3 % interval's) lies above warn_ratio x budget, ERROR above error_ratio x budget:
+    when the data show the budget is missed, not when a short record cannot yet show it is
+    met (:meth:`~imu_allan.core.fit.FittedModel.alarm_low`: the lowest over the term sets
+    the data cannot reject and the unresolved terms' sizes).
 
     Parameters
     ----------
@@ -147,10 +143,9 @@ def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None, alarm_lows=
     Returns
     -------
     list of Health
-        Values per budgeted term: ``<term>`` (measured), ``<term>.ci_low``, ``<term>.ci_high``,
-        ``<term>.alarm_low`` (the lower end the level rests on),
-        ``<term>.budget``, ``<term>.ratio`` (measured / budget), ``<term>.upper_limit`` (not
-        resolved), ``<term>.unit`` (SI) and ``<term>.conventional`` (value in datasheet units).
+        Values per budgeted term: ``<term>`` (measured), ``<term>.ci_low``, ``.ci_high``,
+        ``.alarm_low``, ``.budget``, ``.ratio`` (measured / budget), ``.upper_limit`` (not
+        resolved), ``.unit`` (SI) and ``.conventional`` (value in datasheet units).
 
     """
     out = []
