@@ -130,15 +130,12 @@ def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None, alarm_lows=
         ``imu/allan_coeffs`` layout).  None means no estimate yet: every axis is STALE.
     budget : NoiseBudget
         The limits per axis and term.
-    axes : sequence of str
-        Axis names of the table rows.
-    prefix : str
-        Prefix of the status names (the node's name and a colon).
-    limits : numpy.ndarray, optional
-        Shape (len(axes), 5): the 95 % upper limits of the terms not resolved (SI, NaN where
-        resolved or unbounded; the ``imu/allan_coeffs`` limit block).
-    alarm_lows : numpy.ndarray, optional
-        Shape (len(axes), 5): the lower ends the levels rest on (SI; default the table's).
+    axes, prefix : sequence of str, str
+        Axis names of the table rows; prefix of the status names (node name and colon).
+    limits, alarm_lows : numpy.ndarray, optional
+        Shape (len(axes), 5), SI: the 95 % upper limits of the terms not resolved (NaN where
+        resolved or unbounded; the ``imu/allan_coeffs`` limit block), the lower ends levels
+        rest on.
 
     Returns
     -------
