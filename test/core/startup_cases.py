@@ -28,7 +28,7 @@ from core.independent_imu import Device, IndependentAxis  # noqa: E402
 from imu_allan.core.live import health as hm  # noqa: E402
 from imu_allan.core.live.online import OnlineAllan  # noqa: E402
 from imu_allan.core.units import AXES, is_gyro  # noqa: E402
-from imu_allan.report.coeffs_layout import alarm_lows, coefficient_table, limit_values  # noqa: E402
+from imu_allan.report import coeffs_layout as layout  # noqa: E402
 import numpy as np  # noqa: E402
 
 RATE = 100.0
@@ -66,11 +66,11 @@ def startup(args):
         fitted = pipeline.fit(pipeline.result())
         if fitted is None:
             continue
-        table = coefficient_table(fitted, AXES)
-        limits = limit_values(fitted, AXES).reshape(len(AXES), -1)
+        table = layout.coefficient_table(fitted, AXES)
+        limits = layout.limit_values(fitted, AXES).reshape(len(AXES), -1)
         levels = {}
         for axis, rec in zip(AXES, hm.budget_health(table, budget, AXES, limits=limits,
-                                                    alarm_lows=alarm_lows(fitted, AXES))):
+                                                    alarm_lows=layout.alarm_lows(fitted, AXES))):
             for term in BUDGETED:
                 levels[(axis, term)] = budget.level(axis, term, rec.values[term],
                                                     rec.values.get(f'{term}.alarm_low', math.nan))

@@ -103,7 +103,7 @@ class TauRange:
 
     @property
     def deficit_per_white(self):
-        """A known filter's AVAR deficit per unit N^2 and tau0 / tau^2: 1.5 D / S (0: none)."""
+        """Return a known filter's AVAR deficit per N^2 and tau0 / tau^2: 1.5 D / S (0: none)."""
         return 1.5 * self.filter_moment if self.filter_known and self.filter_moment > 0 else 0.0
 
     def known_deficit(self, tau, rate_hz):
