@@ -97,8 +97,9 @@ class AxisFit:
     #: term -> its 95 % upper limit, filled on demand by ``FittedModel.upper_limit`` (kept
     #: with the fit, so a model re-wrapping these fits reuses them)
     upper_limits: dict = field(default_factory=dict)
-    #: term -> the lower end its budget alarm rests on (``FittedModel.alarm_low``, cached)
-    alarm_lows: dict = field(default_factory=dict)
+    #: resolved term -> the lowest lower end over open sets and held terms
+    #: (``FittedModel.alarm_lows``; None: not computed yet)
+    alarm_lows: dict = None
     #: does the model describe the curve (:class:`.adequacy.Adequacy`; set by fit_noise_model)
     adequacy: object = None
     #: the measured curve as fitted (:class:`Problem`: span, weights, fixed line frequencies)

@@ -130,41 +130,49 @@ class FittedModel:
 
     def alarm_low(self, axis, term):
         """
-        Return the lower end a budget alarm on ``term`` rests on (SI; NaN: not resolved; cached).
+        Return the lower end a budget alarm on ``term`` rests on (SI; NaN: not resolved).
 
         The lowest of its 68.3 % interval's lower end (:meth:`interval`), those of the open
         term sets' own fits (:meth:`alternatives`), and those of the resolved terms refitted
         with each term not resolved held at the largest size the data allow at that level
         (the profile limit at delta chi^2 = 1, :func:`problem_upper_limit`): the data show a
         budget missed only when no term set they cannot reject, and no size of a term they
-        do not resolve, puts the lower end below it.  While bias instability is
-        not resolved the set without it reads white noise 0.1-0.2 standard deviations high
-        (its N takes part of the flicker floor) and the averaged interval leans on that set:
-        a unit exactly at its budget warned on 18-20 % of publications, not 15.9 %.
+        do not resolve, puts the lower end below it.  While bias instability is not resolved
+        the set without it reads white noise 0.1-0.2 standard deviations high (its N takes
+        part of the flicker floor) and the averaged interval leans on that set: a unit
+        exactly at its budget warned on 18-20 % of publications, not 15.9 %.
         """
-        fit = self.fits.get(axis)
         low = self.interval(axis, term)[0]
-        if fit is None or not math.isfinite(low) or fit.problem is None:
+        if not math.isfinite(low):
             return low
-        if term not in fit.alarm_lows:
-            main = TERMS[term].params[0]
-            lows = [low]
-            for names in self.alternatives(axis)[1:]:
-                other = fit.candidate_fits.get(frozenset(names))
-                if other is not None and term in other.intervals:
-                    lows.append(other.intervals[term][main][0])
+        return min(low, self.alarm_lows(axis).get(term, low))
+
+    def alarm_lows(self, axis):
+        """Return {resolved term: its lowest lower end over open sets and held terms} (cached)."""
+        fit = self.fits.get(axis)
+        if fit is None or fit.problem is None:
+            return {}
+        if fit.alarm_lows is None:
+            resolved = [t for t in fit.terms if t in self.resolved(axis)]
+            others = [fit.candidate_fits.get(frozenset(names))
+                      for names in self.alternatives(axis)[1:]]
             problem = fit.problem
-            names = [t for t in fit.terms if t in self.resolved(axis) or t in problem.fixed]
-            for held in self.limits(axis):
+            names = [t for t in fit.terms if t in resolved or t in problem.fixed]
+            for held in self.limits(axis):  # each refitted once, for every resolved term
                 # (delta chi^2 = 1: the size the data allow at the interval's 68.3 %)
                 size = problem_upper_limit(problem, names + [held], held, 1.0)
                 if math.isfinite(size) and size > 0:
-                    other = fit_terms(problem.with_offset(size ** 2 * problem.column(held)),
-                                      names, profile_intervals=False)
-                    lows.append(other.intervals[term][main][0] if term in other.intervals
-                                else 0.0)
-            fit.alarm_lows[term] = min(lows)
-        return fit.alarm_lows[term]
+                    others.append(fit_terms(problem.with_offset(
+                        size ** 2 * problem.column(held)), names, profile_intervals=False))
+            fit.alarm_lows = {}
+            for term in resolved:
+                main = TERMS[term].params[0]
+                # a fit that pins the term at zero allows none of it: its lower end is 0
+                fit.alarm_lows[term] = min([other.intervals[term][main][0]
+                                            if term in other.intervals else 0.0
+                                            for other in others if other is not None],
+                                           default=math.inf)
+        return fit.alarm_lows
 
     def alternatives(self, axis):
         """

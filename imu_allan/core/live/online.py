@@ -361,8 +361,7 @@ class StagedEstimate:
             fitted = self._axis_fits[j]
             for axis in fitted.axes:
                 fitted.limits(axis)
-                for term in fitted.resolved(axis):  # what the budget check reads
-                    fitted.alarm_low(axis, term)
+                fitted.alarm_lows(axis)  # what the budget check reads (cached)
         if not self._queue:
             self._finish()
         return self.done
