@@ -1,76 +1,57 @@
 """
 Bounded-memory online overlapping Allan variance (the estimator the online pipeline runs).
 
-Estimator
----------
-The overlapping Allan variance at averaging factor m (tau = m tau0) is a mean of squared second
-differences of the phase x (here the cumulative sum of the rate samples, in sample units, so
-tau0 cancels):
+Measurements, memory figures and the tests behind each claim: docs/online.md, "The online
+estimator" and "Modified Allan and overlapping Hadamard deviations".
+
+Estimator: with the phase x the cumulative sum of the rate samples (sample units, so tau0
+cancels),
 
     AVAR(m) = sum_k (x_{k+2m} - 2 x_{k+m} + x_k)^2 / (2 m^2 K),   K terms   (as in allan.py)
 
-Each new phase point x_j completes exactly one new term per factor m (k = j - 2m), which needs
-only the phase 2m points back.  :class:`StreamingAllan` keeps, per *stride level* s = 1, 2, 4,
-..., a short history of the phase sampled every s points (exact phase values: sub-sampling
-the cumulative sum loses nothing) and running sums of the squared second differences:
+Each new phase point completes one new term per factor m, which needs only the phase 2m points
+back.  :class:`StreamingAllan` keeps, per *stride level* s = 1, 2, 4, ..., a short history of
+the phase sampled every s points (exact: sub-sampling a cumulative sum loses nothing) and
+running sums of the squared second differences:
 
-* factors m <= ``stride_base`` (default 256) are tracked at stride 1: every term of the batch
-  estimator is formed, so the result equals :func:`imu_allan.core.allan.estimate.allan_deviation`
-  on the same samples (to float rounding, about 1e-13 relative; ``test/core/test_streaming.py``
-  proves it for any chunking);
-* a larger factor m is rounded to a multiple of its level's stride s = 2^ceil(log2(m / base)),
-  so m / s is between base / 2 and base, and only the terms with k a multiple of s are formed:
-  an unbiased estimator of the same Allan variance that uses 1 of every s overlapping terms,
-  i.e. still at least base / 2 = 128 offsets per cluster length.  Its variance is within a few
-  per cent of the fully overlapping one (measured in docs/online.md);
-* with ``exact=True`` every factor uses stride 1 (memory 2 m_max values per axis).
+* factors m <= ``stride_base`` (256) use stride 1: every term of the batch estimator, so the
+  result equals :func:`imu_allan.core.allan.estimate.allan_deviation` to float rounding;
+* a larger m is rounded to a multiple of s = 2^ceil(log2(m / base)) and only the terms with k
+  a multiple of s are formed: an unbiased estimator of the same AVAR from 1 of every s terms,
+  still at least base / 2 offsets per cluster length;
+* ``exact=True``: stride 1 for every factor (memory 2 m_max values per axis).
 
-Memory is fixed at construction: per level a phase history of 2 x (largest m / s) points,
-per factor one running sum, per window bucket one more; nothing grows with the number of
-samples (:meth:`StreamingAllan.memory_bytes`).
+Memory is fixed at construction (:meth:`StreamingAllan.memory_bytes`): per level a phase
+history of 2 x (largest m / s) points, per factor and window bucket one running sum.
 
 Chunk invariance: samples are processed in fixed frames of ``frame`` samples counted from the
-start of the stream, and :meth:`StreamingAllan.result` adds the unfinished frame on a copy of
-the state, so any chunking of the same samples gives bit-identical results.  That is what makes
-the allan node and ``online_allan`` (the offline path of ``analyze``) publish equal numbers.
+start of the stream, and the unfinished frame is added on a copy of the state, so any chunking
+gives bit-identical results: the allan node and ``online_allan`` publish equal numbers.
 
-Gaps: excluded samples (motion) or a stamp gap end the current *segment*: the phase restarts
-and no second difference spans the gap.  The result then equals the sum of the per-segment
-overlapping sums (the batch estimator applied to each segment, pooled).  Masks may be given
-per axis (a value rejected on one axis): each axis then has its own segments, term counts and
-reportable averaging times (NaN on an axis that has too little data at one).  The axes are
-processed together wherever their segments are in step; a run of some axes only is still
-computed on every column (the others' results are discarded), because numpy rounds a
-column's sum differently for different numbers of columns: so an axis's numbers are
-bit-identical whatever the other axes left out.
+Gaps: an excluded sample (motion, a rejected value) or a stamp gap ends the current *segment*:
+the phase restarts and no difference spans it, so the result pools the per-segment sums.
+Masks may be per axis: each axis then has its own segments and term counts (NaN where it has
+too little data).  A run of some axes only is still computed on every column (the others'
+results are discarded), because numpy rounds a column's sum differently for different numbers
+of columns: an axis's numbers are bit-identical whatever the other axes left out.
 
-Modified and Hadamard variances (``estimators``): beside AVAR the same pass can form
+Modified and Hadamard variances (``estimators``) in the same pass:
 
-    OHVAR(m) = sum_k (x_{k+3m} - 3 x_{k+2m} + 3 x_{k+m} - x_k)^2 / (6 m^2 K)
-        (NIST SP1065 eq. 18, overlapping Hadamard: third differences of the phase, 3m back)
-    MVAR(m) = sum_j (sum_{i=j}^{j+m-1} (x_{i+2m} - 2 x_{i+m} + x_i))^2 / (2 m^4 K')
-        (SP1065 eq. 14 with tau = m tau0, phase in sample units)
+    OHVAR(m) = sum_k (x_{k+3m} - 3 x_{k+2m} + 3 x_{k+m} - x_k)^2 / (6 m^2 K)   (SP1065 eq. 18)
+    MVAR(m) = sum_j (sum_{i=j}^{j+m-1} (x_{i+2m} - 2 x_{i+m} + x_i))^2 / (2 m^4 K')   (eq. 14)
 
 The inner sum of MVAR is the third difference at lag m of S, the cumulative sum of the phase
-(S_0 = 0, S_{n+1} = S_n + x_n): S_{j+3m} - 3 S_{j+2m} + 3 S_{j+m} - S_j, so MVAR streams like
-OHVAR on S, with its own history of S per stride level (sub-sampling S is exact as well).  K
-is N + 1 - 3m and K' = N + 2 - 3m for N samples (allantools' counts); strided factors form
-the terms with k (j) a multiple of the stride.  Precision: S grows like n^2 on a raw stream
-(a 1 g offset, 10^7 samples: 5e14); here it never does.  The phase is kept relative to its
-newest value (above), and S relative to its newest value *and* to the line of slope equal to
-the phase shifts removed so far; a third difference ignores any polynomial of degree 2, and
-with that choice S keeps the recurrence S_{n+1} = S_n + x_n on the shifted phase, so each
-stored S is minus the sum of the (shifted) phase from it to the newest point: bounded by 3m
-times the phase excursion over 3m samples, whatever the run time.  Equal to a batch reference
-to 1e-12 relative on 10^7 samples with a 1 g offset (``test/core/test_streaming_kinds.py``).
-Memory: the phase history is 3 (not 2) x (largest m / s) points per level with ``ohdev``, the
-S history 3 x (largest m / s) points per level with ``mdev``, plus one running sum (and
-window buckets) per factor and kind.
+(S_0 = 0, S_{n+1} = S_n + x_n), so MVAR streams like OHVAR on S, with its own history of S per
+level.  K = N + 1 - 3m, K' = N + 2 - 3m for N samples (allantools' counts).  Precision: S of a
+raw stream grows like n^2 (1 g, 10^7 samples: 5e14).  The phase is kept relative to its newest
+value, and S relative to its newest value and to the line whose slope is the phase shift
+removed so far: a third difference ignores both, S keeps the recurrence on the shifted phase,
+and each stored S stays bounded by 3m times the phase excursion over 3m samples.
 
 Sliding window: with ``window_s`` > 0 the sums are also kept in ``window_buckets`` buckets of
 equal length (in stream samples); a term is booked to the bucket of its newest sample, and the
-windowed result pools the newest ``window_buckets`` buckets, i.e. the terms that end within the
-last (1 - 1/buckets) W to W seconds.
+windowed result pools the newest buckets: the terms that end within the last
+(1 - 1/buckets) W to W seconds.
 """
 
 import bisect
@@ -152,16 +133,13 @@ class _State:
         self.hist = [np.zeros((cap, n_axes)) for _, _, _, cap in levels]
         # MVAR: per level the history of S (cumulative sum of the phase), see the docstring.
         self.shist = [np.zeros((cap, n_axes)) for cap in s_caps]
-        # Other kinds than oadev: [acc, cnt, wacc, wcnt] as the four below.
-        self.more = {kind: [np.zeros((n_factors, n_axes)),
+        # Per kind [acc, cnt, wacc, wcnt]: the running sums of squared differences and their
+        # term counts (F, A), and the same per window bucket (B, F, A).
+        self.sums = {kind: [np.zeros((n_factors, n_axes)),
                             np.zeros((n_factors, n_axes), dtype=np.int64),
                             np.zeros((n_buckets, n_factors, n_axes)),
                             np.zeros((n_buckets, n_factors, n_axes), dtype=np.int64)]
-                     for kind in kinds if kind != 'oadev'}
-        self.acc = np.zeros((n_factors, n_axes))
-        self.cnt = np.zeros((n_factors, n_axes), dtype=np.int64)
-        self.wacc = np.zeros((n_buckets, n_factors, n_axes))
-        self.wcnt = np.zeros((n_buckets, n_factors, n_axes), dtype=np.int64)
+                     for kind in kinds}
         self.bucket = 0          # global index of the newest bucket
         # Phase index within each axis's current segment (-1: no segment).  The stored phase
         # history of a level holds min(seg // stride + 1, capacity) points of that axis.
@@ -174,44 +152,21 @@ class _State:
         self.n_segments = np.zeros(n_axes, dtype=np.int64)   # per axis
 
     def arrays(self):
-        return self.hist + self.shist + [a for sums in self.more.values() for a in sums] + [
-            self.acc, self.cnt, self.wacc, self.wcnt, self.seg, self.offset, self.has_offset,
-            self.n_used_axes, self.n_segments]
+        return self.hist + self.shist + [a for sums in self.sums.values() for a in sums] + [
+            self.seg, self.offset, self.has_offset, self.n_used_axes, self.n_segments]
 
 
 class StreamingAllan:
     """
     Online overlapping Allan variance with fixed memory (see the module docstring).
 
-    Parameters
-    ----------
-    rate_hz : float
-        Sample rate, Hz (tau0 = 1 / rate_hz).
-    axes : sequence of str
-        Column names (default the six package axes).
-    max_tau : float
-        Longest averaging time tracked, s (fixes the memory).
-    points_per_decade : float
-        Density of the log grid of averaging factors.
-    taus : array_like, optional
-        Explicit averaging times, s (replace the grid).
-    stride_base : int
-        Largest factor tracked at stride 1 (exact); larger factors use strides (see above).
-    exact : bool
-        Track every factor at stride 1 (memory 2 x m_max values per axis).
-    window_s : float
-        Sliding-window length, s (0: no window).
-    window_buckets : int
-        Buckets per window (the window's time resolution is window_s / window_buckets).
-    frame : int
-        Samples per processing frame (see chunk invariance above).
-    min_clusters : int
-        A factor is reported once its data span at least ``min_clusters`` x m samples (the
-        batch estimator's tau_max = T / 10 rule).
-    estimators : sequence of str or str
-        Deviations to compute (:data:`KINDS`: oadev, mdev, ohdev; a comma list is taken);
-        ``oadev`` is always computed.
-
+    ``rate_hz`` in Hz (tau0 = 1 / rate_hz); ``axes`` the column names; ``max_tau`` (s) the
+    longest averaging time tracked (it fixes the memory), or ``taus`` (s) explicit averaging
+    times instead of the log grid of ``points_per_decade``; ``stride_base``, ``exact``,
+    ``frame``, ``window_s`` (s; 0: no window) and ``window_buckets`` as in the module
+    docstring.  A factor is reported once its data span ``min_clusters`` x m samples (the
+    batch estimator's tau_max = T / 10 rule).  ``estimators``: the kinds of :data:`KINDS` to
+    compute, a list or a comma-separated string (``oadev`` always).
     """
 
     def __init__(self, rate_hz, axes=AXES, max_tau=DEFAULT_MAX_TAU,
@@ -244,10 +199,10 @@ class StreamingAllan:
         self._s_lags = [s * np.arange(cap - 1, -1, -1)[:, None]
                         for (s, _, _, _), cap in zip(self._levels, self._s_caps)]
         self.window_s = float(window_s)
-        n_buckets = int(window_buckets) if window_s > 0 else 1
-        self._bucket_len = (max(1, int(math.ceil(window_s * rate_hz / n_buckets)))
+        self._n_buckets = int(window_buckets) if window_s > 0 else 1
+        self._bucket_len = (max(1, int(math.ceil(window_s * rate_hz / self._n_buckets)))
                             if window_s > 0 else None)
-        self._st = _State(self._levels, self.ms.size, n_axes, n_buckets, self.kinds,
+        self._st = _State(self._levels, self.ms.size, n_axes, self._n_buckets, self.kinds,
                           self._s_caps)
         self.frame = int(frame)
         self._pend = np.zeros((self.frame, n_axes))
@@ -282,20 +237,12 @@ class StreamingAllan:
 
     def update(self, block, use=None, break_before=None):
         """
-        Add rate samples.
+        Add rate samples ``block`` (n, A), or (n,) for one axis, SI units.
 
-        Parameters
-        ----------
-        block : array_like
-            Shape (n, A) (or (n,) for one axis), SI units.  Values left out by ``use`` are
-            never read (they may be NaN).
-        use : array_like of bool, optional
-            Shape (n,) (whole samples) or (n, A) (per axis): False for values to leave out
-            (motion, a rejected value); a left-out run ends that axis's segment.
-        break_before : array_like of bool, optional
-            Shape (n,) or (n, A): True where the phase must restart before the sample (a
-            stamp gap).
-
+        ``use`` (n,) for whole samples or (n, A) per axis: False for values to leave out
+        (motion, a rejected value; never read, may be NaN), which ends that axis's segment.
+        ``break_before`` (n,) or (n, A): True where the phase restarts before the sample (a
+        stamp gap).
         """
         block = np.asarray(block, dtype=float)
         if block.ndim == 1:
@@ -329,11 +276,9 @@ class StreamingAllan:
     def _advance_bucket(self, st, target):
         if self._bucket_len is None or target <= st.bucket:
             return
-        n_b = st.wcnt.shape[0]
+        n_b = self._n_buckets
         for b in range(st.bucket + 1, min(target, st.bucket + n_b) + 1):
-            st.wacc[b % n_b] = 0.0
-            st.wcnt[b % n_b] = 0
-            for _, _, wacc, wcnt in st.more.values():
+            for _, _, wacc, wcnt in st.sums.values():
                 wacc[b % n_b] = 0.0
                 wcnt[b % n_b] = 0
         st.bucket = target
@@ -421,11 +366,8 @@ class StreamingAllan:
         Add a run of consecutive used samples of the axes ``cols`` to their current segment.
 
         ``samples`` has every axis (r, A); ``cols`` is ``slice(None)`` (every axis) or an index
-        array of axes that are in step.  The arithmetic always runs on all A columns (those
-        not in ``cols`` carry meaningless but finite values and are not stored): a column's
-        sums are then rounded exactly as when every axis is in step, so an axis's numbers never
-        depend on what the other axes left out (numpy's reductions over (n, A) round
-        differently for different A).
+        array of axes that are in step.  The arithmetic runs on all A columns, those not in
+        ``cols`` not stored (why: module docstring, "Gaps").
         """
         c0 = 0 if isinstance(cols, slice) else cols[0]
         seg = int(st.seg[c0])
@@ -440,16 +382,16 @@ class StreamingAllan:
         phase = np.cumsum(samples - st.offset, axis=0)  # indices seg+1 .. seg+r
         # S indices seg+2 .. seg+r+1 (S_{n+1} = S_n + x_n; the newest S, index seg+1, is 0).
         cum = np.cumsum(phase, axis=0) if self._mdev else None
-        slot = st.bucket % st.wcnt.shape[0]
+        slot = st.bucket % self._n_buckets
         windowed = self._bucket_len is not None
-        oadev = [st.acc, st.cnt, st.wacc, st.wcnt]
+        oadev = st.sums['oadev']
         for li, (s, f0, qs, cap) in enumerate(self._levels):
             h = min(seg // s + 1, cap)  # stored phase points of this level
             first = (seg // s + 1) * s
             if first <= seg + r:
                 x = np.concatenate((st.hist[li][:h], phase[first - seg - 1:r:s]))
                 if self._ohdev:
-                    self._book_2_3(x, h, qs, f0, oadev, st.more['ohdev'], cols, slot, windowed)
+                    self._book_2_3(x, h, qs, f0, oadev, st.sums['ohdev'], cols, slot, windowed)
                 else:
                     self._book(x, h, qs, f0, 2, oadev, cols, slot, windowed)
                 keep = min(x.shape[0], cap)
@@ -484,7 +426,7 @@ class StreamingAllan:
             st.shist[li][:stored, cols] -= rebase
             return
         y = np.concatenate((st.shist[li][:h], cum[first - seg - 2:r:s]))
-        self._book(y, h, qs, f0, 3, st.more['mdev'], cols, slot, windowed)
+        self._book(y, h, qs, f0, 3, st.sums['mdev'], cols, slot, windowed)
         st.shist[li][:stored, cols] = y[y.shape[0] - stored:, cols] - rebase
 
     @staticmethod
@@ -575,8 +517,7 @@ class StreamingAllan:
     def _sums_of(self, st, window, kind):
         if kind not in self.kinds:
             raise ValueError(f'{kind!r} is not computed (estimators: {", ".join(self.kinds)})')
-        acc, cnt, wacc, wcnt = ((st.acc, st.cnt, st.wacc, st.wcnt) if kind == 'oadev'
-                                else st.more[kind])
+        acc, cnt, wacc, wcnt = st.sums[kind]
         if window:
             if self._bucket_len is None:
                 raise ValueError('no sliding window configured (window_s = 0)')
