@@ -7,10 +7,11 @@ them directly.
 
 Levels follow ``diagnostic_msgs/DiagnosticStatus``: 0 OK, 1 WARN, 2 ERROR, 3 STALE.
 
-Budget rule (per axis and budgeted term, with the fitted value v and its 68.3 % interval
-[lo, hi]): ERROR when lo > error_ratio x budget, WARN when lo > warn_ratio x budget, else OK.
-Using the lower end of the interval means a level is raised only when the data show the
-budget is missed, not when a short record merely cannot yet prove that it is met.
+Budget rule (per axis and resolved budgeted term, lo the lower end of its 68.3 % interval or,
+lower still, :meth:`~imu_allan.core.fit.FittedModel.alarm_low`): ERROR when lo > error_ratio x
+budget, WARN when lo > warn_ratio x budget, else OK.  Using a lower end means a level is
+raised only when the data show the budget is missed, not when a short record merely cannot
+yet prove that it is met.  A term not resolved raises no level: its upper limit is reported.
 
 Budget file format (YAML, continuous-time SI units as in :mod:`imu_allan.core.units`)::
 
@@ -113,37 +114,18 @@ def _fmt(value):
 
 def budget_health(coeffs, budget, axes=AXES, prefix='', limits=None, alarm_lows=None):
     """
-    Compare a coefficient table with a budget; one :class:`Health` per axis.
+    Compare a coefficient table with a budget; one :class:`Health` per axis (module docstring).
 
-    Only a resolved term raises a level; one not resolved is its upper limit, "within
-    budget" once below it, nothing before.  WARN when the lower end (``alarm_lows``, else
-    the 68.3 % interval's) lies above warn_ratio x budget, ERROR above error_ratio x budget:
-    when the data show the budget is missed, not when a short record cannot yet show it is
-    met (:meth:`~imu_allan.core.fit.FittedModel.alarm_low`: the lowest over the term sets
-    the data cannot reject and the unresolved terms' sizes).
+    ``coeffs`` (len(axes), 5, 3): ``[axis, term, (value, ci_low, ci_high)]`` in the order of
+    :data:`~imu_allan.core.units.IEEE_TERMS`, SI, NaN where a term is not resolved (the
+    ``imu/allan_coeffs`` layout); None: no estimate yet, every axis STALE.  ``limits`` and
+    ``alarm_lows`` (len(axes), 5), SI: the 95 % upper limits of the terms not resolved (the
+    ``imu/allan_coeffs`` limit block; "within budget" once below it) and the lower ends the
+    levels rest on.  ``prefix``: of the status names (node name and colon).
 
-    Parameters
-    ----------
-    coeffs : numpy.ndarray or None
-        Shape (len(axes), 5, 3): ``[axis, term, (value, ci_low, ci_high)]`` in the order of
-        :data:`~imu_allan.core.units.IEEE_TERMS`, NaN where a term is not resolved (the
-        ``imu/allan_coeffs`` layout).  None means no estimate yet: every axis is STALE.
-    budget : NoiseBudget
-        The limits per axis and term.
-    axes, prefix : sequence of str, str
-        Axis names of the table rows; prefix of the status names (node name and colon).
-    limits, alarm_lows : numpy.ndarray, optional
-        Shape (len(axes), 5), SI: the 95 % upper limits of the terms not resolved (NaN where
-        resolved or unbounded; the ``imu/allan_coeffs`` limit block), the lower ends levels
-        rest on.
-
-    Returns
-    -------
-    list of Health
-        Values per budgeted term: ``<term>`` (measured), ``<term>.ci_low``, ``.ci_high``,
-        ``.alarm_low``, ``.budget``, ``.ratio`` (measured / budget), ``.upper_limit`` (not
-        resolved), ``.unit`` (SI) and ``.conventional`` (value in datasheet units).
-
+    Values per budgeted term: ``<term>`` (measured), ``<term>.ci_low``, ``.ci_high``,
+    ``.alarm_low``, ``.budget``, ``.ratio`` (measured / budget), ``.upper_limit`` (not
+    resolved), ``.unit`` (SI) and ``.conventional`` (value in datasheet units).
     """
     out = []
     for i, axis in enumerate(axes):
@@ -335,29 +317,14 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
     """
     Health of the input stream: stamps, rate and motion-gate exclusions.
 
-    Parameters
-    ----------
-    monitor : StampMonitor
-        The stamp checks of the stream.
-    recent : dict
-        ``monitor.take_recent()`` for the span since the last report.
-    silence_s : float
-        Time since the last message arrived (s; wall or ROS clock), inf if none ever.
-    timeout_s : float
-        ERROR when silent for longer than this.
-    rate_tolerance : float
-        WARN when the measured rate differs from the configured one by more than this fraction
-        (10 %, the diagnostic_updater FrequencyStatus default).
-    excluded_share : float
-        Share of decided samples the stationarity gate left out (0-1), NaN when gating is off.
-    max_excluded_share : float
-        WARN above this share: the estimate is starved (the IMU is moving most of the time).
-    rejected : dict, optional
-        ``{axis: n}`` samples rejected since the last report as NaN, inf or non-physical
-        (``OnlineAllan.take_rejected``): WARN with the counts.
-    name : str
-        Name of the status.
-
+    ``recent``: ``monitor.take_recent()`` for the span since the last report; ``silence_s``:
+    time since the last message (s, wall or ROS clock; inf if none ever), ERROR above
+    ``timeout_s``.  WARN when the measured rate is off the configured one by more than
+    ``rate_tolerance`` (10 %, the diagnostic_updater FrequencyStatus default), on stamp gaps
+    or out-of-order stamps since the last report, when the gate left out more than
+    ``max_excluded_share`` of the decided samples (``excluded_share``, NaN without a gate:
+    the estimate is starved) and on ``rejected`` (``{axis: n}`` NaN, inf or non-physical
+    samples since the last report, :meth:`OnlineAllan.take_rejected`).
     """
     rate = recent['rate_hz'] if math.isfinite(recent['rate_hz']) else monitor.measured_rate()
     values = {
@@ -376,26 +343,19 @@ def stream_health(monitor, recent, silence_s, timeout_s=2.0, rate_tolerance=0.1,
         return Health(name, STALE, 'no samples received yet', values)
     if silence_s > timeout_s:
         return Health(name, ERROR, f'no samples for {silence_s:.1f} s', values)
-    level, problems = OK, []
-    if math.isfinite(rate) and abs(rate / monitor.rate_hz - 1.0) > rate_tolerance:
-        level = WARN
-        problems.append(f'rate {rate:.4g} Hz differs from configured {monitor.rate_hz:.4g} Hz')
-    if recent['gaps']:
-        level = WARN
-        problems.append(f'{recent["gaps"]} stamp gap(s) (max {monitor.max_gap_s:.3g} s)')
-    if recent['out_of_order']:
-        level = WARN
-        problems.append(f'{recent["out_of_order"]} out-of-order stamp(s) dropped')
-    if math.isfinite(excluded_share) and excluded_share > max_excluded_share:
-        level = WARN
-        problems.append(f'{100 * excluded_share:.0f} % of samples excluded as motion')
-    for axis, n in (rejected or {}).items():
-        values[f'rejected_recent.{axis}'] = n
-    if rejected:
-        level = WARN
-        problems.append('samples rejected as NaN, inf or non-physical: ' +
-                        ', '.join(f'{a} {n}' for a, n in rejected.items()))
-    return Health(name, level, '; '.join(problems) if problems else 'ok', values)
+    rejected = rejected or {}
+    checks = [
+        (math.isfinite(rate) and abs(rate / monitor.rate_hz - 1.0) > rate_tolerance,
+         f'rate {rate:.4g} Hz differs from configured {monitor.rate_hz:.4g} Hz'),
+        (recent['gaps'], f'{recent["gaps"]} stamp gap(s) (max {monitor.max_gap_s:.3g} s)'),
+        (recent['out_of_order'], f'{recent["out_of_order"]} out-of-order stamp(s) dropped'),
+        (math.isfinite(excluded_share) and excluded_share > max_excluded_share,
+         f'{100 * excluded_share:.0f} % of samples excluded as motion'),
+        (rejected, 'samples rejected as NaN, inf or non-physical: '
+         + ', '.join(f'{a} {n}' for a, n in rejected.items()))]
+    problems = [text for failed, text in checks if failed]
+    values.update({f'rejected_recent.{axis}': n for axis, n in rejected.items()})
+    return Health(name, WARN if problems else OK, '; '.join(problems) or 'ok', values)
 
 
 def discrepancy_health(model, result, axes=AXES, prefix=''):

@@ -29,35 +29,17 @@ class OnlineAllan:
     ROS-free; the allan node feeds it message batches and ``online_allan`` feeds it a whole
     record, so both produce the same numbers for the same samples.
 
-    Parameters
-    ----------
-    rate_hz : float
-        Configured sample rate, Hz; 0 or None: measured from the stamps
-        (:class:`~imu_allan.core.live.health.RateFinder`, median spacing over the first
-        ``settle_s`` seconds), the samples of those seconds held and fed once it is known.
-    axes : sequence of str
-        Columns of the data (default the six package axes).
-    gate : bool
-        Leave moving spans out (:class:`~imu_allan.core.live.stationarity.StationarityGate`).
-    gate_options : dict, optional
-        Gate parameters.
-    gap_factor : float
-        A stamp spacing above this many sample intervals is a gap (phase restarts there).
-    terms : sequence of str, optional
-        Terms to fit (default: automatic selection among the five IEEE terms).
-    settle_s : float
-        Stamp span that fixes a measured rate, s.
-    sensor : bool
-        Measure the sensor's processing from the still samples
-        (:class:`~imu_allan.core.sensor.measure.SensorAccumulator`) and fit where it does not shape
-        the curve (:mod:`imu_allan.core.fit.tau_range`).
-    filter_window_s : float
-        Length of the moving average the IMU applies before it outputs, s (the 3DM-GX3-25's
-        0xDB window / 1000 Hz); 0: unknown (measured).  When given, its filter replaces the
-        measured one in the fit (:meth:`~imu_allan.core.sensor.measure.SensorReport.processing`).
-    **estimator_options
-        :class:`StreamingAllan` parameters (max_tau, window_s, stride_base, ...).
-
+    ``rate_hz`` (Hz): the configured sample rate; 0 or None: measured from the stamps
+    (:class:`~imu_allan.core.live.health.RateFinder`, median spacing over the first
+    ``settle_s`` seconds), the samples of those seconds held and fed once it is known.
+    ``gate`` leaves moving spans out (:class:`~imu_allan.core.live.stationarity.StationarityGate`
+    with ``gate_options``); a stamp spacing above ``gap_factor`` sample intervals restarts the
+    phase.  ``terms``: the terms to fit (default: automatic selection).  ``sensor``: measure
+    the sensor's processing from the still samples
+    (:class:`~imu_allan.core.sensor.measure.SensorAccumulator`) and fit where it does not shape
+    the curve; ``filter_window_s`` (s), when not 0, is the IMU's own moving-average length
+    (the 3DM-GX3-25's 0xDB window / 1000 Hz) and replaces the measured filter in the fit.
+    ``estimator_options``: :class:`StreamingAllan` parameters (max_tau, window_s, ...).
     """
 
     def __init__(self, rate_hz, axes=AXES, gate=True, gate_options=None, gap_factor=1.5,
@@ -310,15 +292,12 @@ class StagedEstimate:
     """
     One estimate-and-fit cycle of an :class:`OnlineAllan`, in short steps.
 
-    The sums are frozen when the cycle starts; each :meth:`step` then does one axis's EDF and
-    intervals, one axis's fit or one axis's upper limits of the terms it does not resolve and
-    the lower ends its budget check rests on (:meth:`~imu_allan.core.fit.FittedModel.alarm_low`;
-    a few tens of ms; the limits cost as much as the fit, and are published), so a node can
-    interleave them with taking messages instead of blocking for the whole cycle.  Axes are
-    independent in all three, so the final :attr:`result` and :attr:`fitted` equal
-    ``pipeline.result()`` and ``pipeline.fit(...)`` on the frozen data.  :attr:`deviations`
-    holds the extra kinds' curves (``estimators``: mdev, ohdev) of the same frozen data, ready
-    at once.
+    The sums are frozen when the cycle starts; each :meth:`step` (a few tens of ms) then does
+    one axis's EDF and intervals, its fit, or its upper limits and budget lower ends
+    (:meth:`~imu_allan.core.fit.FittedModel.alarm_low`), so a node can interleave them with
+    taking messages.  Axes are independent, so :attr:`result` and :attr:`fitted` equal
+    ``pipeline.result()`` and ``pipeline.fit(...)`` on the frozen data; :attr:`deviations`
+    (the extra ``estimators``) are ready at once.
     """
 
     def __init__(self, pipeline, window=False):
@@ -396,13 +375,11 @@ class _TagDelay:
 
     def push(self, flags, n_out):
         """Append ``flags``; pop the flags of the ``n_out`` oldest samples."""
-        total = self._n + flags.size
         merged = np.concatenate((self._buf[:self._n], flags))
-        out = merged[:n_out]
-        rest = merged[n_out:total]
+        rest = merged[n_out:]
         self._buf[:rest.size] = rest
         self._n = rest.size
-        return out
+        return merged[:n_out]
 
 
 def run_online(data, rate_hz, t=None, axes=None, **options):
@@ -422,31 +399,11 @@ def online_allan(data, rate_hz, t=None, axes=None, gate=True, gate_options=None,
     Run the online estimator over a whole record; return an ``AllanResult`` (or None).
 
     The same code and defaults as the allan node: for the same samples (and options) the
-    numbers equal what the node publishes.  ``t`` (s) enables the stamp checks (out-of-order
-    samples dropped, gaps restart the phase); ``gate`` leaves moving spans out (the last one
-    to two gate windows, still undecided, are not included - as in the node).
-
-    Parameters
-    ----------
-    data : array_like
-        Shape (n, A), SI units.
-    rate_hz : float
-        Sample rate, Hz (0: measured from ``t``).
-    t : array_like, optional
-        Header stamps, s (n,): enables the stamp checks.
-    axes : sequence of str, optional
-        Column names (default the first A package axes).
-    gate, gate_options : bool, dict
-        Leave moving spans out, with these gate parameters (as the node).
-    gap_factor : float
-        A stamp spacing above this many sample intervals is a gap.
-    window : bool
-        Return the sliding-window estimate (needs ``window_s``).
-    **estimator_options
-        :class:`StreamingAllan` parameters: ``max_tau``, ``points_per_decade``, ``taus``,
-        ``stride_base``, ``exact``, ``window_s``, ``window_buckets``, ``frame``,
-        ``min_clusters``.
-
+    numbers equal what the node publishes.  ``data`` (n, A) in SI units; ``t`` (s) enables
+    the stamp checks (out-of-order samples dropped, gaps restart the phase); ``gate`` leaves
+    moving spans out (the last one to two gate windows, still undecided, are not included -
+    as in the node); ``window`` returns the sliding-window estimate (needs ``window_s``).
+    The other options are :class:`OnlineAllan`'s and :class:`StreamingAllan`'s.
     """
     pipeline = run_online(data, rate_hz, t, axes, gate=gate, gate_options=gate_options,
                           gap_factor=gap_factor, sensor=False, **estimator_options)

@@ -20,11 +20,10 @@ is chunked).  A window is *raw-moving* when, on any axis,
   means' vector norm where that is more (never stricter than the noise: a static ADIS16405's
   accelerometer 0.2-s means crossed 0.05 m/s^2 about once a minute, and every crossing cost a
   second, 0.7 % of the record in short cuts that left no span longer than 250 s for the
-  longest averaging times).  When
-  the data stay quiet (no spread or step alarm) but
-  away from the reference for ``settle_s`` seconds (accelerometer only: a new resting pose) or
-  ``reacquire_s`` seconds (gyro: a persistent shift is taken for a bias change after that long),
-  the reference jumps to the new level.
+  longest averaging times).  When the data stay quiet (no spread or step alarm) but away from
+  the reference for ``settle_s`` seconds (accelerometer only: a new resting pose) or
+  ``reacquire_s`` seconds (gyro: a persistent shift is taken for a bias change after that
+  long), the reference jumps to the new level.
 
 Every window statistic leaves out the window's most extreme sample per axis: a single spike is
 not motion (motion moves every sample).  The noise floor of each axis is the
@@ -83,18 +82,10 @@ class StationarityGate:
     """
     Streaming motion detector; :meth:`update` returns the samples it has decided on.
 
-    Parameters
-    ----------
-    rate_hz : float
-        Sample rate, Hz.
-    n_axes : int
-        Number of columns (6: gyro x/y/z rad/s, accel x/y/z m/s^2).
-    gyro_columns : sequence of int
-        Columns holding angular rate (used for the ``gyro_max`` test).
-    options : GateOptions, optional
-        The tunables (default: :class:`GateOptions`'s); keyword arguments of the same names
-        change single ones (``window_s=0.1``).
-
+    ``rate_hz`` in Hz; ``n_axes`` columns (6: gyro x/y/z rad/s, accel x/y/z m/s^2), of which
+    ``gyro_columns`` hold angular rate; ``options`` the tunables (default
+    :class:`GateOptions`'s), keyword arguments of the same names change single ones
+    (``window_s=0.1``).
     """
 
     def __init__(self, rate_hz, n_axes=6, gyro_columns=(0, 1, 2), options=None, **changes):
@@ -186,8 +177,7 @@ class StationarityGate:
         if self._ref is None:
             self._ref = mean.copy()
         dev = mean - self._ref
-        # never stricter than the window means' own scatter (step_factor sigmas of the vector
-        # norm): a noisy accelerometer's 0.2-s means wander by more than 0.05 m/s^2 when still
+        # never stricter than the window means' own scatter (module docstring)
         noise = (np.zeros(self.n_axes) if floor is None
                  else opt.step_factor * floor / math.sqrt(self.w))
         gyro_off = bool(self.gyro_columns) and (
@@ -213,16 +203,20 @@ class StationarityGate:
         self._n_windows += 1
         return moving
 
+    def _decide_held(self, next_raw, out_data, out_mask):
+        """Decide the held window (``next_raw``: its successor's flag); return it is still."""
+        self._since_raw = 0 if self._held_raw else self._since_raw + 1
+        moving = next_raw or self._since_raw <= self.hold_windows
+        out_data.append(self._held.copy())
+        out_mask.append(np.full(self.w, not moving))
+        self.n_decided += self.w
+        self.n_excluded += self.w if moving else 0
+        return not moving
+
     def _complete_window(self, window, mean, std, out_data, out_mask):
         raw = self._raw_moving(mean, std)
         if self._held_raw is not None:
-            # Decide the held window now that its successor is known.
-            self._since_raw = 0 if self._held_raw else self._since_raw + 1
-            moving = raw or self._since_raw <= self.hold_windows
-            out_data.append(self._held.copy())
-            out_mask.append(np.full(self.w, not moving))
-            self.n_decided += self.w
-            self.n_excluded += self.w if moving else 0
+            self._decide_held(raw, out_data, out_mask)
         self._held[:] = window
         self._held_raw = raw
 
@@ -259,9 +253,7 @@ class StationarityGate:
         if i < n:
             self._part[:n - i] = block[i:]
             self._part_n = n - i
-        if not out_data:
-            return np.zeros((0, self.n_axes)), np.zeros(0, bool)
-        return np.concatenate(out_data), np.concatenate(out_mask)
+        return self._output(out_data, out_mask)
 
     def flush(self):
         """
@@ -273,13 +265,7 @@ class StationarityGate:
         out_data, out_mask = [], []
         last_still = True
         if self._held_raw is not None:
-            self._since_raw = 0 if self._held_raw else self._since_raw + 1
-            moving = self._since_raw <= self.hold_windows
-            out_data.append(self._held.copy())
-            out_mask.append(np.full(self.w, not moving))
-            self.n_decided += self.w
-            self.n_excluded += self.w if moving else 0
-            last_still = not moving
+            last_still = self._decide_held(False, out_data, out_mask)
             self._held_raw = None
         if self._part_n:
             out_data.append(self._part[:self._part_n].copy())
@@ -287,6 +273,9 @@ class StationarityGate:
             self.n_decided += self._part_n
             self.n_excluded += 0 if last_still else self._part_n
             self._part_n = 0
+        return self._output(out_data, out_mask)
+
+    def _output(self, out_data, out_mask):
         if not out_data:
             return np.zeros((0, self.n_axes)), np.zeros(0, bool)
         return np.concatenate(out_data), np.concatenate(out_mask)
