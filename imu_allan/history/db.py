@@ -135,15 +135,8 @@ def record(con, entry, rows):
     """
     Write one input: its ``inputs`` row and its ``measurements`` rows, in one transaction.
 
-    Parameters
-    ----------
-    con : duckdb.DuckDBPyConnection
-        An open connection (:func:`connect`).
-    entry : dict
-        Values of :data:`INPUT_COLUMNS`.
-    rows : list of dict
-        Values of :data:`MEASUREMENT_COLUMNS`, one dict per measurement.
-
+    ``con`` an open connection (:func:`connect`); ``entry`` a dict of :data:`INPUT_COLUMNS`,
+    ``rows`` one dict of :data:`MEASUREMENT_COLUMNS` per measurement.
     """
     inp = entry['input']
     con.execute('BEGIN TRANSACTION')

@@ -34,25 +34,12 @@ def _finite(value):
 
 def measurement_rows(report, input_path, analyzed_at, imu_id=None):
     """
-    Return the ``measurements`` rows (dicts) of one report.
+    Return the ``measurements`` rows (dicts) of one ``analyze`` JSON report.
 
-    Parameters
-    ----------
-    report : dict
-        ``analyze``'s JSON report (with its ``recording`` and ``upper_limits`` blocks).
-    input_path : str
-        The input as stored in the ``input`` column (absolute path).
-    analyzed_at : datetime.datetime
-        Naive UTC time of the analysis.
-    imu_id : str, optional
-        Overrides the id derived from the topic's namespace and the Imu frame_id.
-
-    Returns
-    -------
-    list of dict
-        Detected terms with their 68.3 % intervals (one row per parameter), then the 95 %
-        upper limits of undetected white noise and rate random walk (``detected`` false).
-
+    Detected terms with their 68.3 % intervals (one row per parameter), then the 95 % upper
+    limits of the undetected ones (``detected`` false).  ``input_path``: as stored in the
+    ``input`` column (absolute); ``analyzed_at``: naive UTC; ``imu_id`` overrides the id
+    derived from the topic's namespace and the Imu frame_id.
     """
     rec = report.get('recording', {})
     topic = rec.get('topic') or None

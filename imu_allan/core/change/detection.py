@@ -110,21 +110,9 @@ class ChangeTest:
     """
     The sequential change test over blocks (ROS-free; stream or whole record).
 
-    Parameters
-    ----------
-    rate_hz : float
-        Sample rate, Hz.
-    block_samples : int
-        Block (step) length, samples.
-    ms : sequence of int
-        Averaging factors of the blocks' sums.
-    k : int
-        Blocks per window (even).
-    axes : sequence of str
-        Axis names.
-    target_per_day : float
-        Target false alarms per axis per day (sets the threshold).
-
+    ``rate_hz`` in Hz; ``block_samples`` the block (step) length and ``ms`` the averaging
+    factors of the blocks' sums (:func:`~imu_allan.core.change.dynamic.layout`); ``k`` blocks
+    per window (even); ``target_per_day`` false alarms per axis per day (sets the threshold).
     """
 
     def __init__(self, rate_hz, block_samples, ms, k, axes, target_per_day=None):
@@ -234,10 +222,9 @@ class ChangeTest:
         if good.sum() < 2:
             return a_b, nan, nan, np.ones(self.ms.size), good & False
         alpha = _alphas(self.ms, a_b, good)
-        nu_w = np.array([_edf(alpha[i], m, phase_count(int(w_cnt[i]), m))
-                         if good[i] else np.nan for i, m in enumerate(self.ms)])
-        nu_b = np.array([_edf(alpha[i], m, phase_count(int(self.base_cnt[i, j]), m))
-                         if good[i] else np.nan for i, m in enumerate(self.ms)])
+        nu_w, nu_b = (np.array([_edf(alpha[i], m, phase_count(int(counts[i]), m))
+                                if good[i] else np.nan for i, m in enumerate(self.ms)])
+                      for counts in (w_cnt, self.base_cnt[:, j]))
         good &= np.isfinite(nu_w) & np.isfinite(nu_b)
         r = np.where(good, a_w / np.where(good, a_b, 1.0), 1.0)
         nw, nb = np.where(good, nu_w, 1.0), np.where(good, nu_b, 1.0)
@@ -253,7 +240,7 @@ class ChangeTest:
             a_b, nu_w, nu_b, p, good = self._spectrum(j, a_w, w_cnt[:, j])
             if not good.any():
                 continue
-            p_level, _, step, _ = self._level(j, a_b, nu_b, good)
+            p_level, sd_half = self._level(j, a_b, nu_b, good)
             best = int(np.argmin(p))
             if min(p[best], p_level) >= self.p_crit:
                 continue
@@ -268,8 +255,7 @@ class ChangeTest:
             # The block at the cut may hold both sides: the estimate waits for blocks after it.
             self._pending[j] = {'level': level, 'p': min(p[best], p_level), 't_s': starts[cut],
                                 'first_pure': self.blocks_seen - self.k + cut + 1,
-                                'before': before, 'detected_s': end,
-                                'sd_half': self._level(j, a_b, nu_b, good)[3]}
+                                'before': before, 'detected_s': end, 'sd_half': sd_half}
             self.skip[j] = self.k  # the window's blocks are not pooled into the baseline
 
     def _finish(self, j, end):
@@ -306,7 +292,7 @@ class ChangeTest:
 
     def _level(self, j, a_b, nu_b, good):
         """
-        Level test of axis j: (p, z, step, sd of the half-window deviation).
+        Level test of axis j: (p, sd of the half-window deviation).
 
         z^2 = D^2 / (2 AVAR_b(W/2)) is F(1, nu_b)-distributed (AVAR_b an estimate with the
         EDF nu_b of the longest tau it is extrapolated from), not chi-square(1): a baseline
@@ -317,17 +303,15 @@ class ChangeTest:
         n1, n2 = yc[:h].sum(), yc[h:].sum()
         top = np.flatnonzero(good)
         if n1 == 0 or n2 == 0 or top.size < 2:
-            return 1.0, 0.0, 0.0, math.nan
+            return 1.0, math.nan
         i1, i0 = top[-1], top[-2]
         slope = math.log(a_b[i1] / a_b[i0]) / math.log(self.ms[i1] / self.ms[i0])
         slope = min(max(slope + 0.5, 0.0), 1.0)  # never falling: a flicker floor at least
         avar_half = max(a_b[i] * (self.window_s / 2.0 / self.tau[i]) ** slope
                         for i in top[-3:])  # the longest three: one low estimate is no floor
         step = ys[h:].sum() / n2 - ys[:h].sum() / n1
-        sd = math.sqrt(2.0 * avar_half)
-        z = step / sd
-        p = float(_special().fdtrc(1.0, nu_b[i1], z * z))
-        return p, z, step, math.sqrt(avar_half)
+        z = step / math.sqrt(2.0 * avar_half)
+        return float(_special().fdtrc(1.0, nu_b[i1], z * z)), math.sqrt(avar_half)
 
     def _classify(self, a_w, a_b, nu_w, nu_b, good):
         """Name the term whose AVAR shape fits the excess best; (what, ratio, i*, extra)."""

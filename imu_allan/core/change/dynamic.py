@@ -113,19 +113,10 @@ class BlockAllan:
     """
     Per-block sums of squared second differences at every averaging factor (stream form).
 
-    Parameters
-    ----------
-    n_axes : int
-        Columns of the data.
-    block_samples : int
-        Block length, samples (a multiple of 2^level of the coarsest factor used).
-    ms : sequence of int
-        Averaging factors (from :func:`factor_grid`).
-
-    :meth:`feed` takes samples ``(n, A)`` in any batch sizes and returns the blocks completed
-    by them: a :class:`Blocks`.  Memory is fixed: per level 25 partial sums per axis, and
-    one open block's sums.
-
+    ``block_samples``: a multiple of 2^level of the coarsest factor of ``ms`` (from
+    :func:`factor_grid`; :func:`layout` gives both).  :meth:`feed` takes samples ``(n, A)`` in
+    any batch sizes and returns the blocks completed by them: a :class:`Blocks`.  Memory is
+    fixed: per level 25 partial sums per axis, and one open block's sums.
     """
 
     def __init__(self, n_axes, block_samples, ms):
@@ -249,12 +240,9 @@ def _block_sum(ids, values, nb):
 
 
 def _first_finite(data):
-    out = np.full(data.shape[1], np.nan)
-    for j in range(data.shape[1]):
-        good = np.flatnonzero(np.isfinite(data[:, j]))
-        if good.size:
-            out[j] = data[good[0], j]
-    return out
+    good = np.isfinite(data)
+    first = data[np.argmax(good, axis=0), np.arange(data.shape[1])] if data.shape[0] else np.nan
+    return np.where(good.any(axis=0), first, np.nan)
 
 
 @dataclass

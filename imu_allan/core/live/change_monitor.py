@@ -34,19 +34,9 @@ class ChangeMonitor:
     """
     Stream form of the change test, per axis, with its diagnostic records.
 
-    Parameters
-    ----------
-    rate_hz : float
-        Sample rate, Hz.
-    window_s : float
-        Window, s (step = window / 4).
-    axes : sequence of str
-        Axis names of the data columns.
-    hold_s : float
-        Seconds (stamp time) a WARN lasts after its detection; 0: until :meth:`reset`.
-    target_per_day : float, optional
-        False alarms per axis per day the threshold aims at.
-
+    ``rate_hz`` in Hz; ``window_s`` the window, s (step = window / 4); ``hold_s`` (stamp
+    time, s) how long a WARN lasts after its detection (0: until :meth:`reset`);
+    ``target_per_day`` the false alarms per axis per day the threshold aims at.
     """
 
     def __init__(self, rate_hz, window_s, axes, hold_s=0.0, target_per_day=None):

@@ -100,14 +100,9 @@ class LiveSession:
     """
     The live estimate of one IMU stream and everything computed on it, in bounded steps.
 
-    Parameters
-    ----------
-    params : dict
-        The allan node's parameters by name (validated by :func:`check_parameters`).
-    log : callable, optional
-        ``log(level, text)`` with level ``'info'`` or ``'warn'``: the sample rate once known
-        and each change the change test finds.
-
+    ``params``: the allan node's parameters by name (validated by :func:`check_parameters`);
+    ``log(level, text)``, level ``'info'`` or ``'warn'``: the sample rate once known and each
+    change the change test finds.
     """
 
     def __init__(self, params, log=None):
