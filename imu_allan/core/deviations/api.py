@@ -28,28 +28,12 @@ class DeviationResult:
     """
     One deviation of a record, per averaging time and axis.
 
-    Attributes
-    ----------
-    kind : str
-        One of :data:`KINDS`.
-    tau : numpy.ndarray
-        Averaging times, s, shape (T,) (theo1: 0.75 m tau0).
-    m : numpy.ndarray
-        Averaging factors, shape (T,).
-    dev, ci_low, ci_high : numpy.ndarray
-        Shape (T, A): the deviation, bias-corrected as Stable32 prints it, in the rate's unit
-        (rad/s, m/s^2; tdev: that unit x s), and its 68.3 % chi-square interval.
-    edf, alpha : numpy.ndarray
-        Shape (T, A): equivalent degrees of freedom and the identified noise exponent.
-    n_terms : numpy.ndarray
-        Shape (T,): summands behind each estimate (Stable32's '#').
-    axes : tuple of str
-        Column names.
-    rate_hz : float
-        Sample rate, Hz.
-    n_samples : int
-        Rate samples in the record.
-
+    ``kind`` one of :data:`KINDS`; ``tau`` (T,) s (theo1: 0.75 m tau0) and ``m`` (T,) the
+    averaging factors; ``dev``, ``ci_low``, ``ci_high`` (T, A): the deviation, bias-corrected
+    as Stable32 prints it, in the rate's unit (rad/s, m/s^2; tdev: that unit x s), and its
+    68.3 % chi-square interval; ``edf``, ``alpha`` (T, A): equivalent degrees of freedom and
+    the identified noise exponent; ``n_terms`` (T,) the summands behind each estimate
+    (Stable32's '#'); ``rate_hz`` in Hz; ``n_samples`` the rate samples of the record.
     """
 
     kind: str
@@ -74,13 +58,9 @@ def raw_variance(kind, x, ms, data=None, fast=True):
     """
     Uncorrected variance (T, A) of ``kind`` from the phase ``x`` (A, N) in sample units.
 
-    tdev gives MVAR (scaled afterwards).  The kind's compiled path (:attr:`.kinds.Kind.
-    compiled`) when ``fast``: oadev the package's Allan kernel
-    (:func:`imu_allan.core.allan.estimate.avar_function`; ``data`` (n, A) needed, else numpy);
-    adev, hdev, ohdev, mdev, tdev and totdev :mod:`.kernels` from the same amount of work as the
-    Allan kernel (:data:`imu_allan.core.allan.estimate.SMALL_WORK`), numpy below it; mtotdev,
-    htotdev and theo1 :mod:`.total_kernel` (on long records with thinned window starts, exact
-    whenever the work fits its budget).  ``fast=False`` or no numba: the kind's numpy variance.
+    tdev gives MVAR (scaled afterwards).  With ``fast``, the kind's compiled path
+    (:attr:`.kinds.Kind.compiled`; oadev needs ``data`` (n, A) for the Allan kernel);
+    ``fast=False`` or no numba: the kind's numpy variance.
     """
     spec = kind_of(kind)
     if fast and spec.compiled == 'allan' and data is not None:
@@ -183,11 +163,6 @@ def n_terms(kind, n_phase, m):
 def bias_factor(kind, alpha, m, n_phase):
     """E[raw variance] / (variance Stable32 prints), by kind and noise; 1 where none."""
     return kind_of(kind).bias(alpha, m, n_phase)
-
-
-def edf(kind, alpha, m, n_phase):
-    """EDF of ``kind`` at factor ``m`` for noise ``alpha`` and ``n_phase`` phase points."""
-    return kind_of(kind).edf(alpha, m, n_phase)
 
 
 def finish(kind, raw, ms, alpha, n_phase, factor=None):
@@ -373,23 +348,20 @@ def extra_deviations(data, rate_hz, kinds, axes, points_per_decade, min_clusters
     A kind the record is too short for is left out (the Allan estimate decides whether the
     record is usable at all).
     """
-    out = {}
-    modified_result = []  # mdev and tdev share one modified variance (:func:`tdev_of`)
+    out, modified = {}, None  # mdev and tdev share one modified variance (:func:`tdev_of`)
     for kind in kinds:
+        base = 'mdev' if kind == 'tdev' else kind
         if kind == 'oadev':
             continue
-        try:
-            if kind in ('mdev', 'tdev') and modified_result:
-                out[kind] = modified_result[0] if kind == 'mdev' else tdev_of(
-                    modified_result[0])
+        if base != 'mdev' or modified is None:
+            try:
+                result = deviation(data, rate_hz, base, points_per_decade=points_per_decade,
+                                   min_clusters=min_clusters, axes=axes)
+            except ValueError:
                 continue
-            result = deviation(data, rate_hz, 'mdev' if kind == 'tdev' else kind,
-                               points_per_decade=points_per_decade,
-                               min_clusters=min_clusters, axes=axes)
-        except ValueError:
-            continue
-        if kind in ('mdev', 'tdev'):
-            modified_result.append(result)
-            result = result if kind == 'mdev' else tdev_of(result)
-        out[kind] = result
+        else:
+            result = modified
+        if base == 'mdev':
+            modified = result
+        out[kind] = tdev_of(result) if kind == 'tdev' else result
     return out

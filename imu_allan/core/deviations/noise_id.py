@@ -16,11 +16,8 @@ It needs K >= 30 block means.  Where fewer remain (the longest averaging times) 
 block means over their non-overlapping Allan variance, picks the exponent mu of AVAR ~ tau^mu
 whose expected B1(K, mu) is nearest (boundaries at the geometric means), as Stable32 does; its
 mu = -2 (white or flicker PM, which B1 cannot split) is reported as white PM (alpha = +2).
-
-Why not the package's fit-based :func:`imu_allan.core.allan.estimate.identify_noise`: it fits one
-Allan curve's shape and cannot see what the Hadamard or modified estimators see, whereas the
-autocorrelation works on the data themselves, per averaging time, for every kind alike, and
-is the identification behind the Stable32 bounds the tests compare with.
+Why not the package's fit-based :func:`imu_allan.core.allan.estimate.identify_noise`:
+docs/method.md section 8.
 """
 
 import numpy as np

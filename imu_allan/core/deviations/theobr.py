@@ -10,17 +10,10 @@ stability", EFTF 2004: the bias-removed ThêoBR; Taylor & Howe, "Fast ThêoBR", 
 the mean ratio of the overlapping Allan variance to Theo1 at the same tau = (9 + 3 i) tau0, N
 phase points; and it labels every averaging time with the one noise whose nominal ratio
 AVAR / Theo1 is nearest to k (:data:`NOMINAL`, boundaries at geometric means).  The EDF is
-then Theo1's for that noise (:func:`.theo.edf`).  Reproduced here from Stable32's own tables:
-PHASE.DAT (N = 1001): k = 0.60279, alpha 1 on all 181 rows of its table, every value Theo1 x k
-to its 5 digits and its bounds (octave table of Stable32 1.61) to 5e-5; AllanToolkit's Sr87
-clock record (N = 1253): k = 1.3491, alpha -1, its 196 rows within 2.2e-5, bounds within 2.2e-4.
-A ratio whose AVAR has no term (2 m > N - 1, when N is a multiple of 6) is left out.
-
-The noise found this way is a property of the whole run, dominated by its long averaging
-times (i runs linearly up to tau = T/2): on a record whose noise changes with tau (an IMU's
-white noise below its bias instability and random walk) the factor of the long end is applied
-at the short end too (docs/method.md section 8 gives the measured effect; a caller who knows
-the noise fixes alpha and gets Howe & Tasset's bias per averaging time instead).
+then Theo1's for that noise (:func:`.theo.edf`).  A ratio whose AVAR has no term (2 m > N - 1,
+when N is a multiple of 6) is left out.  Stable32's tables it reproduces, and what it is worth
+on an IMU (the long end's factor is applied at the short end too; a caller who knows the noise
+fixes alpha): docs/method.md section 8.
 
 Cost: the exact mean takes Theo1 at N/6 factors, O(N^3) in all; above :data:`EXACT_WORK`
 Theo1 summands per axis the mean is taken over :data:`SAMPLES` ratios evenly spaced in i,
