@@ -384,16 +384,13 @@ class StreamingAllan:
         cum = np.cumsum(phase, axis=0) if self._mdev else None
         slot = st.bucket % self._n_buckets
         windowed = self._bucket_len is not None
-        oadev = st.sums['oadev']
         for li, (s, f0, qs, cap) in enumerate(self._levels):
             h = min(seg // s + 1, cap)  # stored phase points of this level
             first = (seg // s + 1) * s
             if first <= seg + r:
                 x = np.concatenate((st.hist[li][:h], phase[first - seg - 1:r:s]))
-                if self._ohdev:
-                    self._book_2_3(x, h, qs, f0, oadev, st.sums['ohdev'], cols, slot, windowed)
-                else:
-                    self._book(x, h, qs, f0, 2, oadev, cols, slot, windowed)
+                self._book2(x, h, qs, f0, st.sums['oadev'], st.sums.get('ohdev'), cols, slot,
+                            windowed)
                 keep = min(x.shape[0], cap)
                 st.hist[li][:keep, cols] = x[x.shape[0] - keep:, cols]
             if self._mdev:
@@ -426,23 +423,26 @@ class StreamingAllan:
             st.shist[li][:stored, cols] -= rebase
             return
         y = np.concatenate((st.shist[li][:h], cum[first - seg - 2:r:s]))
-        self._book(y, h, qs, f0, 3, st.sums['mdev'], cols, slot, windowed)
+        self._book3(y, h, qs, f0, st.sums['mdev'], cols, slot, windowed)
         st.shist[li][:stored, cols] = y[y.shape[0] - stored:, cols] - rebase
 
     @staticmethod
-    def _book_2_3(x, h, qs, f0, sums2, sums3, cols, slot, windowed):
+    def _book2(x, h, qs, f0, sums2, sums3, cols, slot, windowed):
         """
-        :meth:`_book` of orders 2 (AVAR) and 3 (OHVAR) on the same phase history, at once.
+        Add the new AVAR terms of one level's phase history ``x``, and OHVAR's unless None.
 
+        ``x``: the level's history, its first ``h`` points stored before; lags q are the
+        level's factors / stride; ``sums2``, ``sums3`` are [acc, cnt, wacc, wcnt] of the kinds.
         A third difference at lag q is the difference of two second differences q apart
         (D3_k = D2_{k+q} - D2_k), so the second differences are formed once, from the oldest
-        new OHVAR term's k on, and the AVAR terms are the same numbers as in :meth:`_book`.
+        new OHVAR term's k on.
         """
         length = x.shape[0]
+        # Factors with new terms: 2 q < length, a prefix of the level's (q ascending).
         nv = bisect.bisect_right(qs, (length - 1) // 2)
         if not nv:
             return
-        nv3 = bisect.bisect_right(qs, (length - 1) // 3)
+        nv3 = 0 if sums3 is None else bisect.bisect_right(qs, (length - 1) // 3)
         ss = np.empty((nv, x.shape[1]))
         kk = np.empty((nv, 1), np.int64)
         ss3 = np.empty((nv3, x.shape[1]))
@@ -465,29 +465,20 @@ class StreamingAllan:
             _add_terms(sums3, f0, cols, ss3, kk3, slot, windowed)
 
     @staticmethod
-    def _book(x, h, qs, f0, order, sums, cols, slot, windowed):
-        """
-        Add the new terms of one level's history ``x`` (its first ``h`` points stored before).
-
-        Second (``order`` 2, AVAR) or third (3: OHVAR on the phase, MVAR on S) differences at
-        lags q (the level's factors / stride); ``sums`` is [acc, cnt, wacc, wcnt] of the kind.
-        """
-        length = x.shape[0]
-        # Factors with new terms: order q < length, a prefix of the level's (q ascending).
-        nv = bisect.bisect_right(qs, (length - 1) // order)
+    def _book3(y, h, qs, f0, sums, cols, slot, windowed):
+        """Add the new MVAR terms (third differences) of one level's S history (as _book2)."""
+        length = y.shape[0]
+        nv = bisect.bisect_right(qs, (length - 1) // 3)
         if not nv:
             return
-        ss = np.empty((nv, x.shape[1]))
+        ss = np.empty((nv, y.shape[1]))
         kk = np.empty((nv, 1), np.int64)
         for i in range(nv):
             q = qs[i]
-            k0 = max(0, h - order * q)
-            k1 = length - order * q
-            if order == 2:
-                d = x[k0 + 2 * q:k1 + 2 * q] - 2.0 * x[k0 + q:k1 + q] + x[k0:k1]
-            else:
-                d = (x[k0 + 3 * q:k1 + 3 * q] - x[k0:k1]
-                     - 3.0 * (x[k0 + 2 * q:k1 + 2 * q] - x[k0 + q:k1 + q]))
+            k0 = max(0, h - 3 * q)
+            k1 = length - 3 * q
+            d = (y[k0 + 3 * q:k1 + 3 * q] - y[k0:k1]
+                 - 3.0 * (y[k0 + 2 * q:k1 + 2 * q] - y[k0 + q:k1 + q]))
             np.einsum('ij,ij->j', d, d, out=ss[i])
             kk[i] = k1 - k0
         _add_terms(sums, f0, cols, ss, kk, slot, windowed)
