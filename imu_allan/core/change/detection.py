@@ -4,11 +4,9 @@ A change test on the dynamic Allan variance, per axis, with a known false-alarm 
 Each new window (``k`` blocks of :class:`~imu_allan.core.change.dynamic.BlockAllan`) is compared
 with a *baseline*: the pooled terms of every block since the axis's last reset that is not in the
 window (its EDF grows with its length).  An axis is tested once its baseline holds
-:data:`BASELINE_WINDOWS` windows: with one window only, the noise type read from the
-baseline's slope (which sets both EDFs) is itself too noisy where flicker dominates, and the
-thesis 3DM-GX3-25 model at the default window of a 1-h record (150 s) gave 2 false alarms in
-1.5 axis-days (1.3 per axis-day against a target of 0.05); with three, none in 4.5 axis-days
-(test/core/test_dynamic.py keeps that case).  Two tests per window and axis:
+:data:`BASELINE_WINDOWS` windows: with one only, the noise type read from the baseline's slope
+(which sets both EDFs) is too noisy where flicker dominates (measured: docs/analyze.md,
+"Change test"; test/core/test_dynamic.py keeps that case).  Two tests per window and axis:
 
 * **spectrum**: at every averaging factor m, the ratio R = AVAR_window / AVAR_baseline of two
   independent chi-square estimates is F(nu_w, nu_b)-distributed when nothing changed (NIST

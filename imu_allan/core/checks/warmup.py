@@ -101,10 +101,9 @@ def find_warmup(data, rate_hz, axes=None):
     block_s = max(BLOCK_S, 1.0 / rate_hz)
     means, dt = _block_means(data[:int(span * rate_hz)], rate_hz, block_s)
     t_max = min(T_MAX_S, span / 3.0)
-    grid = np.geomspace(T_MIN_S, t_max, N_T) if t_max > T_MIN_S else np.array([])
-    if grid.size == 0:
+    if t_max <= T_MIN_S:
         return 0.0, {}
-    tc, amp, _ = fit_settling(means, dt, grid)
+    tc, amp, _ = fit_settling(means, dt, np.geomspace(T_MIN_S, t_max, N_T))
     rest, _ = _block_means(data[int(span * rate_hz):], rate_hz, block_s)
     details, warm = {}, []
     for j, axis in enumerate(axes):

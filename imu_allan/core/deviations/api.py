@@ -240,34 +240,18 @@ def deviation(data, rate_hz, kind='oadev', taus=None, points_per_decade=10,
     """
     Frequency-stability deviation ``kind`` of rate samples with 68.3 % intervals.
 
-    Parameters
-    ----------
-    data : array_like
-        Shape (n_samples,) or (n_samples, n_axes): rate samples (rad/s, m/s^2, ...), i.e.
-        fractional-frequency-like data (allantools ``data_type='freq'``).
-    rate_hz : float
-        Sample rate, Hz; tau0 = 1 / rate_hz.
-    kind : str
-        adev, oadev, mdev, tdev, hdev, ohdev, totdev, mtotdev, htotdev or theo1.
-    taus : array_like, optional
-        Averaging times, s, each rounded to a whole factor m (theo1: even m, tau = 0.75 m
-        tau0).  Default: ``points_per_decade`` log-spaced factors up to Stable32's stop ratio
-        (:mod:`.grid`; oadev: the ``min_clusters`` guard of ``allan_deviation``).
-    points_per_decade, min_clusters : float, int
-        Grid density; the oadev guard.
-    axes : sequence of str, optional
-        Column names (default: the package axis order).
-    alpha : int, optional
-        The noise exponent, fixed for every averaging time and axis (Stable32's "Alpha"; +2
-        white PM .. -2 random-walk FM, -4 for the Hadamard kinds): the bias corrections and
-        EDFs are that noise's.  Default: identified from the data, per averaging time (lag-1
-        autocorrelation, B1 ratio: :mod:`.noise_id`); theo1 per axis for the whole run, with
-        Stable32's ThêoBR bias removal (:mod:`.theobr`).
+    ``data`` (n_samples,) or (n_samples, n_axes): rate samples (rad/s, m/s^2, ...), i.e.
+    fractional-frequency-like data (allantools ``data_type='freq'``); ``rate_hz`` in Hz
+    (tau0 = 1 / rate_hz); ``kind`` one of :data:`KINDS`.  ``taus`` (s) are each rounded to a
+    whole factor m (theo1: even m, tau = 0.75 m tau0); default: ``points_per_decade``
+    log-spaced factors up to Stable32's stop ratio (:mod:`.grid`; oadev: the ``min_clusters``
+    guard of ``allan_deviation``).  ``axes``: column names (default: the package axis order).
 
-    Returns
-    -------
-    DeviationResult
-
+    ``alpha`` fixes the noise exponent for every averaging time and axis (Stable32's "Alpha";
+    +2 white PM .. -2 random-walk FM, -4 for the Hadamard kinds): the bias corrections and
+    EDFs are that noise's.  Default: identified from the data, per averaging time (lag-1
+    autocorrelation, B1 ratio: :mod:`.noise_id`); theo1 per axis for the whole run, with
+    Stable32's ThêoBR bias removal (:mod:`.theobr`).  Returns a :class:`DeviationResult`.
     """
     data = _check(data, rate_hz, kind)
     spec = kind_of(kind)

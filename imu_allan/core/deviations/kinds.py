@@ -54,8 +54,7 @@ class Kind:
     m_step : int
         Averaging factors are multiples of it (theo1: even m), the shortest one included.
     edf_floor : bool
-        Floor the EDF at 1 (SP1065's fitted EDFs go below 1, even negative, at the longest
-        factors, outside the range they were fitted on).
+        Floor the EDF at 1 (why: :func:`.api.finish`).
     allan_grid : bool
         Default grid of ``allan_deviation`` (the ``min_clusters`` guard) instead of the stop
         ratio (oadev).

@@ -183,12 +183,9 @@ class OnlineAllan:
         Return the samples for the motion gate: each bad value replaced by a stand-in.
 
         The stand-in is the same axis's value one gate window earlier (itself a stand-in if
-        that was bad), so the gate sees real noise at the right level and mean, never a spike
-        or a NaN (not motion), even through a long run of bad values.  Bad values with no
-        history yet (the very start of the stream) take the axis's first good value in the
-        batch, or 0.  The estimator never reads these values (its per-axis mask leaves them
-        out).  The history is what the gate holds (:meth:`StationarityGate.recent`): nothing
-        is kept or copied while every value is good.
+        that was bad; why: docs/online.md, "Rejected values, per axis"), taken from what the
+        gate holds (:meth:`StationarityGate.recent`); with no history yet, the axis's first
+        good value in the batch, or 0.  The estimator never reads these values.
         """
         w = self.gate.w
         tail = self.gate.recent(w)
