@@ -8,9 +8,9 @@ running maximum carried between batches) and ``analyze`` to the whole record
 (:func:`drop_isolated`), so both drop the same samples.
 
 Offline, dropping is only right for *isolated* faults, a damaged stamp here and there: a
-record is refused (as before this rule) when two dropped samples are neighbours (a stretch
-that runs backwards, or a stamp far ahead that hides the samples after it) or when more than
-:data:`MAX_DROPPED_SHARE` of its samples would be dropped (at least one is always allowed).
+record is refused when two dropped samples are neighbours (a stretch that runs backwards, or
+a stamp far ahead that hides the samples after it) or when more than :data:`MAX_DROPPED_SHARE`
+of its samples would be dropped (at least one is always allowed).
 Online a stream cannot be refused: the node keeps dropping and reports the count in its
 diagnostics.
 """

@@ -46,8 +46,8 @@ EDF, with N the phase points and the noise alpha of the row:
   m = 1, 2, 4, 8, white FM; no Greenhall-Riley variant of any d, F, S, alpha gives them back
   to better than 1 %); the package uses the overlapping Hadamard variance's Greenhall EDF there
   (HTOTVAR is OHVAR at m = 1; 452, 257, 140 at m = 2, 4, 8: conservative against the Monte
-  Carlo's 604, 400, 210; the non-overlapping one used before gave 272, 131, 64).  No HTOTVAR
-  EDF is published for phase noise (alpha > 0): the Hadamard variance's there too.
+  Carlo's 604, 400, 210).  No HTOTVAR EDF is published for phase noise (alpha > 0): the
+  Hadamard variance's there too.
 """
 
 import math

@@ -46,13 +46,10 @@ _FLOOR_EVERY = 8
 @dataclass(frozen=True)
 class GateOptions:
     """
-    The tunables of :class:`StationarityGate` (see the module docstring); SI: rad/s, m/s^2, s.
+    The tunables of :class:`StationarityGate`, each in the module docstring; SI: rad/s, m/s^2, s.
 
-    ``window_s``, ``std_factor``, ``step_factor``, ``gyro_max`` (rad/s), ``hold_s``,
-    ``floor_windows``, ``floor_quantile``: the window tests; ``gyro_delta_max`` (rad/s),
-    ``accel_delta_max`` (m/s^2), ``reference_s``, ``settle_s``, ``reacquire_s``: the
-    still-reference test; ``min_floor``: lower bound of the floor (units of the samples) so
-    constant or coarsely quantized signals do not divide by zero.  ValueError if out of range.
+    ``min_floor``: lower bound of the floor (units of the samples) so constant or coarsely
+    quantized signals do not divide by zero.  ValueError if out of range.
     """
 
     window_s: float = 0.2
