@@ -48,11 +48,9 @@ from pathlib import Path
 from .export_registry import Exporter, EXPORTERS, register
 from .sim_exporters import SIM_EXPORTERS
 from ..core.export_values import ExportValues
-from ..core.units import discrete_random_walk_step, discrete_white_std
+from ..core.units import discrete_random_walk_step, discrete_white_std, STANDARD_GRAVITY
 
 EXPORT_DIR = 'export'
-#: Standard gravity written where a consumer wants a gravity magnitude (m/s^2).
-GRAVITY = 9.80665
 
 
 def exporter_names():
@@ -294,7 +292,7 @@ def _vins_build(values):
         return _per_step(term, value, values.rate_hz) * (
             math.sqrt(2.0) if term == 'white_noise' else 1.0)
     return {**_worst_four(values, ('gyr_n', 'gyr_w', 'acc_n', 'acc_w'), per_sample),
-            'g_norm': GRAVITY, 'imu': 1, 'imu_topic': values.topic}
+            'g_norm': STANDARD_GRAVITY, 'imu': 1, 'imu_topic': values.topic}
 
 
 register(Exporter(
@@ -375,7 +373,7 @@ def _gtsam_build(values):
             'biasOmegaCovariance': cov('gyro', 'rate_random_walk', 'biasOmegaCovariance'),
             'biasAccCovariance': cov('accel', 'rate_random_walk', 'biasAccCovariance'),
             'integrationCovariance': _diag([GTSAM_INTEGRATION_COVARIANCE] * 3),
-            'gravity': GRAVITY}
+            'gravity': STANDARD_GRAVITY}
 
 
 _GTSAM_SETTERS = (('gyroscopeCovariance', 'setGyroscopeCovariance'),
@@ -420,7 +418,7 @@ def _lio_sam_build(values):
     # noise in continuous"); :225, :374-375: bias BetweenFactor sigma sqrt(deltaTij) *
     # imuAccBiasN: continuous densities.
     params = {**_worst_four(values, ('imuGyrNoise', 'imuGyrBiasN', 'imuAccNoise', 'imuAccBiasN')),
-              'imuGravity': GRAVITY}
+              'imuGravity': STANDARD_GRAVITY}
     return {'/**': {'ros__parameters': params}}
 
 
@@ -455,18 +453,19 @@ register(Exporter(
 # ----------------------------------------------------------------------------- MATLAB
 
 
+#: MATLAB's gyroparams / accelparams keys and the term each holds.
+_MATLAB_KEYS = (('NoiseDensity', 'white_noise'), ('RandomWalk', 'rate_random_walk'),
+                ('BiasInstability', 'bias_instability'))
+
+
 def _matlab_build(values):
     # gyroparams / accelparams: NoiseDensity (rad/s)/sqrt(Hz) = N, RandomWalk (rad/s)*sqrt(Hz)
     # = K (MathWorks answer 1631045), BiasInstability rad/s = B, as MathWorks' example
     # "Inertial Sensor Noise Analysis Using Allan Variance" reads them off allanvar.
     out = {'SampleRate': values.rate_hz}
     for sensor, name in (('gyro', 'gyroparams'), ('accel', 'accelparams')):
-        out[name] = {'NoiseDensity': values.per_axis(sensor, 'white_noise',
-                                                     f'{name}.NoiseDensity'),
-                     'RandomWalk': values.per_axis(sensor, 'rate_random_walk',
-                                                   f'{name}.RandomWalk'),
-                     'BiasInstability': values.per_axis(sensor, 'bias_instability',
-                                                        f'{name}.BiasInstability')}
+        out[name] = {key: values.per_axis(sensor, term, f'{name}.{key}')
+                     for key, term in _MATLAB_KEYS}
         gm = {}
         for axis in values.axes(sensor):
             sigma, _ = values.value(axis, 'gauss_markov', 'sigma')
@@ -490,8 +489,7 @@ def _matlab_render(data, header, values=None):
         f'fs = {_rate(data["SampleRate"])};']
     for name, var in (('gyroparams', 'gyro'), ('accelparams', 'accel')):
         params = data[name]
-        args = ', '.join(f"'{key}', {_matlab_vector(params[key])}"
-                         for key in ('NoiseDensity', 'RandomWalk', 'BiasInstability'))
+        args = ', '.join(f"'{key}', {_matlab_vector(params[key])}" for key, _ in _MATLAB_KEYS)
         lines.append(f'{var} = {name}({args});')
         for axis, gm in params.get('gauss_markov', {}).items():
             phi = math.exp(-1.0 / (data['SampleRate'] * gm['tau_c']))
