@@ -80,7 +80,7 @@ def format_duration(seconds):
 
 def term_words(term):
     """Return a term's name for people: 'white noise', 'Gauss-Markov'."""
-    return 'Gauss-Markov' if term == 'gauss_markov' else term.replace('_', ' ')
+    return 'Gauss-Markov' if term == 'gauss_markov' else str(term).replace('_', ' ')
 
 
 def _percent(rel):

@@ -3,25 +3,14 @@ Exporters: the fitted noise model in the keys, units and time base each consumer
 
 Which consumer wants what (keys, units, continuous-time density or per-sample value, and the
 line of its source where it converts) is documented in ``docs/exports.md``; each builder below
-cites that source line too.  The rules every file shares live in
-:mod:`imu_allan.core.export_values`: fitted continuous-time SI values, a term the fit did
-not select written as its 95 % upper limit and marked, ``inflate = (white, walk)`` on the
-standard deviations, the worst axis where the format has one number per sensor.
-
-Every file starts with the same header (:func:`header_lines`; an ``imu_allan`` list of lines
-in JSON): software version, input, rate, time base and conversion, axis rule, inflation and
-the keys written as upper limits.
+cites that source line too.  The rules every file shares (upper limits, inflation, the worst
+axis) live in :mod:`imu_allan.core.export_values`; every file starts with the provenance of
+:func:`header_lines` (an ``imu_allan`` list of lines in JSON).
 
 Registry
 --------
-:data:`EXPORTERS` (in :mod:`.export_registry`) maps a name to an :class:`Exporter`::
-
-    Exporter(name, files, consumer, time_base, conversion, build, render, per_axis, model)
-
-``model`` is the consumer's own noise model (terms of ``core/terms.py``; default white noise +
-rate random walk), the one ``--overbound`` fits (:mod:`imu_allan.core.overbound`).
-
-``build(values) -> dict`` turns an :class:`~imu_allan.core.export_values.ExportValues` into
+:data:`EXPORTERS` (in :mod:`.export_registry`) maps a name to an :class:`Exporter` (its fields
+are described there).  ``build(values) -> dict`` turns an :class:`~imu_allan.core.export_values.ExportValues` into
 the data the file holds (that dict is what :func:`export` returns); ``render(data, header,
 values)`` returns ``{file name: text}`` for the files in ``files`` (``header``: the comment
 lines of :func:`header_lines`, to be written first).  Adding a consumer (for example Gazebo's

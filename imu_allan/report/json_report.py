@@ -28,6 +28,7 @@ from .kalibr import kalibr_values
 from .temperature_report import temperature_json, temperature_sentence
 from ..core.checks.warmup import warmup_sentence
 from ..core.export_values import motion_withheld
+from ..core.terms import TERMS
 from ..core.units import sample_unit
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
@@ -131,12 +132,12 @@ def console_summary(analysis):
             lines.append(f'  {axis:8} {term:17} {_fmt(entry["value"]):>11} '
                          f'{interval} {entry["unit"]:>17}'
                          f'  {_fmt(conv["value"]):>11} {conv["unit"]}')
-            for extra in ('tau_c', 'frequency_hz'):
-                if extra in entry:
-                    e = entry[extra]
-                    lines.append(f'  {"":8} {"  " + extra:17} {_fmt(e["value"]):>11} '
-                                 f'[{_fmt(e["ci"][0]):>10}, {_fmt(e["ci"][1]):>10}] '
-                                 f'{e["unit"]:>17}')
+            extra = TERMS[term].position   # a hump term's tau_c or frequency_hz
+            if extra in entry:
+                e = entry[extra]
+                lines.append(f'  {"":8} {"  " + extra:17} {_fmt(e["value"]):>11} '
+                             f'[{_fmt(e["ci"][0]):>10}, {_fmt(e["ci"][1]):>10}] '
+                             f'{e["unit"]:>17}')
         for term, entry in analysis.fit.limit_report(axis).items():
             if entry['upper_limit'] is None or moved:
                 continue
