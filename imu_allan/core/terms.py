@@ -183,49 +183,35 @@ STANDARD_GRAVITY = 9.80665
 
 @dataclass(frozen=True)
 class TermSpec:
-    """
-    Everything the package knows about one noise term, in one place.
+    """Everything the package knows about one noise term, in one place."""
 
-    Attributes
-    ----------
-    name, symbol : str
-        Key (``white_noise``) and IEEE symbol (``N``).
-    params : tuple of str
-        Parameter names; the first is the amplitude (AVAR is linear in its square), the
-        second, for hump terms, the position (``tau_c`` in s or ``frequency_hz`` in Hz).
-    alpha : int or None
-        Frequency-PSD power-law exponent of the estimate's noise (drives the EDF and the
-        correlation between averaging times; Greenhall & Riley 2004 notation): +2 white PM,
-        0 white FM, -1 flicker FM, -2 random-walk FM.  None for deterministic terms, whose
-        estimate carries no randomness of its own; Gauss-Markov depends on tau (see
-        :meth:`alpha_at`).
-    adev_slope : str
-        Log-log slope of the Allan deviation (IEEE Std 952 Fig. C.1), for people.
-    si_units, conventional : dict
-        Per sensor (``gyro``, ``accel``): the SI unit of the amplitude (continuous time) and
-        ``(label, factor)`` with conventional = SI * factor.
-    peak_ratio : float or None
-        Hump terms: where the Allan deviation peaks, tau_peak / tau_c (Gauss-Markov) or
-        tau_peak * f0 (sinusoid).
-    id_shape : callable
-        Continuous-time AVAR shape per unit squared amplitude used to identify the dominant
-        noise at each averaging time (no sampling corrections).
-    id_alpha : int or None
-        The exponent that identification counts where the term dominates, if not ``alpha``
-        (the deterministic ramp: random-walk FM, the most conservative EDF there).
-
-    """
-
+    #: key (``white_noise``) and IEEE symbol (``N``)
     name: str
     symbol: str
+    #: parameter names: the first is the amplitude (AVAR is linear in its square), the second,
+    #: for hump terms, the position (``tau_c`` in s or ``frequency_hz`` in Hz)
     params: tuple
+    #: frequency-PSD power-law exponent of the estimate's noise (drives the EDF and the
+    #: correlation between averaging times; Greenhall & Riley 2004 notation): +2 white PM, 0
+    #: white FM, -1 flicker FM, -2 random-walk FM.  None for deterministic terms, whose estimate
+    #: carries no randomness of its own; Gauss-Markov depends on tau (:meth:`alpha_at`)
     alpha: Optional[int]
+    #: log-log slope of the Allan deviation (IEEE Std 952 Fig. C.1), for people
     adev_slope: str
+    #: per sensor (``gyro``, ``accel``): the SI unit of the amplitude (continuous time) and
+    #: ``(label, factor)`` with conventional = SI * factor
     si_units: dict
     conventional: dict
+    #: hump terms: where the Allan deviation peaks, tau_peak / tau_c (Gauss-Markov) or
+    #: tau_peak * f0 (sinusoid)
     peak_ratio: float = None
+    #: continuous-time AVAR shape per unit squared amplitude that identifies the dominant noise
+    #: at each averaging time (no sampling corrections)
     id_shape: Callable = None
+    #: the exponent identification counts where the term dominates, if not ``alpha`` (the
+    #: deterministic ramp: random-walk FM, the most conservative EDF there)
     id_alpha: int = None
+    #: SI unit of each position parameter
     position_units: dict = field(default_factory=dict)
 
     @property

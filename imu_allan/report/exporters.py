@@ -10,12 +10,12 @@ axis) live in :mod:`imu_allan.core.export_values`; every file starts with the pr
 Registry
 --------
 :data:`EXPORTERS` (in :mod:`.export_registry`) maps a name to an :class:`Exporter` (its fields
-are described there).  ``build(values) -> dict`` turns an :class:`~imu_allan.core.export_values.ExportValues` into
-the data the file holds (that dict is what :func:`export` returns); ``render(data, header,
-values)`` returns ``{file name: text}`` for the files in ``files`` (``header``: the comment
-lines of :func:`header_lines`, to be written first).  Adding a consumer (for example Gazebo's
-SDF ``<imu>`` element and PX4's gazebo_imu_plugin block) is two functions and one call in the
-module that defines them::
+are described there).  ``build(values) -> dict`` turns an
+:class:`~imu_allan.core.export_values.ExportValues` into the data the file holds (that dict is
+what :func:`export` returns); ``render(data, header, values)`` returns ``{file name: text}``
+for the files in ``files`` (``header``: the comment lines of :func:`header_lines`, to be
+written first).  Adding a consumer (for example Gazebo's SDF ``<imu>`` element and PX4's
+gazebo_imu_plugin block) is two functions and one call in the module that defines them::
 
     from imu_allan.report.export_registry import Exporter
     GAZEBO = Exporter('gazebo', ('gazebo_imu.sdf',), 'Gazebo (gz-sensors)', 'per sample',
