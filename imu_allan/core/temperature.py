@@ -41,7 +41,7 @@ and down separates them) and, fitted, takes over the long-term part of the rando
 (rms 1.13 and 1.22 measured with all five IEEE terms).
 """
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import math
 
 import numpy as np
@@ -141,8 +141,7 @@ class SlopeEstimate:
 
     def to_json(self):
         """Plain dict for report.json."""
-        return {'value': self.value, 'ci': list(self.ci), 'unit': self.unit,
-                'stderr': self.stderr, 'block_s': self.block_s, 'n_blocks': self.n_blocks}
+        return {**asdict(self), 'ci': list(self.ci)}
 
 
 def block_means(t, data, rate_hz, block_s):
@@ -273,8 +272,7 @@ class TemperatureChange:
 
     def to_json(self):
         """Plain dict for report.json."""
-        return {'t_start_s': self.t_start_s, 't_end_s': self.t_end_s, 'from_c': self.from_c,
-                'to_c': self.to_c}
+        return asdict(self)
 
 
 def moving_average(t, values, width_s):

@@ -194,10 +194,6 @@ def _yaml_file(name, opencv=False):
     return render
 
 
-def _var(value):
-    return None if value is None else value * value
-
-
 #: The four numbers most consumers take, in the order :func:`_worst_four` names them.
 _FOUR = (('gyro', 'white_noise'), ('gyro', 'rate_random_walk'), ('accel', 'white_noise'),
          ('accel', 'rate_random_walk'))
@@ -356,7 +352,7 @@ def _gtsam_build(values):
     # continuous time noise to discrete time noise"; CombinedImuFactor.cpp:157-178:
     # dt * biasAccCovariance.  Variances (sigma^2) of continuous densities, per axis.
     def cov(sensor, term, key):
-        return _diag([_var(v) for v in values.per_axis(sensor, term, key)])
+        return _diag([None if v is None else v * v for v in values.per_axis(sensor, term, key)])
     return {'gyroscopeCovariance': cov('gyro', 'white_noise', 'gyroscopeCovariance'),
             'accelerometerCovariance': cov('accel', 'white_noise', 'accelerometerCovariance'),
             'biasOmegaCovariance': cov('gyro', 'rate_random_walk', 'biasOmegaCovariance'),

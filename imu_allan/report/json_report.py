@@ -39,6 +39,12 @@ def _floats(values):
     return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=float)]
 
 
+def _curve(res, j, key, dev):
+    """One axis (column ``j``) of a deviation: ``tau``, ``key`` (``dev``), interval, EDF."""
+    return {'tau': _floats(res.tau), key: _floats(dev[:, j]), 'ci_low': _floats(res.ci_low[:, j]),
+            'ci_high': _floats(res.ci_high[:, j]), 'edf': _floats(res.edf[:, j])}
+
+
 def analysis_to_json(analysis, samples=None):
     """
     Return the report dictionary of one analysis (JSON-ready).
@@ -52,9 +58,7 @@ def analysis_to_json(analysis, samples=None):
     for j, axis in enumerate(analysis.axes):
         axes[axis] = {
             'unit': sample_unit(axis),
-            'adev': {'tau': _floats(res.tau), 'adev': _floats(res.adev[:, j]),
-                     'ci_low': _floats(res.ci_low[:, j]), 'ci_high': _floats(res.ci_high[:, j]),
-                     'edf': _floats(res.edf[:, j])},
+            'adev': _curve(res, j, 'adev', res.adev),
             'terms': analysis.fit.term_report(axis),
             'limits': analysis.fit.limit_report(axis),
             'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis]),
@@ -68,12 +72,8 @@ def analysis_to_json(analysis, samples=None):
                     **fit_json(analysis.fit, axis)},
         }
         if analysis.deviations:
-            axes[axis]['deviations'] = {
-                kind: {'tau': _floats(d.tau), 'dev': _floats(d.dev[:, d.axis_index(axis)]),
-                       'ci_low': _floats(d.ci_low[:, d.axis_index(axis)]),
-                       'ci_high': _floats(d.ci_high[:, d.axis_index(axis)]),
-                       'edf': _floats(d.edf[:, d.axis_index(axis)])}
-                for kind, d in analysis.deviations.items()}
+            axes[axis]['deviations'] = {kind: _curve(d, d.axis_index(axis), 'dev', d.dev)
+                                        for kind, d in analysis.deviations.items()}
     timing = analysis.timing
     kalibr, _ = kalibr_values(analysis)
     report = {
