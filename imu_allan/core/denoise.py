@@ -83,12 +83,10 @@ def _threshold(coeffs, lam, mode):
 def check_options(method='wavelet', wavelet='sym8', level=12, rule='universal', mode='soft',
                   median_window=21):
     """Validate denoising options; raise ValueError with the reason."""
-    if method not in METHODS:
-        raise ValueError(f'method must be one of {", ".join(METHODS)}')
-    if rule not in RULES:
-        raise ValueError(f'rule must be one of {", ".join(RULES)}')
-    if mode not in MODES:
-        raise ValueError(f'mode must be one of {", ".join(MODES)}')
+    for name, value, allowed in (('method', method, METHODS), ('rule', rule, RULES),
+                                 ('mode', mode, MODES)):
+        if value not in allowed:
+            raise ValueError(f'{name} must be one of {", ".join(allowed)}')
     if wavelet not in pywt.wavelist(kind='discrete'):
         raise ValueError(f'unknown discrete wavelet {wavelet!r} (e.g. haar, db4, sym8)')
     if int(level) < 1 or int(level) > 20:

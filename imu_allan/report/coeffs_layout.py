@@ -78,9 +78,8 @@ def alarm_lows(fitted, axes=AXES):
         return None
     out = np.full((len(axes), len(IEEE_TERMS)), np.nan)
     for i, axis in enumerate(axes):
-        for j, term in enumerate(IEEE_TERMS):
-            if axis in fitted.fits:
-                out[i, j] = fitted.alarm_low(axis, term)
+        if axis in fitted.fits:
+            out[i] = [fitted.alarm_low(axis, term) for term in IEEE_TERMS]
     return out
 
 
