@@ -103,16 +103,14 @@ def _grouped_legend(ax, axes, below):
 
 def draw_adev(ax, result, fitted, axes, denoised=None, legend_below=False, deviations=None):
     """
-    Draw one sensor's Allan deviation panel on a matplotlib ``Axes``.
+    Draw one sensor's Allan deviation panel (module docstring) on a matplotlib ``Axes``.
 
-    The measured overlapping ADEV of each of ``axes`` (points) with its 68.3 % band, each
-    fitted term of ``fitted`` (a :class:`~imu_allan.core.fit.FittedModel`, or None before the
-    first fit) as a dashed line named (once) below its line where it runs furthest under the
-    model, clear of the points, the total model (solid), slope guides clear of the curves,
-    the ``denoised`` :class:`AllanResult` dotted and the extra ``deviations`` (kind ->
-    DeviationResult) as open markers when given; the legend has one column
-    per axis, under the plot with ``legend_below``.  The one drawing shared by ``analyze``'s
-    plots (PNG and the page's SVG) and the allan node's live figure.
+    ``fitted``: a :class:`~imu_allan.core.fit.FittedModel`, or None before the first fit; each
+    term is named once, below its line where it runs furthest under the model, clear of the
+    points.  ``denoised`` (an :class:`AllanResult`) is dotted, the extra ``deviations`` (kind
+    -> DeviationResult) open markers; one legend column per axis, under the plot with
+    ``legend_below``.  The one drawing of ``analyze``'s plots (PNG and the page's SVG) and the
+    allan node's live figure.
     """
     tau = result.tau
     fine = np.logspace(math.log10(tau[0]), math.log10(tau[-1]), 200)
