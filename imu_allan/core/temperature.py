@@ -13,17 +13,12 @@ m/s^2); times in s.
 
 Slope method (:func:`bias_slopes`; docs/analyze.md, "temperature")
 --------------------------------------------------------------------
-The rate is averaged over blocks of ``block_s`` seconds (default :data:`N_BLOCKS` blocks over
-the overlap of the two records), the temperature interpolated at the block centres (never
-extrapolated), and the slope is the least-squares ``b = S_xy / S_xx`` (:func:`regress_slopes`).
-Its standard error ``se`` must account for correlated noise (flicker and random walks wander
-slowly and are partly confounded with a slow ramp: the textbook ``sigma^2 / S_xx`` interval
-covered the truth in 20-35 % of simulated records).  So the rate minus ``b`` times the
-temperature is given an Allan deviation and a fit of :data:`SLOPE_TERMS`, that model is
-simulated :data:`REPLICAS` times at the block scale (:func:`simulated_stderr`), each replica
-regressed on the same ``x_k``, and their spread is ``se``; the interval is ``b +- se``
-(68.3 %, normal; the fitted model's own uncertainty is not propagated).  When the fit fails,
-``se`` falls back to the white-noise ``sqrt(AVAR(block_s) / S_xx)`` and a note says so.
+Block means of the rate (:data:`N_BLOCKS` blocks by default) regressed on the temperature
+interpolated at the block centres, ``b = S_xy / S_xx`` (:func:`regress_slopes`); the standard
+error ``se`` is the spread of that slope over :data:`REPLICAS` simulations of the
+:data:`SLOPE_TERMS` model fitted to the residuals (:func:`simulated_stderr`: correlated noise
+makes the textbook ``sigma^2 / S_xx`` far too narrow), the white-noise one, with a note, when
+that fit fails; the interval is ``b +- se`` (68.3 %, normal).
 
 No term selection, because an uncertainty budget needs each contribution's estimate, not a
 verdict on whether it is resolved: a BIC-selected model sets a term the record cannot resolve

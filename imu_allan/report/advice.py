@@ -238,9 +238,7 @@ def advice_statuses(advice, name, prefix=''):
     ``advice``: an :class:`~imu_allan.core.fit.advisor.Advice` or None (STALE: no estimate
     yet); ``name``: the record status's name; per axis ``<prefix><axis> advice`` with its
     sentence (:func:`axis_lines`).  OK when every target is met and nothing is open, WARN
-    otherwise.  Key-values: ``record_more_s``, ``recorded_s``; per axis ``more_s`` and
-    ``<term>.rel_halfwidth`` of the resolved terms, ``<term>.upper_limit`` and
-    ``<term>.resolve_s`` of the others (s; NaN: no prediction).
+    otherwise.  The key-values are those of docs/interfaces.md (``/diagnostics``).
     """
     from ..core.live.health import Health, OK, STALE, WARN
     if advice is None:
