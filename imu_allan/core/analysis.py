@@ -125,23 +125,18 @@ def _validate(samples):
     if samples.n < 2:
         raise InputError(where, 'only one sample; need a record to compute an Allan deviation')
     limits = np.asarray(physical_limits(samples.axes))
-    bad = None
-    for start in range(0, samples.n, _VALIDATE_BLOCK):  # in blocks: no record-sized temporary
-        with np.errstate(invalid='ignore'):
-            block = ~(np.abs(samples.data[start:start + _VALIDATE_BLOCK]) <= limits)  # NaN too
-        if block.any():  # the whole record once more, to count and name them
-            with np.errstate(invalid='ignore'):
-                bad = ~(np.abs(samples.data) <= limits)
-            break
-    if bad is not None:
-        i, j = np.argwhere(bad)[0]
-        value = samples.data[i, j]
-        unit = sample_unit(samples.axes[j])
-        what = (f'non-finite value {value}' if not np.isfinite(value) else
-                f'non-physical value {value:.6g} (beyond {limits[j]:g} {unit})')
-        raise InputError(where, f'{what} in {samples.axes[j]} at sample {i} '
-                                f'(t={samples.t[i]:.6f} s); {int(bad.any(axis=1).sum())} '
-                                'such sample(s): damaged input or wrong units')
+    with np.errstate(invalid='ignore'):  # (NaN compares False: it is caught too)
+        # in blocks: no record-sized temporary; on a hit the whole record, to count and name
+        if any((~(np.abs(samples.data[s:s + _VALIDATE_BLOCK]) <= limits)).any()
+               for s in range(0, samples.n, _VALIDATE_BLOCK)):
+            bad = ~(np.abs(samples.data) <= limits)
+            i, j = np.argwhere(bad)[0]
+            value, unit = samples.data[i, j], sample_unit(samples.axes[j])
+            what = (f'non-finite value {value}' if not np.isfinite(value) else
+                    f'non-physical value {value:.6g} (beyond {limits[j]:g} {unit})')
+            raise InputError(where, f'{what} in {samples.axes[j]} at sample {i} '
+                                    f'(t={samples.t[i]:.6f} s); {int(bad.any(axis=1).sum())} '
+                                    'such sample(s): damaged input or wrong units')
     if not np.all(np.isfinite(samples.t)):
         raise InputError(where, f'non-finite time stamp at sample '
                                 f'{int(np.flatnonzero(~np.isfinite(samples.t))[0])}')
@@ -165,18 +160,15 @@ def motion_verdict(data, axes, rate_hz):
     block = max(int(round(rate_hz)), 1)
     n_blocks = data.shape[0] // block
     details = {}
-    static = True
     if n_blocks < 2:
         return True, details
     means = data[:n_blocks * block].reshape(n_blocks, block, -1).mean(axis=1)
     excursion = np.percentile(np.abs(means - np.median(means, axis=0)), 95.0, axis=0)
     for j, axis in enumerate(axes):
         limit = MOTION_GYRO_RAD_S if is_gyro(axis) else MOTION_ACCEL_M_S2
-        moving = bool(excursion[j] > limit)
         details[axis] = {'excursion_p95': float(excursion[j]), 'threshold': limit,
-                         'moving': moving}
-        static = static and not moving
-    return static, details
+                         'moving': bool(excursion[j] > limit)}
+    return not any(d['moving'] for d in details.values()), details
 
 
 def _checks(samples, rate, outliers):

@@ -18,14 +18,12 @@ approximation kept, inverse transform.
 Median method: a running median over ``median_window`` samples (the thesis used 20; the
 default here is 21 so the window is centred).
 
-Block streaming (:class:`BlockDenoiser`): output samples are produced ``hop`` at a time, each
-from a block that reaches ``margin`` samples before and after them.  With block starts on
-multiples of 2^level, the coefficients that influence those samples are the same as in the
-transform of the whole record, so with a data-independent threshold (sigma given, and a fixed
-``n_ref``; universal or minimax rule) the output equals :func:`denoise` of the whole record to
-float rounding, for every sample (``test_denoise.py``).  With data-dependent thresholds (MAD,
-SURE) each block is denoised by the same :func:`denoise` call with the block's own statistics.
-The latency is bounded: ``margin + hop`` samples at most (see :func:`block_geometry`).
+Block streaming (:class:`BlockDenoiser`, docs/online.md "Blocks"): output comes ``hop`` samples
+at a time, each from a block reaching ``margin`` samples before and after them, with block starts
+on multiples of 2^level; with a data-independent threshold (sigma and ``n_ref`` given) the output
+equals :func:`denoise` of the whole record for every sample (``test_denoise.py``), with MAD or
+SURE each block is :func:`denoise` of that block.  Latency: at most ``margin + hop`` samples
+(:func:`block_geometry`).
 """
 
 import math
@@ -85,12 +83,10 @@ def _threshold(coeffs, lam, mode):
 def check_options(method='wavelet', wavelet='sym8', level=12, rule='universal', mode='soft',
                   median_window=21):
     """Validate denoising options; raise ValueError with the reason."""
-    if method not in METHODS:
-        raise ValueError(f'method must be one of {", ".join(METHODS)}')
-    if rule not in RULES:
-        raise ValueError(f'rule must be one of {", ".join(RULES)}')
-    if mode not in MODES:
-        raise ValueError(f'mode must be one of {", ".join(MODES)}')
+    for name, value, allowed in (('method', method, METHODS), ('rule', rule, RULES),
+                                 ('mode', mode, MODES)):
+        if value not in allowed:
+            raise ValueError(f'{name} must be one of {", ".join(allowed)}')
     if wavelet not in pywt.wavelist(kind='discrete'):
         raise ValueError(f'unknown discrete wavelet {wavelet!r} (e.g. haar, db4, sym8)')
     if int(level) < 1 or int(level) > 20:
@@ -102,29 +98,13 @@ def check_options(method='wavelet', wavelet='sym8', level=12, rule='universal', 
 def denoise(data, rate_hz=None, method='wavelet', wavelet='sym8', level=12, rule='universal',
             mode='soft', sigma=None, noise_density=None, n_ref=None, median_window=21):
     """
-    Denoise rate samples; returns an array shaped like ``data``.
+    Denoise rate samples (module docstring); returns an array shaped like ``data``.
 
-    Parameters
-    ----------
-    data : array_like
-        Shape (n,) or (n, A): rate samples, SI units (rad/s, m/s^2).
-    rate_hz : float, optional
-        Sample rate, Hz (needed only with ``noise_density``).
-    method : str
-        ``wavelet`` or ``median``.
-    wavelet, level, rule, mode : str, int, str, str
-        Wavelet name, decomposition levels (reduced to what the record length allows),
-        threshold rule and thresholding mode.
-    sigma : float or array_like, optional
-        Per-sample white-noise standard deviation per axis (SI), used on every level instead
-        of the MAD estimate.
-    noise_density : float or array_like, optional
-        White-noise coefficient N per axis (rad/s/sqrt(Hz), m/s^2/sqrt(Hz)); sigma = N sqrt(fs).
-    n_ref : int, optional
-        n in the universal / minimax threshold (default: the number of samples).
-    median_window : int
-        Window of the median filter, samples.
-
+    ``data``: (n,) or (n, A) rate samples, SI (rad/s, m/s^2); ``level`` is reduced to what the
+    record length allows.  ``sigma``: the per-sample white-noise std per axis (SI), used on
+    every level instead of the MAD estimate; or ``noise_density``: N per axis (rad/s/sqrt(Hz),
+    m/s^2/sqrt(Hz)), sigma = N sqrt(``rate_hz``, Hz).  ``n_ref``: n of the universal / minimax
+    threshold (default: the number of samples); ``median_window`` in samples.
     """
     check_options(method, wavelet, level, rule, mode, median_window)
     x, flat = _as_2d(data)
@@ -148,10 +128,7 @@ def denoise(data, rate_hz=None, method='wavelet', wavelet='sym8', level=12, rule
     n_ref = n if n_ref is None else int(n_ref)
     for j in range(1, len(coeffs)):
         d = coeffs[j]
-        if sigma is None:
-            sig = np.median(np.abs(d), axis=0) / _MAD_SCALE
-        else:
-            sig = sigma
+        sig = np.median(np.abs(d), axis=0) / _MAD_SCALE if sigma is None else sigma
         if rule == 'sure':
             lam = np.array([s * sure_threshold(d[:, a] / s) if s > 0 else 0.0
                             for a, s in enumerate(sig)])
@@ -187,19 +164,9 @@ class BlockDenoiser:
     """
     Streaming denoiser on overlapping blocks with bounded latency (see module docstring).
 
-    Parameters
-    ----------
-    rate_hz : float
-        Sample rate, Hz.
-    n_axes : int
-        Number of columns.
-    hop_s : float
-        Output step, s (rounded up to a multiple of 2^level samples).
-    **options
-        :func:`denoise` options (method, wavelet, level, rule, mode, sigma, noise_density,
-        n_ref, median_window).  Without ``n_ref`` the threshold uses the block length; the
-        default level is :data:`LIVE_LEVEL` (4), not the batch default 12.
-
+    ``rate_hz`` in Hz, ``n_axes`` columns, ``hop_s`` the output step in s (rounded up to a
+    multiple of 2^level samples); ``options``: those of :func:`denoise`.  Without ``n_ref`` the
+    threshold uses the block length; the default level is :data:`LIVE_LEVEL`, not 12.
     """
 
     def __init__(self, rate_hz, n_axes=6, hop_s=0.1, **options):
@@ -249,6 +216,15 @@ class BlockDenoiser:
         out = denoise(block, **self.options)
         return out[first - lo:first - lo + min(self.hop, end - first)]
 
+    def _drop_old(self):
+        """Keep only the left margin of the next output (it starts on a multiple of 2^level)."""
+        new_start = max(0, self._emitted - self.margin)
+        shift = new_start - self._start
+        if shift > 0:
+            keep = self._count - new_start
+            self._buf[:keep] = self._buf[shift:shift + keep]
+            self._start = new_start
+
     def push(self, block):
         """Add samples (n, n_axes); return the denoised samples now ready (k, n_axes)."""
         block = np.asarray(block, dtype=float)
@@ -267,16 +243,8 @@ class BlockDenoiser:
             if self._count == need_end:
                 outputs.append(self._emit(need_end))
                 self._emitted += self.hop
-                # Keep the left margin of the next output (on a multiple of 2^level).
-                new_start = max(0, self._emitted - self.margin)
-                shift = new_start - self._start
-                if shift > 0:
-                    keep = self._count - new_start
-                    self._buf[:keep] = self._buf[shift:shift + keep]
-                    self._start = new_start
-        if not outputs:
-            return np.zeros((0, self.n_axes))
-        return np.concatenate(outputs)
+                self._drop_old()
+        return np.concatenate(outputs) if outputs else np.zeros((0, self.n_axes))
 
     def flush(self):
         """Denoise and return every sample not yet output (end of the stream)."""
@@ -285,12 +253,5 @@ class BlockDenoiser:
             out = self._emit(self._count)
             outputs.append(out)
             self._emitted += out.shape[0]
-            new_start = max(0, self._emitted - self.margin)
-            if new_start > self._start:
-                keep = self._count - new_start
-                shift = new_start - self._start
-                self._buf[:keep] = self._buf[shift:shift + keep]
-                self._start = new_start
-        if not outputs:
-            return np.zeros((0, self.n_axes))
-        return np.concatenate(outputs)
+            self._drop_old()
+        return np.concatenate(outputs) if outputs else np.zeros((0, self.n_axes))

@@ -15,10 +15,8 @@ One place for the rules the Kalibr file introduced and every exporter shares (th
   was an upper limit, is recorded per key for the file header;
 * with ``overbound`` (the :class:`~imu_allan.core.record.OverboundValues` computed with the
   record) the terms of the consumer's own model (:attr:`ExportValues.model`) take the values of
-  :func:`imu_allan.core.overbound.overbound` instead (AVAR at or above the measured upper 95 %
-  bound from tau0 to the horizon), the inflation multiplying on top; per key the factor against
-  the raw value (fit or upper limit) and the averaging times where the bound is tight are
-  recorded for the header and the report (:func:`overbound_block`);
+  :func:`imu_allan.core.overbound.overbound` instead, the inflation on top; per key the factor
+  against the raw value and the tight averaging times are recorded (:func:`overbound_block`);
 * an analysis whose motion verdict says the IMU moved gives no values (its curve measures the
   motion, not the sensor noise) unless it was run with ``allow_motion``
   (``analyze --allow-motion``).

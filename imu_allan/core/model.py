@@ -31,7 +31,7 @@ import math
 import os
 import stat
 
-from .terms import TURN_ON_BIAS
+from .terms import TERMS, TURN_ON_BIAS
 from .units import ALL_TERMS, AXES, sensor_of, TERM_PARAMETERS
 from ..errors import InputError
 
@@ -199,15 +199,13 @@ def _check_params(axis, term, params, where, rate_hz=None):
         raise ModelError(where, f'{axis}.{term} needs {", ".join(names)}')
     label = {n: f'{axis}.{term}' if names == ('value',) else f'{axis}.{term}.{n}' for n in names}
     out = {name: as_number(params[name], where, label[name]) for name in names}
-    if term == 'gauss_markov' and out['tau_c'] <= 0:
-        raise ModelError(where, f'{axis}.gauss_markov.tau_c must be > 0')
-    if term == 'sinusoid':
-        if out['frequency_hz'] <= 0:
-            raise ModelError(where, f'{axis}.sinusoid.frequency_hz must be > 0')
-        if rate_hz and out['frequency_hz'] >= rate_hz / 2:
-            raise ModelError(where, f'{axis}.sinusoid.frequency_hz = {out["frequency_hz"]:g} '
-                                    f'is not below the Nyquist frequency {rate_hz / 2:g} Hz '
-                                    f'(rate_hz {rate_hz:g})')
+    position = TERMS[term].position   # tau_c (s) or frequency_hz (Hz) of a hump term
+    if position and out[position] <= 0:
+        raise ModelError(where, f'{axis}.{term}.{position} must be > 0')
+    if term == 'sinusoid' and rate_hz and out['frequency_hz'] >= rate_hz / 2:
+        raise ModelError(where, f'{axis}.sinusoid.frequency_hz = {out["frequency_hz"]:g} '
+                                f'is not below the Nyquist frequency {rate_hz / 2:g} Hz '
+                                f'(rate_hz {rate_hz:g})')
     return out
 
 

@@ -1,11 +1,8 @@
 """
 Overbounding: a consumer's noise model whose Allan variance lies above the measured one.
 
-Estimators (Kalibr, OpenVINS, VINS, ORB-SLAM3, Basalt, GTSAM, LIO-SAM, FAST-LIO) model an IMU as
-white noise plus a bias random walk; Gazebo and PX4 as white noise plus one Gauss-Markov bias.
-Bias instability, a Gauss-Markov drift or quantization do not exist in those models, so the
-raw fitted N and K make a filter over-confident at the horizons where those terms dominate.
-Following Lethander & Taylor ("Conservative estimation of inertial sensor errors using Allan
+Why, and each consumer's model: docs/exports.md ("Raw, overbound or inflated").  Following
+Lethander & Taylor ("Conservative estimation of inertial sensor errors using Allan
 variance data", NAVIGATION 70(3), 2023), :func:`overbound` chooses the parameters of the
 consumer's own model so that its Allan variance is at or above the UPPER bound of the measured
 one at every averaging time from tau0 to a horizon, and as small as possible.
@@ -67,35 +64,21 @@ class HorizonError(OverboundError):
 
 @dataclass
 class OverboundFit:
-    """
-    The overbounding parameters of one consumer model for one axis (or a set of axes).
+    """The overbounding parameters of one consumer model for one axis (or a set of axes)."""
 
-    Attributes
-    ----------
-    terms : dict
-        ``{term: {param: value}}``, SI, continuous time (the consumer model's terms).
-    tau : numpy.ndarray
-        Averaging times of the constraint grid, s (tau0 .. horizon).
-    bound : numpy.ndarray
-        The measured upper bound of the AVAR there, unit^2.
-    model_avar : numpy.ndarray
-        The model's AVAR on the grid (>= ``bound``).
-    tight_tau : list of float
-        Averaging times where the model meets the bound (s).
-    horizon_s, level : float
-        Longest averaging time constrained (s) and the two-sided level of the bound.
-    objective : float
-        Mean of model / bound over the grid (>= 1; 1 only if the model fits the bound exactly).
-
-    """
-
+    #: ``{term: {param: value}}``, SI, continuous time (the consumer model's terms)
     terms: dict
+    #: averaging times of the constraint grid, s (tau0 .. horizon), and the measured upper
+    #: bound of the AVAR there, unit^2, and the model's AVAR there (>= ``bound``)
     tau: np.ndarray
     bound: np.ndarray
     model_avar: np.ndarray
+    #: averaging times where the model meets the bound, s
     tight_tau: list
+    #: longest averaging time constrained, s, and the two-sided level of the bound
     horizon_s: float
     level: float
+    #: mean of model / bound over the grid (>= 1; 1 only if the model fits the bound exactly)
     objective: float
     axes: tuple = field(default_factory=tuple)
 
@@ -155,27 +138,13 @@ def overbound(tau, bound, shapes, rate_hz, horizon_s=None, level=OVERBOUND_LEVEL
     """
     Smallest parameters of a model with terms ``shapes`` whose AVAR is >= ``bound`` at ``tau``.
 
-    Parameters
-    ----------
-    tau, bound : array_like
-        Averaging times (s) and the AVAR bound there (unit^2), e.g. from :func:`upper_bound`.
-    shapes : sequence of str
-        The consumer model's terms (names of :data:`~imu_allan.core.terms.TERMS`), e.g.
-        ``('white_noise', 'rate_random_walk')`` or ``('white_noise', 'gauss_markov')``; at most
-        one hump term (its position, tau_c, is profiled).
-    rate_hz : float
-        Sample rate of the data (the sampled-data shapes of :mod:`~imu_allan.core.terms`).
-    horizon_s : float, optional
-        Recorded as the horizon (default: the last ``tau``); tau_c is profiled up to 100 x it.
-    level : float
-        Two-sided level the bound was computed at (recorded).
-    axes : sequence of str
-        The axes the bound covers (recorded).
-
-    Returns
-    -------
-    OverboundFit
-
+    ``tau`` (s) and ``bound`` (unit^2): e.g. from :func:`upper_bound`.  ``shapes``: the
+    consumer model's terms (names of :data:`~imu_allan.core.terms.TERMS`), e.g. ``WHITE_WALK``
+    or ``('white_noise', 'gauss_markov')``, at most one hump term (its position, tau_c, is
+    profiled up to 100 x ``horizon_s``, default the last ``tau``).  ``rate_hz``: the data's
+    rate (the sampled-data shapes).  ``horizon_s``, ``level`` (the two-sided level the bound
+    was computed at) and ``axes`` (those the bound covers) are recorded in the returned
+    :class:`OverboundFit`.
     """
     tau = np.asarray(tau, dtype=float)
     bound = np.asarray(bound, dtype=float)

@@ -11,24 +11,14 @@ m/s^2); times in s.
 * :func:`temperature_changes` -- where the temperature moved, so a report can tell whether a
   detected change or a warm-up coincides with one (:func:`coinciding_change`).
 
-Slope method (:func:`bias_slopes`)
-----------------------------------
-The rate is averaged over blocks of ``block_s`` seconds (block means ``y_k``, default
-:data:`N_BLOCKS` blocks over the overlap of the two records); the temperature is linearly
-interpolated at the block centres (``x_k``; no extrapolation beyond the temperature record).
-The slope is the least-squares ``b = S_xy / S_xx`` (:func:`regress_slopes`).
-
-Its interval must account for correlated noise: flicker (bias instability) and random-walk
-noise wander slowly, and a slow temperature ramp is partly confounded with that wander, so
-the textbook ``sigma^2 / S_xx`` (independent block means) is far too narrow (measured: a
-68.3 % interval built that way covered the true slope in 20-35 % of simulated records with
-the thesis 3DM-GX3-25 noise and a 30-minute ramp).  So the standard error comes from the
-record's own Allan characterisation: the rate minus ``b`` times the temperature is given an
-Allan deviation and a fit of every noise term that moves block means (:data:`SLOPE_TERMS`:
-white noise, bias instability, rate random walk; no term selection), that model is simulated
-:data:`REPLICAS` times at the block scale (:data:`SUB_SAMPLES` samples per block, which keeps
-the block-mean statistics of every term), each replica is regressed on the same ``x_k``, and
-the spread of those slopes is the standard error ``se``.
+Slope method (:func:`bias_slopes`; docs/analyze.md, "temperature")
+--------------------------------------------------------------------
+Block means of the rate (:data:`N_BLOCKS` blocks by default) regressed on the temperature
+interpolated at the block centres, ``b = S_xy / S_xx`` (:func:`regress_slopes`); the standard
+error ``se`` is the spread of that slope over :data:`REPLICAS` simulations of the
+:data:`SLOPE_TERMS` model fitted to the residuals (:func:`simulated_stderr`: correlated noise
+makes the textbook ``sigma^2 / S_xx`` far too narrow), the white-noise one, with a note, when
+that fit fails; the interval is ``b +- se`` (68.3 %, normal).
 
 No term selection, because an uncertainty budget needs each contribution's estimate, not a
 verdict on whether it is resolved: a BIC-selected model sets a term the record cannot resolve
@@ -40,18 +30,13 @@ temperature every 0.5 s in 0.06 deg C steps, 60-120 seeds x 6 axes): with the se
 truth in 59-64 % of cases; with :data:`SLOPE_TERMS` fitted, 0.99 and 1.04, 73 % (the true
 model itself gives 1.13 and 1.03); with the simulator's own noise source (20-s blocks, 120
 seeds) 1.00 and 0.99, covering 80 % and 76 % (heavier tails than a normal's).  No bias either
-way (mean error -0.1 +- 0.07 se).  A rate ramp is left out of the
-fit: it adds no spread (see below) and, fitted, takes over the long-term part of the
-random-walk terms (rms 1.13 and 1.22 measured with all five IEEE terms).  The interval is
-``b +- se`` (68.3 %, normal; the uncertainty of the fitted model itself is not propagated).
-When the fit fails, ``se`` falls back to ``sqrt(AVAR(block_s) / S_xx)`` of the residual
-block means (exact for white noise only) and the note says so.  A deterministic rate ramp in
-the residual model adds no spread: drift that is not temperature-driven but follows the
-temperature's course cannot be told apart from it; a temperature that goes up and down
-separates them.
+way (mean error -0.1 +- 0.07 se).  A rate ramp is left out of the fit: it adds no spread (a
+drift that follows the temperature's course cannot be told from it; a temperature that goes up
+and down separates them) and, fitted, takes over the long-term part of the random-walk terms
+(rms 1.13 and 1.22 measured with all five IEEE terms).
 """
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 import math
 
 import numpy as np
@@ -76,8 +61,6 @@ MIN_SPAN_C = 0.3
 #: (:func:`temperature_changes`).
 CHANGE_THRESHOLD_C = 1.0
 SMOOTH_S = 60.0
-
-PROFILE_KINDS = ('constant', 'ramp', 'warmup')
 
 
 @dataclass(frozen=True)
@@ -153,8 +136,7 @@ class SlopeEstimate:
 
     def to_json(self):
         """Plain dict for report.json."""
-        return {'value': self.value, 'ci': list(self.ci), 'unit': self.unit,
-                'stderr': self.stderr, 'block_s': self.block_s, 'n_blocks': self.n_blocks}
+        return {**asdict(self), 'ci': list(self.ci)}
 
 
 def block_means(t, data, rate_hz, block_s):
@@ -285,8 +267,7 @@ class TemperatureChange:
 
     def to_json(self):
         """Plain dict for report.json."""
-        return {'t_start_s': self.t_start_s, 't_end_s': self.t_end_s, 'from_c': self.from_c,
-                'to_c': self.to_c}
+        return asdict(self)
 
 
 def moving_average(t, values, width_s):

@@ -74,7 +74,7 @@ _DISCRETE_FLICKER_MAX_M = 1000
 
 
 @functools.lru_cache(maxsize=4096)
-def _sampled_flicker(m):
+def _sampled_flicker(m, power=4):
     """
     AVAR per B^2 of a *sampled* 1/f series (PSD B^2/(2 pi f) up to Nyquist) at factor m.
 
@@ -82,6 +82,8 @@ def _sampled_flicker(m):
     AVAR = 4 int_0^{fs/2} S(f) sin^4(pi f m dt) / (m^2 sin^2(pi f dt)) df; with u = pi f dt
     that is (2/pi) int_0^{pi/2} sin^4(m u) / (m^2 u sin^2 u) du, a function of m alone.  At
     m = 1, 2, 3 it is 40, 11 and 6 % above the continuous formula, which would bias a fit.
+    ``power=6`` gives the Hadamard variance, (2/pi) int (4/3) sin^6(m u) / (m^2 u sin^2 u) du,
+    which tends to :data:`HADAMARD_FLICKER_FLOOR`.
 
     Integrated by 16-point Gauss-Legendre between consecutive zeros of sin(m u) (the integrand
     is smooth there): converged to 1e-15 (48 points agree), where the trapezoid rule on 128
@@ -90,8 +92,9 @@ def _sampled_flicker(m):
     edges = np.unique(np.minimum(np.arange(m // 2 + 2) * (math.pi / m), math.pi / 2.0))
     half = 0.5 * np.diff(edges)[:, None]
     u = half * _GL16[0] + (edges[:-1, None] + half)
-    f = np.sin(m * u) ** 4 / (m * m * u * np.sin(u) ** 2)
-    return 2.0 / math.pi * float(np.sum(f * half * _GL16[1]))
+    f = np.sin(m * u) ** power / (m * m * u * np.sin(u) ** 2)
+    scale = 2.0 / math.pi if power == 4 else 8.0 / (3.0 * math.pi)
+    return scale * float(np.sum(f * half * _GL16[1]))
 
 
 _GL16 = np.polynomial.legendre.leggauss(16)  # nodes on [-1, 1] and weights
@@ -180,49 +183,35 @@ STANDARD_GRAVITY = 9.80665
 
 @dataclass(frozen=True)
 class TermSpec:
-    """
-    Everything the package knows about one noise term, in one place.
+    """Everything the package knows about one noise term, in one place."""
 
-    Attributes
-    ----------
-    name, symbol : str
-        Key (``white_noise``) and IEEE symbol (``N``).
-    params : tuple of str
-        Parameter names; the first is the amplitude (AVAR is linear in its square), the
-        second, for hump terms, the position (``tau_c`` in s or ``frequency_hz`` in Hz).
-    alpha : int or None
-        Frequency-PSD power-law exponent of the estimate's noise (drives the EDF and the
-        correlation between averaging times; Greenhall & Riley 2004 notation): +2 white PM,
-        0 white FM, -1 flicker FM, -2 random-walk FM.  None for deterministic terms, whose
-        estimate carries no randomness of its own; Gauss-Markov depends on tau (see
-        :meth:`alpha_at`).
-    adev_slope : str
-        Log-log slope of the Allan deviation (IEEE Std 952 Fig. C.1), for people.
-    si_units, conventional : dict
-        Per sensor (``gyro``, ``accel``): the SI unit of the amplitude (continuous time) and
-        ``(label, factor)`` with conventional = SI * factor.
-    peak_ratio : float or None
-        Hump terms: where the Allan deviation peaks, tau_peak / tau_c (Gauss-Markov) or
-        tau_peak * f0 (sinusoid).
-    id_shape : callable
-        Continuous-time AVAR shape per unit squared amplitude used to identify the dominant
-        noise at each averaging time (no sampling corrections).
-    id_alpha : int or None
-        The exponent that identification counts where the term dominates, if not ``alpha``
-        (the deterministic ramp: random-walk FM, the most conservative EDF there).
-
-    """
-
+    #: key (``white_noise``) and IEEE symbol (``N``)
     name: str
     symbol: str
+    #: parameter names: the first is the amplitude (AVAR is linear in its square), the second,
+    #: for hump terms, the position (``tau_c`` in s or ``frequency_hz`` in Hz)
     params: tuple
+    #: frequency-PSD power-law exponent of the estimate's noise (drives the EDF and the
+    #: correlation between averaging times; Greenhall & Riley 2004 notation): +2 white PM, 0
+    #: white FM, -1 flicker FM, -2 random-walk FM.  None for deterministic terms, whose estimate
+    #: carries no randomness of its own; Gauss-Markov depends on tau (:meth:`alpha_at`)
     alpha: Optional[int]
+    #: log-log slope of the Allan deviation (IEEE Std 952 Fig. C.1), for people
     adev_slope: str
+    #: per sensor (``gyro``, ``accel``): the SI unit of the amplitude (continuous time) and
+    #: ``(label, factor)`` with conventional = SI * factor
     si_units: dict
     conventional: dict
+    #: hump terms: where the Allan deviation peaks, tau_peak / tau_c (Gauss-Markov) or
+    #: tau_peak * f0 (sinusoid)
     peak_ratio: float = None
+    #: continuous-time AVAR shape per unit squared amplitude that identifies the dominant noise
+    #: at each averaging time (no sampling corrections)
     id_shape: Callable = None
+    #: the exponent identification counts where the term dominates, if not ``alpha`` (the
+    #: deterministic ramp: random-walk FM, the most conservative EDF there)
     id_alpha: int = None
+    #: SI unit of each position parameter
     position_units: dict = field(default_factory=dict)
 
     @property
@@ -268,9 +257,7 @@ class TermSpec:
 
     def position_range(self, tau_lo, tau_hi):
         """Positions whose Allan-deviation peak lies inside ``[tau_lo, tau_hi]`` (s)."""
-        if self.name == 'gauss_markov':
-            return tau_lo / self.peak_ratio, tau_hi / self.peak_ratio
-        return self.peak_ratio / tau_hi, self.peak_ratio / tau_lo
+        return tuple(sorted((self.position_at_peak(tau_lo), self.position_at_peak(tau_hi))))
 
     def position_at_peak(self, tau_peak):
         """Return the position that puts the Allan-deviation peak at ``tau_peak`` (s)."""
@@ -381,27 +368,12 @@ def model_avar(axis_terms, tau, rate_hz):
 HADAMARD_FLICKER_FLOOR = (4.0 * math.log(2.0) - 1.5 * math.log(3.0)) / math.pi
 
 
-@functools.lru_cache(maxsize=4096)
-def _sampled_flicker_hadamard(m):
-    """
-    HVAR per B^2 of a sampled 1/f series at factor m (as :func:`_sampled_flicker`).
-
-    (2/pi) int_0^{pi/2} (4/3) sin^6(m u) / (m^2 u sin^2 u) du, by 16-point Gauss-Legendre
-    between consecutive zeros of sin(m u); it tends to :data:`HADAMARD_FLICKER_FLOOR`.
-    """
-    edges = np.unique(np.minimum(np.arange(m // 2 + 2) * (math.pi / m), math.pi / 2.0))
-    half = 0.5 * np.diff(edges)[:, None]
-    u = half * _GL16[0] + (edges[:-1, None] + half)
-    f = np.sin(m * u) ** 6 / (m * m * u * np.sin(u) ** 2)
-    return 8.0 / (3.0 * math.pi) * float(np.sum(f * half * _GL16[1]))
-
-
 def hadamard_shape(name, tau, rate_hz):
     """
     Overlapping Hadamard variance per unit squared amplitude of an IEEE term (exact, sampled).
 
     Q: 10 Q^2 / (3 tau^2) (third difference of white phase: 20 Q^2 / tau^2, over 6);
-    N: N^2 / tau (as AVAR); B: :func:`_sampled_flicker_hadamard`; K: K^2 (tau / 6 +
+    N: N^2 / tau (as AVAR); B: :func:`_sampled_flicker` (``power=6``); K: K^2 (tau / 6 +
     dt^2 / (6 tau)) (the third difference of a sampled walk: sum of squared tail weights
     (m^2 + 1) / m, over 6; half the Allan tau / 3); R: 0 (a constant slope cancels).
     """
@@ -412,7 +384,7 @@ def hadamard_shape(name, tau, rate_hz):
         return 1.0 / tau
     if name == 'bias_instability':
         m = np.maximum(np.rint(np.atleast_1d(tau) * rate_hz).astype(np.int64), 1)
-        return np.array([_sampled_flicker_hadamard(int(k)) for k in m]).reshape(tau.shape)
+        return np.array([_sampled_flicker(int(k), 6) for k in m]).reshape(tau.shape)
     if name == 'rate_random_walk':
         return tau / 6.0 + 1.0 / (6.0 * rate_hz ** 2 * tau)
     if name == 'rate_ramp':

@@ -15,7 +15,6 @@ from ..errors import InputError
 #: Axis order everywhere (topics, arrays, JSON, CSV).
 AXES = ('gyro_x', 'gyro_y', 'gyro_z', 'accel_x', 'accel_y', 'accel_z')
 GYRO_AXES = AXES[:3]
-ACCEL_AXES = AXES[3:]
 
 #: The five IEEE terms carried on ``imu/allan_coeffs`` (in this order).
 IEEE_TERMS = ('quantization', 'white_noise', 'bias_instability', 'rate_random_walk', 'rate_ramp')

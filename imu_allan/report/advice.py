@@ -6,25 +6,12 @@ each resolved term, the open term sets and when they are told apart, the upper l
 term not resolved and when it would be.  :func:`advice_to_json` makes it data (report.json's
 ``advice`` block); everything a person reads is rendered from that data here, once: the
 console's closing sentence (:func:`advice_sentence`), the page's headline and lines
-(:func:`advice_lines`), the allan node's ``/diagnostics`` statuses, whose messages the
-``monitor`` shows as they are (:func:`advice_statuses`).
+(:func:`advice_headline`, :func:`axis_lines`), the allan node's ``/diagnostics`` statuses,
+whose messages the ``monitor`` shows as they are (:func:`advice_statuses`).
 
-JSON (design.md section 6, key ``advice``)::
-
-    {"targets": {"white_noise": 0.02, ...},
-     "axes": {"gyro_x": {"white_noise": {"rel_halfwidth": x, "more_s": s}, ...}, ...},
-     "unresolved": [{"axis": "accel_x", "terms": ["bias_instability", "rate_random_walk"],
-                     "sets": [["white_noise", "bias_instability"], ...], "more_s": s}],
-     "record_more_s": s,
-     "undetected": [{"axis": ..., "term": ..., "upper_limit": u, "unit": ..., "open": bool,
-                     "more_s": s}]}
-
-``axes`` holds the resolved terms; ``unresolved`` one entry per axis whose open term sets
-differ (``terms``: the terms they differ in, ``sets``: the sets, the selected one first;
-``more_s``: until they are told apart); ``undetected`` every IEEE term not resolved: its 95 %
-upper limit (SI, continuous-time) and the time until it is resolved (``open``: an open set
-holds it).  ``more_s`` (s of additional recording at the same rate and conditions) is 0 when
-a target is met and null only when no prediction is possible, with a ``reason`` beside it.
+The JSON schema and the meaning of each key (``more_s``: s of additional recording at the same
+rate and conditions, 0 when a target is met, null with a ``reason`` when no prediction is
+possible) are in docs/interfaces.md (``analyze --json`` key ``advice``).
 """
 
 import math
@@ -93,7 +80,7 @@ def format_duration(seconds):
 
 def term_words(term):
     """Return a term's name for people: 'white noise', 'Gauss-Markov'."""
-    return 'Gauss-Markov' if term == 'gauss_markov' else term.replace('_', ' ')
+    return 'Gauss-Markov' if term == 'gauss_markov' else str(term).replace('_', ' ')
 
 
 def _percent(rel):
@@ -251,9 +238,7 @@ def advice_statuses(advice, name, prefix=''):
     ``advice``: an :class:`~imu_allan.core.fit.advisor.Advice` or None (STALE: no estimate
     yet); ``name``: the record status's name; per axis ``<prefix><axis> advice`` with its
     sentence (:func:`axis_lines`).  OK when every target is met and nothing is open, WARN
-    otherwise.  Key-values: ``record_more_s``, ``recorded_s``; per axis ``more_s`` and
-    ``<term>.rel_halfwidth`` of the resolved terms, ``<term>.upper_limit`` and
-    ``<term>.resolve_s`` of the others (s; NaN: no prediction).
+    otherwise.  The key-values are those of docs/interfaces.md (``/diagnostics``).
     """
     from ..core.live.health import Health, OK, STALE, WARN
     if advice is None:

@@ -1,21 +1,16 @@
 """
 The numbers on ``imu/allan_coeffs`` and ``imu/allan_deviation`` (the contract layouts).
 
-``imu/allan_coeffs``: dims ``axis`` (6) x ``term`` (5: :data:`~imu_allan.core.units.IEEE_TERMS`)
-x ``stat`` (3: value, ci_low, ci_high; 68.3 %), row-major, ``data_offset`` 0, SI units,
-continuous-time coefficients, NaN where a term is not detected.  After those 90 numbers, which
-the dims describe, come 6 more (:data:`ADEQUACY_VALUES`): each axis's adequacy p
-(:mod:`imu_allan.core.fit.adequacy`; the model describes the curve when p >= 0.001; NaN: not
-fitted).  Then 30 more (:data:`LIMIT_VALUES`, axis x term in the table's order): the 95 %
-upper limit of each term the record does not resolve (SI; NaN where the term is resolved, or
-not bounded), so a term is either a value with its interval or a limit, never both.  Readers
-that index by the dims or by fixed offsets are unaffected (the table's place and strides did
-not change); :func:`decode_adequacy` and :func:`decode_limits` read the trailing blocks, and a
-publisher without them (older releases) gives None.  ``imu/allan_deviation``: dims
-``row`` (7: tau, then the six axes) x ``tau``; ``imu/allan_deviation/<kind>`` (mdev, ohdev) the
-same with that deviation.  The node encodes with these functions; users
-and tools (``monitor``) decode with :func:`decode_coefficients` and :func:`decode_deviation`,
-which check the layout, or :func:`decode_table` for the bare reshape.
+The layouts are documented in docs/interfaces.md (Topics).  ``imu/allan_coeffs``: dims
+``axis`` (6) x ``term`` (5: :data:`~imu_allan.core.units.IEEE_TERMS`) x ``stat`` (3: value,
+ci_low, ci_high; 68.3 %), row-major, SI, continuous-time, NaN where a term is not resolved;
+after those 90 numbers, which the dims describe, :data:`ADEQUACY_VALUES` (each axis's adequacy
+p) and :data:`LIMIT_VALUES` (axis x term 95 % upper limits of the unresolved terms), read with
+:func:`decode_adequacy` and :func:`decode_limits` (None from a publisher without them).
+``imu/allan_deviation`` (and ``imu/allan_deviation/<kind>``): dims ``row`` (7: tau, then the
+six axes) x ``tau``.  The node encodes with these functions; users and tools (``monitor``)
+decode with :func:`decode_coefficients` and :func:`decode_deviation`, which check the layout,
+or :func:`decode_table` for the bare reshape.
 """
 
 import math
@@ -36,11 +31,9 @@ STATS = ('value', 'ci_low', 'ci_high')
 
 def coefficient_table(fitted, axes=AXES):
     """
-    Return the ``imu/allan_coeffs`` numbers: array (axis, term, stat) = (A, 5, 3), NaN if absent.
+    Return the ``imu/allan_coeffs`` table (axis, term, stat) = (A, 5, 3), SI, NaN if absent.
 
-    ``stat`` is ``value, ci_low, ci_high`` (68.3 %); terms in
-    :data:`~imu_allan.core.units.IEEE_TERMS` order; SI units.  ``fitted`` is a
-    :class:`~imu_allan.core.fit.FittedModel` or None (all NaN).
+    ``fitted`` is a :class:`~imu_allan.core.fit.FittedModel` or None (all NaN).
     """
     out = np.full((len(axes), len(IEEE_TERMS), 3), np.nan)
     if fitted is None:
@@ -85,10 +78,17 @@ def alarm_lows(fitted, axes=AXES):
         return None
     out = np.full((len(axes), len(IEEE_TERMS)), np.nan)
     for i, axis in enumerate(axes):
-        for j, term in enumerate(IEEE_TERMS):
-            if axis in fitted.fits:
-                out[i, j] = fitted.alarm_low(axis, term)
+        if axis in fitted.fits:
+            out[i] = [fitted.alarm_low(axis, term) for term in IEEE_TERMS]
     return out
+
+
+def _trailing(source, dims, skip, count):
+    """Return the ``count`` values after the table and ``skip`` more; None if they are absent."""
+    data, dims = _layout(source, dims, 'imu/allan_coeffs')
+    values = np.asarray(data, dtype=float)
+    start = int(np.prod([size for _, size in dims])) + skip
+    return None if values.size < start + count else values[start:start + count]
 
 
 def decode_limits(source, dims=None):
@@ -97,12 +97,8 @@ def decode_limits(source, dims=None):
 
     None when the message has no limit block (an older publisher).
     """
-    data, dims = _layout(source, dims, 'imu/allan_coeffs')
-    values = np.asarray(data, dtype=float)
-    start = int(np.prod([size for _, size in dims])) + ADEQUACY_VALUES
-    if values.size < start + LIMIT_VALUES:
-        return None
-    return values[start:start + LIMIT_VALUES].reshape(len(AXES), len(IEEE_TERMS))
+    limits = _trailing(source, dims, ADEQUACY_VALUES, LIMIT_VALUES)
+    return None if limits is None else limits.reshape(len(AXES), len(IEEE_TERMS))
 
 
 def decode_adequacy(source, dims=None):
@@ -112,12 +108,7 @@ def decode_adequacy(source, dims=None):
     The model of an axis describes its curve when p >= 0.001 (:data:`ADEQUACY_LEVEL` of
     :mod:`imu_allan.core.fit.adequacy`).
     """
-    data, dims = _layout(source, dims, 'imu/allan_coeffs')
-    values = np.asarray(data, dtype=float)
-    table = int(np.prod([size for _, size in dims]))
-    if values.size < table + ADEQUACY_VALUES:
-        return None
-    return values[table:table + ADEQUACY_VALUES]
+    return _trailing(source, dims, 0, ADEQUACY_VALUES)
 
 
 def deviation_table(result, axes=AXES):

@@ -3,30 +3,19 @@ Exporters: the fitted noise model in the keys, units and time base each consumer
 
 Which consumer wants what (keys, units, continuous-time density or per-sample value, and the
 line of its source where it converts) is documented in ``docs/exports.md``; each builder below
-cites that source line too.  The rules every file shares live in
-:mod:`imu_allan.core.export_values`: fitted continuous-time SI values, a term the fit did
-not select written as its 95 % upper limit and marked, ``inflate = (white, walk)`` on the
-standard deviations, the worst axis where the format has one number per sensor.
-
-Every file starts with the same header (:func:`header_lines`; an ``imu_allan`` list of lines
-in JSON): software version, input, rate, time base and conversion, axis rule, inflation and
-the keys written as upper limits.
+cites that source line too.  The rules every file shares (upper limits, inflation, the worst
+axis) live in :mod:`imu_allan.core.export_values`; every file starts with the provenance of
+:func:`header_lines` (an ``imu_allan`` list of lines in JSON).
 
 Registry
 --------
-:data:`EXPORTERS` (in :mod:`.export_registry`) maps a name to an :class:`Exporter`::
-
-    Exporter(name, files, consumer, time_base, conversion, build, render, per_axis, model)
-
-``model`` is the consumer's own noise model (terms of ``core/terms.py``; default white noise +
-rate random walk), the one ``--overbound`` fits (:mod:`imu_allan.core.overbound`).
-
-``build(values) -> dict`` turns an :class:`~imu_allan.core.export_values.ExportValues` into
-the data the file holds (that dict is what :func:`export` returns); ``render(data, header,
-values)`` returns ``{file name: text}`` for the files in ``files`` (``header``: the comment
-lines of :func:`header_lines`, to be written first).  Adding a consumer (for example Gazebo's
-SDF ``<imu>`` element and PX4's gazebo_imu_plugin block) is two functions and one call in the
-module that defines them::
+:data:`EXPORTERS` (in :mod:`.export_registry`) maps a name to an :class:`Exporter` (its fields
+are described there).  ``build(values) -> dict`` turns an
+:class:`~imu_allan.core.export_values.ExportValues` into the data the file holds (that dict is
+what :func:`export` returns); ``render(data, header, values)`` returns ``{file name: text}``
+for the files in ``files`` (``header``: the comment lines of :func:`header_lines`, to be
+written first).  Adding a consumer (for example Gazebo's SDF ``<imu>`` element and PX4's
+gazebo_imu_plugin block) is two functions and one call in the module that defines them::
 
     from imu_allan.report.export_registry import Exporter
     GAZEBO = Exporter('gazebo', ('gazebo_imu.sdf',), 'Gazebo (gz-sensors)', 'per sample',
@@ -48,11 +37,9 @@ from pathlib import Path
 from .export_registry import Exporter, EXPORTERS, register
 from .sim_exporters import SIM_EXPORTERS
 from ..core.export_values import ExportValues
-from ..core.units import discrete_random_walk_step, discrete_white_std
+from ..core.units import discrete_random_walk_step, discrete_white_std, STANDARD_GRAVITY
 
 EXPORT_DIR = 'export'
-#: Standard gravity written where a consumer wants a gravity magnitude (m/s^2).
-GRAVITY = 9.80665
 
 
 def exporter_names():
@@ -207,10 +194,6 @@ def _yaml_file(name, opencv=False):
     return render
 
 
-def _var(value):
-    return None if value is None else value * value
-
-
 #: The four numbers most consumers take, in the order :func:`_worst_four` names them.
 _FOUR = (('gyro', 'white_noise'), ('gyro', 'rate_random_walk'), ('accel', 'white_noise'),
          ('accel', 'rate_random_walk'))
@@ -294,7 +277,7 @@ def _vins_build(values):
         return _per_step(term, value, values.rate_hz) * (
             math.sqrt(2.0) if term == 'white_noise' else 1.0)
     return {**_worst_four(values, ('gyr_n', 'gyr_w', 'acc_n', 'acc_w'), per_sample),
-            'g_norm': GRAVITY, 'imu': 1, 'imu_topic': values.topic}
+            'g_norm': STANDARD_GRAVITY, 'imu': 1, 'imu_topic': values.topic}
 
 
 register(Exporter(
@@ -369,13 +352,13 @@ def _gtsam_build(values):
     # continuous time noise to discrete time noise"; CombinedImuFactor.cpp:157-178:
     # dt * biasAccCovariance.  Variances (sigma^2) of continuous densities, per axis.
     def cov(sensor, term, key):
-        return _diag([_var(v) for v in values.per_axis(sensor, term, key)])
+        return _diag([None if v is None else v * v for v in values.per_axis(sensor, term, key)])
     return {'gyroscopeCovariance': cov('gyro', 'white_noise', 'gyroscopeCovariance'),
             'accelerometerCovariance': cov('accel', 'white_noise', 'accelerometerCovariance'),
             'biasOmegaCovariance': cov('gyro', 'rate_random_walk', 'biasOmegaCovariance'),
             'biasAccCovariance': cov('accel', 'rate_random_walk', 'biasAccCovariance'),
             'integrationCovariance': _diag([GTSAM_INTEGRATION_COVARIANCE] * 3),
-            'gravity': GRAVITY}
+            'gravity': STANDARD_GRAVITY}
 
 
 _GTSAM_SETTERS = (('gyroscopeCovariance', 'setGyroscopeCovariance'),
@@ -420,7 +403,7 @@ def _lio_sam_build(values):
     # noise in continuous"); :225, :374-375: bias BetweenFactor sigma sqrt(deltaTij) *
     # imuAccBiasN: continuous densities.
     params = {**_worst_four(values, ('imuGyrNoise', 'imuGyrBiasN', 'imuAccNoise', 'imuAccBiasN')),
-              'imuGravity': GRAVITY}
+              'imuGravity': STANDARD_GRAVITY}
     return {'/**': {'ros__parameters': params}}
 
 
@@ -455,18 +438,19 @@ register(Exporter(
 # ----------------------------------------------------------------------------- MATLAB
 
 
+#: MATLAB's gyroparams / accelparams keys and the term each holds.
+_MATLAB_KEYS = (('NoiseDensity', 'white_noise'), ('RandomWalk', 'rate_random_walk'),
+                ('BiasInstability', 'bias_instability'))
+
+
 def _matlab_build(values):
     # gyroparams / accelparams: NoiseDensity (rad/s)/sqrt(Hz) = N, RandomWalk (rad/s)*sqrt(Hz)
     # = K (MathWorks answer 1631045), BiasInstability rad/s = B, as MathWorks' example
     # "Inertial Sensor Noise Analysis Using Allan Variance" reads them off allanvar.
     out = {'SampleRate': values.rate_hz}
     for sensor, name in (('gyro', 'gyroparams'), ('accel', 'accelparams')):
-        out[name] = {'NoiseDensity': values.per_axis(sensor, 'white_noise',
-                                                     f'{name}.NoiseDensity'),
-                     'RandomWalk': values.per_axis(sensor, 'rate_random_walk',
-                                                   f'{name}.RandomWalk'),
-                     'BiasInstability': values.per_axis(sensor, 'bias_instability',
-                                                        f'{name}.BiasInstability')}
+        out[name] = {key: values.per_axis(sensor, term, f'{name}.{key}')
+                     for key, term in _MATLAB_KEYS}
         gm = {}
         for axis in values.axes(sensor):
             sigma, _ = values.value(axis, 'gauss_markov', 'sigma')
@@ -490,8 +474,7 @@ def _matlab_render(data, header, values=None):
         f'fs = {_rate(data["SampleRate"])};']
     for name, var in (('gyroparams', 'gyro'), ('accelparams', 'accel')):
         params = data[name]
-        args = ', '.join(f"'{key}', {_matlab_vector(params[key])}"
-                         for key in ('NoiseDensity', 'RandomWalk', 'BiasInstability'))
+        args = ', '.join(f"'{key}', {_matlab_vector(params[key])}" for key, _ in _MATLAB_KEYS)
         lines.append(f'{var} = {name}({args});')
         for axis, gm in params.get('gauss_markov', {}).items():
             phi = math.exp(-1.0 / (data['SampleRate'] * gm['tau_c']))

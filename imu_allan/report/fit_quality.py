@@ -10,6 +10,7 @@ and the node's diagnostics, in one wording.
 import math
 
 from ..core.live.health import Health, OK, WARN
+from ..core.terms import TERMS
 from ..core.units import conventional, is_gyro, STANDARD_GRAVITY
 
 
@@ -136,8 +137,8 @@ def line_sentence(fitted):
         fit = fitted.fits[axis]
         lines = dict(fit.lines)
         if 'sinusoid' in fit.terms:
-            term = fit.terms['sinusoid']
-            lines[term['frequency_hz']] = term['amplitude']
+            amplitude, frequency = TERMS['sinusoid'].unpack(fit.terms['sinusoid'])
+            lines[frequency] = amplitude
         if lines:
             parts.append(f'{axis} ' + ', '.join(
                 f'{f:.3g} Hz ({_amplitude(axis, a)})' for f, a in sorted(lines.items())))

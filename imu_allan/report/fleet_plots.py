@@ -16,10 +16,10 @@ import matplotlib.dates as mdates  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .plots import AXIS_COLORS  # noqa: E402
 from ..core.units import AXES, conventional, si_unit  # noqa: E402
 from ..history.trends import SENSORS, TREND_TERMS, WORST  # noqa: E402
 
-_COLORS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
 _NAMES = {'gyro': 'gyroscope', 'accel': 'accelerometer'}
 
 
@@ -35,7 +35,7 @@ def plot_imu(path, imu):
                 s = imu.series.get((sensor, term, axis))
                 if s is None:
                     continue
-                color = _COLORS[axis[-1]]
+                color = AXIS_COLORS[axis[-1]]
                 if s.value:
                     v = np.asarray(s.value) * factor
                     err = np.vstack([v - np.asarray(s.low) * factor,

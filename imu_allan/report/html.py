@@ -29,10 +29,10 @@ import tempfile
 import jinja2
 from markupsafe import Markup
 
-from .advice import advice_headline, axis_lines, format_duration
+from .advice import advice_headline, axis_lines, format_duration, term_words
 from .fit_quality import misfit_sentence
 from ..core.terms import TERMS
-from ..core.units import conventional, si_unit
+from ..core.units import conventional, IEEE_TERMS, si_unit
 
 TEMPLATES = Path(__file__).with_name('templates')
 STYLE = 'style.css'
@@ -65,8 +65,8 @@ ADEV_CAPTION = ('Dots: measured overlapping Allan deviation per axis, shaded: it
                 'interval; dashed: each fitted term alone; solid: the fitted model (their sum, '
                 'with the lines fitted beside it); a band in the colour of an axis from the left: '
                 'averaging times its fit left out (a resonance of the sensor shapes them); '
-                'grey fan: the slopes -1 (quantization), -1/2 (white noise), 0 (bias '
-                'instability), +1/2 (rate random walk), +1 (rate ramp).')
+                'grey fan: the slopes ' + ', '.join(f'{TERMS[t].adev_slope} ({term_words(t)})'
+                                                    for t in IEEE_TERMS) + '.')
 
 
 def fmt(value, digits=4):
@@ -78,10 +78,6 @@ def fmt(value, digits=4):
     except (TypeError, ValueError):
         return str(value)
     return f'{value:.{digits}g}' if math.isfinite(value) else '-'
-
-
-def _words(name):
-    return 'Gauss-Markov' if name == 'gauss_markov' else str(name).replace('_', ' ')
 
 
 def _duration(seconds):
@@ -98,7 +94,7 @@ def environment():
                              trim_blocks=True, lstrip_blocks=True,
                              undefined=jinja2.StrictUndefined)
     env.filters['num'] = fmt
-    env.filters['words'] = _words
+    env.filters['words'] = term_words
     env.filters['duration'] = _duration
     env.filters['is_mapping'] = lambda v: isinstance(v, dict)
     env.filters['is_list'] = lambda v: isinstance(v, (list, tuple))
@@ -180,11 +176,12 @@ def coefficient_rows(report):
             lo, hi = t.get('ci', [None, None])
             conv = t.get('conventional') or {}
             conv_ci = conv.get('ci') or [None, None]
+            spec = TERMS.get(term)
             extras = [{'name': name, 'value': fmt(t[name].get('value')),
                        'ci': [fmt(c) for c in t[name].get('ci', [None, None])],
                        'unit': t[name].get('unit', '')}
-                      for name in ('tau_c', 'frequency_hz') if isinstance(t.get(name), dict)]
-            letter = TERMS[term].symbol if term in TERMS else ''
+                      for name in [spec.position] if spec and isinstance(t.get(name), dict)]
+            letter = spec.symbol if spec else ''
             rows.append({'axis': axis, 'term': term, 'letter': letter,
                          'value': fmt(t.get('value')), 'ci': [fmt(lo), fmt(hi)],
                          'unit': t.get('unit', ''), 'conv_value': fmt(conv.get('value')),
@@ -252,8 +249,8 @@ def _alternatives(report):
     for axis, entry in report['axes'].items():
         alts = (entry.get('fit') or {}).get('alternatives')
         if alts and len(alts) > 1:
-            out.append({'axis': axis, 'selected': [_words(t) for t in alts[0]],
-                        'others': [[_words(t) for t in a] for a in alts[1:]]})
+            out.append({'axis': axis, 'selected': [term_words(t) for t in alts[0]],
+                        'others': [[term_words(t) for t in a] for a in alts[1:]]})
     return out
 
 
@@ -467,16 +464,15 @@ DISCREPANCY_FILES = {
 def _param_rows(parameters, prefix=''):
     rows = []
     for name, entry in (parameters or {}).items():
+        label = prefix + str(name).replace('_', ' ')
         if isinstance(entry, dict) and 'value' in entry:
             ci = entry.get('ci') or [None, None]
-            rows.append({'name': prefix + str(name).replace('_', ' '),
-                         'value': fmt(entry['value']), 'ci': [fmt(ci[0]), fmt(ci[1])],
-                         'unit': entry.get('unit', '')})
+            rows.append({'name': label, 'value': fmt(entry['value']),
+                         'ci': [fmt(ci[0]), fmt(ci[1])], 'unit': entry.get('unit', '')})
         elif isinstance(entry, dict):
-            rows += _param_rows(entry, f'{prefix}{_words(name)}: ')
+            rows += _param_rows(entry, f'{prefix}{term_words(name)}: ')
         else:
-            rows.append({'name': prefix + str(name).replace('_', ' '), 'value': fmt(entry),
-                         'ci': None, 'unit': ''})
+            rows.append({'name': label, 'value': fmt(entry), 'ci': None, 'unit': ''})
     return rows
 
 
@@ -515,7 +511,7 @@ def discrepancy_context(report, out_dir):
     files = [{'name': n, 'what': w} for n, w in DISCREPANCY_FILES.items()
              if (out_dir / n).is_file()]
     files += [{'name': s['plot'], 'what': f'step {s["number"]} ({s["axis"]} + '
-                                          f'{_words(s["effect"])}), as an image'}
+                                          f'{term_words(s["effect"])}), as an image'}
               for s in steps if s['plot']]
     model_terms = sorted({t for terms in report.get('final_model', {}).values() for t in terms},
                          key=lambda t: list(TERMS).index(t) if t in TERMS else 99)

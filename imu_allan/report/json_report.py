@@ -28,6 +28,7 @@ from .kalibr import kalibr_values
 from .temperature_report import temperature_json, temperature_sentence
 from ..core.checks.warmup import warmup_sentence
 from ..core.export_values import motion_withheld
+from ..core.terms import TERMS
 from ..core.units import sample_unit
 
 ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi-square '
@@ -36,6 +37,12 @@ ESTIMATOR = ('fully overlapping Allan deviation (NIST SP1065 eq. 11); 68.3 % chi
 
 def _floats(values):
     return [float(v) if math.isfinite(v) else None for v in np.asarray(values, dtype=float)]
+
+
+def _curve(res, j, key, dev):
+    """One axis (column ``j``) of a deviation: ``tau``, ``key`` (``dev``), interval, EDF."""
+    return {'tau': _floats(res.tau), key: _floats(dev[:, j]), 'ci_low': _floats(res.ci_low[:, j]),
+            'ci_high': _floats(res.ci_high[:, j]), 'edf': _floats(res.edf[:, j])}
 
 
 def analysis_to_json(analysis, samples=None):
@@ -51,9 +58,7 @@ def analysis_to_json(analysis, samples=None):
     for j, axis in enumerate(analysis.axes):
         axes[axis] = {
             'unit': sample_unit(axis),
-            'adev': {'tau': _floats(res.tau), 'adev': _floats(res.adev[:, j]),
-                     'ci_low': _floats(res.ci_low[:, j]), 'ci_high': _floats(res.ci_high[:, j]),
-                     'edf': _floats(res.edf[:, j])},
+            'adev': _curve(res, j, 'adev', res.adev),
             'terms': analysis.fit.term_report(axis),
             'limits': analysis.fit.limit_report(axis),
             'fit': {'chi2': float(analysis.fit.chi2[axis]), 'dof': int(analysis.fit.dof[axis]),
@@ -67,12 +72,8 @@ def analysis_to_json(analysis, samples=None):
                     **fit_json(analysis.fit, axis)},
         }
         if analysis.deviations:
-            axes[axis]['deviations'] = {
-                kind: {'tau': _floats(d.tau), 'dev': _floats(d.dev[:, d.axis_index(axis)]),
-                       'ci_low': _floats(d.ci_low[:, d.axis_index(axis)]),
-                       'ci_high': _floats(d.ci_high[:, d.axis_index(axis)]),
-                       'edf': _floats(d.edf[:, d.axis_index(axis)])}
-                for kind, d in analysis.deviations.items()}
+            axes[axis]['deviations'] = {kind: _curve(d, d.axis_index(axis), 'dev', d.dev)
+                                        for kind, d in analysis.deviations.items()}
     timing = analysis.timing
     kalibr, _ = kalibr_values(analysis)
     report = {
@@ -131,12 +132,12 @@ def console_summary(analysis):
             lines.append(f'  {axis:8} {term:17} {_fmt(entry["value"]):>11} '
                          f'{interval} {entry["unit"]:>17}'
                          f'  {_fmt(conv["value"]):>11} {conv["unit"]}')
-            for extra in ('tau_c', 'frequency_hz'):
-                if extra in entry:
-                    e = entry[extra]
-                    lines.append(f'  {"":8} {"  " + extra:17} {_fmt(e["value"]):>11} '
-                                 f'[{_fmt(e["ci"][0]):>10}, {_fmt(e["ci"][1]):>10}] '
-                                 f'{e["unit"]:>17}')
+            extra = TERMS[term].position   # a hump term's tau_c or frequency_hz
+            if extra in entry:
+                e = entry[extra]
+                lines.append(f'  {"":8} {"  " + extra:17} {_fmt(e["value"]):>11} '
+                             f'[{_fmt(e["ci"][0]):>10}, {_fmt(e["ci"][1]):>10}] '
+                             f'{e["unit"]:>17}')
         for term, entry in analysis.fit.limit_report(axis).items():
             if entry['upper_limit'] is None or moved:
                 continue

@@ -1,13 +1,12 @@
 """
 The allan node's ``/diagnostics`` records, worded from its session's state.
 
-The session is a :class:`~imu_allan.core.live.session.LiveSession`.
-
-In this order: the stream (rate, gaps, samples used and dropped, the estimator's memory and the
-last cycle's cost), each axis against the noise budget (resolved terms only; upper limits as
-notes), each axis's model adequacy, the recording advice (record and per axis), the change
-test and, with a reference model, the model-vs-data discrepancy.  The words are the ones
-``analyze`` and ``monitor`` print: :mod:`.advice` and :mod:`.fit_quality` write them once.
+The session is a :class:`~imu_allan.core.live.session.LiveSession`.  In this order: the stream
+(rate, gaps, samples used and dropped, the estimator's memory and the last cycle's cost), each
+axis against the noise budget (resolved terms only; upper limits as notes), each axis's model
+adequacy, the recording advice (record and per axis), the change test and, with a reference
+model, the model-vs-data discrepancy.  The words are the ones ``analyze`` and ``monitor``
+print: :mod:`.advice` and :mod:`.fit_quality` write them once.
 """
 
 import math
@@ -24,17 +23,9 @@ def session_records(session, silence_s, prefix, extra=None):
     """
     Return the :class:`~imu_allan.core.live.health.Health` records of a live session.
 
-    Parameters
-    ----------
-    session : LiveSession
-        The node's session (its latest publication, advice, budget and change test).
-    silence_s : float
-        Seconds since the last message arrived (inf before the first).
-    prefix : str
-        The node's name and a colon: the first part of every status name.
-    extra : dict, optional
-        More key-values for the stream record (the figure publisher's counts).
-
+    ``silence_s``: seconds since the last message (inf before the first); ``prefix``: the
+    node's name and a colon, the start of every status name; ``extra``: more key-values for
+    the stream record (the figure publisher's counts).
     """
     p, params = session.pipeline, session.params
     latest = session.latest

@@ -9,6 +9,7 @@ PNG plots of an analysis (matplotlib, Agg backend, no screen needed).
   drawn by the same :func:`draw_adev`.
 """
 
+from fractions import Fraction
 import io
 import math
 
@@ -22,10 +23,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ..core import terms as _terms  # noqa: E402
-from ..core.units import GYRO_AXES, is_gyro, sample_unit  # noqa: E402
+from ..core.units import GYRO_AXES, IEEE_TERMS, is_gyro, sample_unit  # noqa: E402
 
-_COLORS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
-_SLOPES = (-1.0, -0.5, 0.0, 0.5, 1.0)
+#: Colour of each axis (x, y, z) in every plot.
+AXIS_COLORS = {'x': 'tab:red', 'y': 'tab:green', 'z': 'tab:blue'}
+#: The slope guides: the IEEE terms' ADEV slopes (-1 .. +1).
+_SLOPES = tuple(float(Fraction(_terms.TERMS[t].adev_slope)) for t in IEEE_TERMS)
 
 
 def _slope_guides(ax, tau, adev, curves=()):
@@ -100,16 +103,14 @@ def _grouped_legend(ax, axes, below):
 
 def draw_adev(ax, result, fitted, axes, denoised=None, legend_below=False, deviations=None):
     """
-    Draw one sensor's Allan deviation panel on a matplotlib ``Axes``.
+    Draw one sensor's Allan deviation panel (module docstring) on a matplotlib ``Axes``.
 
-    The measured overlapping ADEV of each of ``axes`` (points) with its 68.3 % band, each
-    fitted term of ``fitted`` (a :class:`~imu_allan.core.fit.FittedModel`, or None before the
-    first fit) as a dashed line named (once) below its line where it runs furthest under the
-    model, clear of the points, the total model (solid), slope guides clear of the curves,
-    the ``denoised`` :class:`AllanResult` dotted and the extra ``deviations`` (kind ->
-    DeviationResult) as open markers when given; the legend has one column
-    per axis, under the plot with ``legend_below``.  The one drawing shared by ``analyze``'s
-    plots (PNG and the page's SVG) and the allan node's live figure.
+    ``fitted``: a :class:`~imu_allan.core.fit.FittedModel`, or None before the first fit; each
+    term is named once, below its line where it runs furthest under the model, clear of the
+    points.  ``denoised`` (an :class:`AllanResult`) is dotted, the extra ``deviations`` (kind
+    -> DeviationResult) open markers; one legend column per axis, under the plot with
+    ``legend_below``.  The one drawing of ``analyze``'s plots (PNG and the page's SVG) and the
+    allan node's live figure.
     """
     tau = result.tau
     fine = np.logspace(math.log10(tau[0]), math.log10(tau[-1]), 200)
@@ -117,7 +118,7 @@ def draw_adev(ax, result, fitted, axes, denoised=None, legend_below=False, devia
     lines = []  # (tau, y) of the fitted lines, kept clear of the slope fan
     for axis in axes:
         j = result.axis_index(axis)
-        color = _COLORS[axis[-1]]
+        color = AXIS_COLORS[axis[-1]]
         ax.fill_between(tau, result.ci_low[:, j], result.ci_high[:, j], color=color,
                         alpha=0.18, lw=0)
         ax.plot(tau, result.adev[:, j], 'o', ms=2.5, color=color, label=f'{axis} measured')
@@ -173,7 +174,7 @@ def draw_deviations(ax, deviations, axes):
         for axis in axes:
             j = dev.axis_index(axis)
             ax.plot(dev.tau, dev.dev[:, j], _KIND_STYLE.get(kind, '.'), ms=3.5, mfc='none',
-                    mew=0.7, color=_COLORS[axis[-1]], alpha=0.8, label=f'{axis} {kind}')
+                    mew=0.7, color=AXIS_COLORS[axis[-1]], alpha=0.8, label=f'{axis} {kind}')
 
 
 def plot_adev(path, analysis, sensor, denoised=None):
@@ -259,7 +260,7 @@ def plot_timeseries(path, analysis):
     n_blocks = t.size // block
     for j, axis in enumerate(axes):
         ax = subplots[j, 0]
-        color = _COLORS[axis[-1]] if axis in GYRO_AXES else 'tab:' + {
+        color = AXIS_COLORS[axis[-1]] if axis in GYRO_AXES else 'tab:' + {
             'x': 'orange', 'y': 'olive', 'z': 'purple'}[axis[-1]]
         ax.plot(t[::step], raw[::step, j], lw=0.4, color=color, alpha=0.6)
         if n_blocks >= 2:

@@ -54,11 +54,10 @@ def _overbound_source(values, per_sensor):
 
 def _factors(values, raw, bounded, per_sensor):
     """Record per written key the factor against the raw file's value and the tight taus."""
-    keys = ('stddev', 'dynamic_bias_stddev') if not per_sensor else None
-    if keys:
+    if not per_sensor:
         for axis, written in bounded['axes'].items():
             fit = values.overbound_fit(axis, SIM_MODEL)
-            for key in keys:
+            for key in ('stddev', 'dynamic_bias_stddev'):
                 before = raw['axes'].get(axis, {}).get(key, math.nan)
                 values.note_overbound(f'{axis}.{key}', axis,
                                       written[key] / before if before > 0 else math.nan,

@@ -4,19 +4,9 @@ The ``temperature`` section of report.json: bias-versus-temperature slopes and m
 Filled when a bag input has a ``sensor_msgs/Temperature`` topic (read with the Imu samples,
 :mod:`imu_allan.formats.temperature_bag`); renders the record's
 :class:`~imu_allan.core.record.TemperatureAnalysis` (numerics in
-:mod:`imu_allan.core.temperature`, coincidences in :mod:`imu_allan.core.record`).  Schema::
-
-    "temperature": {"topic": "/imu/temperature", "n_readings": int, "range_c": [lo, hi],
-                    "slopes": {"gyro_x": {"value": b, "ci": [lo, hi], "unit": "rad/s/K",
-                                          "stderr": se, "block_s": s, "n_blocks": n}, ...},
-                    "changes": [{"t_start_s", "t_end_s", "from_c", "to_c"}, ...],
-                    "coincidences": [{"event": "change"|"warmup", "t_s", "axis",
-                                      "temperature_change": index or null}, ...],
-                    "notes": [...], "method": "..."}
-
-Slopes are SI per kelvin (= per deg C of difference), 68.3 % intervals; times in s from the
-first IMU sample; ``range_c`` over the readings inside the IMU record (all of them when none
-is).
+:mod:`imu_allan.core.temperature`, coincidences in :mod:`imu_allan.core.record`).  The schema
+is in docs/interfaces.md (JSON, ``temperature``): slopes SI per kelvin with 68.3 % intervals,
+times in s from the first IMU sample, ``range_c`` over the readings inside the IMU record.
 """
 
 #: How the slopes are estimated (report.json ``method``).
