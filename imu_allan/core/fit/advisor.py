@@ -467,10 +467,7 @@ class _AxisAdvisor:
         sqrt(G) = sqrt(G*) + 2.5 on (a threshold 2.5 standard deviations below the estimate)
         the truncation moves the interval by under 1 %.
         """
-        rejected = {frozenset(e['terms']) for e in self.fit.evidence if e['rejected']}
-        gains = (None if term == 'white_noise' else
-                 selection_gain(self.fit, term, ALTERNATIVE_MARGIN, self.fit.selection_penalty,
-                                rejected))
+        gains = selection_gain(self.fit, term)
         if gains is None or not gains[0] > 0:
             return self.n
         gain, needed = gains

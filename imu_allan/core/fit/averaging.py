@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from .axis import chi_square_applies
+from .axis import ALTERNATIVE_MARGIN, chi_square_applies
 from ..scipy_compiled import function
 
 _gammaincc = function('special', '_special_ufuncs', 'gammaincc')
@@ -39,14 +39,15 @@ _BISECTIONS = 80
 AVERAGING_PENALTY = 2.0
 
 
-def weights(fit, rejected=()):
+def weights(fit):
     """
     Return ``[(weight, AxisFit), ...]``: every candidate set's fit of ``fit`` with its weight.
 
-    ``rejected``: term sets (frozensets) another curve contradicts, left out.  A fit without
-    candidates (named terms, a remedy's set) is the one set, weight 1.
+    Sets another curve contradicts are left out.  A fit without candidates (named terms, a
+    remedy's set) is the one set, weight 1.
     """
     scored = []
+    rejected = fit.rejected_sets
     for _, names in fit.candidates:
         key = frozenset(names)
         if key in fit.candidate_fits and key not in rejected:
@@ -84,25 +85,24 @@ def _cdf(fit, term, scale):
     return lambda x: _gammaincc(0.5 * nu, 0.5 * nu * c / np.maximum(np.asarray(x), 1e-300))
 
 
-def selection_gain(fit, term, margin, penalty, rejected=()):
+def selection_gain(fit, term):
     """
     ``(G, G*)``: the chi^2 gain that resolved a term, and the gain that would just have.
 
-    The term's size is resolved because the best of the selected set's subsets without it
-    trails the selected set by D >= ``margin`` in the criterion chi^2 + k ``penalty``: a
-    chi^2 gain G = D + (k_sel - k_without) ``penalty``, G* the same at D = ``margin``.  (A set
-    that swaps the term for another is a question of which term, not of how large: the
-    weights of :func:`weights` carry it.)  None when the selection did not choose the term
-    (named terms) or no such subset was fitted.
+    The term is resolved because the best of the selected set's subsets without it (none
+    another curve rejected) trails the selected set by D >= :data:`.axis.ALTERNATIVE_MARGIN` in
+    the criterion chi^2 + k ``fit.selection_penalty``: a chi^2 gain G = D + (k_sel - k_without)
+    penalty, G* the same at D = the margin.  (A set that swaps the term for another is a
+    question of which term, not of how large: the weights of :func:`weights` carry it.)  None
+    for white noise (in every set), a term the selection did not choose, or no such subset.
     """
-    if not fit.candidates or term not in fit.coef:
+    if term == 'white_noise' or not fit.candidate_fits or term not in fit.coef:
         return None
-    chosen = set(fit.terms)
+    chosen, rejected = set(fit.terms), fit.rejected_sets
     for crit, names in fit.candidates:
-        if (term not in names and set(names) < chosen
-                and frozenset(names) not in rejected):
-            extra = (len(fit.terms) - len(names)) * penalty
-            return crit - fit.candidates[0][0] + extra, margin + extra
+        if term not in names and set(names) < chosen and frozenset(names) not in rejected:
+            extra = (len(fit.terms) - len(names)) * fit.selection_penalty
+            return crit - fit.candidates[0][0] + extra, ALTERNATIVE_MARGIN + extra
     return None
 
 
