@@ -1,24 +1,13 @@
 """
 Intervals that carry the choice of terms: model averaging over the candidate term sets.
 
-A coefficient's interval from the selected set alone is computed as if that set were known.
-Where other sets fit nearly as well, the coefficient moves with the choice (white noise takes
-part of an angle quantization it lacks; a bias instability reported just past the selection
-threshold was selected because the long averaging times came out high), and such an interval
-misses the truth more often than it says: 0 of 7 bias instabilities from 10 s of data, the
-white noise of a 10-s quantized gyro on 42 % instead of 68 %.
-
-Each candidate set S (every subset the selection fitted, less those another curve rejected)
-gets the weight w_S = exp(-(crit_S - crit_best) / 2) / sum with crit_S = chi^2_S + 2 k_S (k_S
-its terms: an Akaike weight, :data:`AVERAGING_PENALTY`; Buckland, Burnham & Augustin 1997,
-"Model selection: an integral part of inference", Biometrics 53, 603), and its fit a confidence
-distribution for the squared coefficient c: the one its own interval inverts
-(:func:`.axis.coefficient_interval`: c_hat nu / chi^2_nu, or normal), a point mass at zero
-where S lacks the term.  The interval is the mixture's quantiles, the model-averaged tail area
-interval of Turek & Fletcher (2012, "Model-averaged Wald confidence intervals", CSDA 56,
-2809) with those distributions.  With one set of all the weight it is that set's interval;
-a term resolved just past the margin keeps a few % of mass at zero, which the 95 % interval
-reaches and the 68.3 % one does not.  Measured: docs/method.md section 11.
+Each candidate set S (less those another curve rejected) gets the Akaike weight
+w_S = exp(-(crit_S - crit_best) / 2) / sum, crit_S = chi^2_S + 2 k_S (Buckland, Burnham &
+Augustin 1997, Biometrics 53, 603), and its fit a confidence distribution for the squared
+coefficient c: the one its own interval inverts (:func:`.axis.coefficient_interval`), a point
+mass at zero where S lacks the term.  The interval is the mixture's quantiles, the
+model-averaged tail-area interval of Turek & Fletcher (2012, CSDA 56, 2809).  Why and how well:
+docs/method.md section 11.
 """
 
 import math
