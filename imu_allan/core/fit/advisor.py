@@ -27,7 +27,7 @@ from .axis import (
     fit_terms,
     Problem,
     ramp_drift_variance,
-    SELECTION_PENALTY,
+    selection_penalty,
     shape_columns,
 )
 from .bisection import bisection, guided, log_ratio
@@ -267,10 +267,10 @@ class _Forecast:
             problem = self.problem(n, truth, key)
             if problem is None:
                 return 0.0
-            penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
             self._gaps[memo] = (_best_chi2(problem, other_names, start or {},
                                            _nonlinear(truth))
-                                + (_n_params(other_names) - _n_params(truth)) * penalty)
+                                + (_n_params(other_names) - _n_params(truth))
+                                * selection_penalty(problem))
         return self._gaps[memo]
 
 
@@ -573,7 +573,7 @@ class _AxisAdvisor:
 
     def _penalty(self, n, truth, key):
         problem = self.forecast.problem(n, truth, key)
-        return SELECTION_PENALTY * math.log(max(problem.tau.size, 2)) if problem else 0.0
+        return selection_penalty(problem) if problem else 0.0
 
 
 class StagedAdvice:

@@ -31,6 +31,11 @@ CORRELATION_TAIL = {-1: 0.1}
 _MIN_EDF = 1.0
 
 
+def selection_penalty(problem):
+    """Return the selection criterion's charge per term on ``problem``: 2 ln T (chi^2 units)."""
+    return SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
+
+
 def usable_points(avar, edf):
     """Return the mask of averaging times a fit can use: a finite AVAR > 0 with EDF >= 1."""
     return np.isfinite(avar) & (avar > 0) & np.isfinite(edf) & (edf >= _MIN_EDF)
@@ -633,7 +638,7 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
         # for it and took 10 % off N on a real gyro)
         candidates.remove('quantization')
     best, best_bic = None, math.inf
-    penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
+    penalty = selection_penalty(problem)
     scored, fits = [], {}
     for k in range(0, len(candidates) + 1):
         for subset in combinations(candidates, k):

@@ -26,7 +26,7 @@ from .axis import (
     coefficient_interval,
     fit_terms,
     Problem,
-    SELECTION_PENALTY,
+    selection_penalty,
     shape_columns,
     two_sided_z,
 )
@@ -131,8 +131,8 @@ def hadamard_walk(hadamard, names):
     base = [n for n in _BASE if n in names or n != 'quantization']
     without = fit_terms(hadamard, base, profile_intervals=False)
     with_k = fit_terms(hadamard, base + [_WALK], profile_intervals=False)
-    penalty = SELECTION_PENALTY * math.log(max(hadamard.tau.size, 2))
-    gain = without.chi2 - with_k.chi2 - (penalty if _WALK in with_k.coef else 0.0)
+    gain = without.chi2 - with_k.chi2 - (selection_penalty(hadamard) if _WALK in with_k.coef
+                                         else 0.0)
     c, _, hi = _walk(with_k, LEVEL)
     if c == 0.0:
         coef, _, g = hadamard.solve(shape_columns(hadamard, base + [_WALK], {}))
