@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from .axis import ALTERNATIVE_MARGIN, chi_square_applies
+from .bisection import halve
 from ..scipy_compiled import function
 
 _gammaincc = function('special', '_special_ufuncs', 'gammaincc')
@@ -119,16 +120,7 @@ def selective_lower(c, gain, needed, level):
         return num / den if den > 1e-300 else 0.0
     if tail(0.0) >= p:
         return 0.0
-    a, b = 0.0, c
-    for _ in range(_BISECTIONS):  # tail grows with x
-        mid = 0.5 * (a + b)
-        if tail(mid) < p:
-            a = mid
-        else:
-            b = mid
-        if b - a < 1e-9 * c:
-            break
-    return 0.5 * (a + b)
+    return halve(lambda x: tail(x) < p, 0.0, c, _BISECTIONS, 1e-9 * c)  # tail grows with x
 
 
 def averaged_interval(weighted, term, level, selected=None, scale=1.0, selection=None):
@@ -162,15 +154,7 @@ def averaged_interval(weighted, term, level, selected=None, scale=1.0, selection
             a -= 2.0 * (b - a)
         while mixture(math.exp(b)) < q:
             b += 2.0 * (b - a)
-        for _ in range(_BISECTIONS):
-            mid = 0.5 * (a + b)
-            if mixture(math.exp(mid)) < q:
-                a = mid
-            else:
-                b = mid
-            if b - a < 1e-9:
-                break
-        return math.exp(0.5 * (a + b))
+        return math.exp(halve(lambda x: mixture(math.exp(x)) < q, a, b, _BISECTIONS, 1e-9))
     lo = quantile(p)
     if selection is not None and selected is not None and term in selected.coef:
         lo = min(lo, selective_lower(selected.coef[term], *selection, level))

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from .bisection import guided, log_ratio, run
+from .bisection import guided, halve, log_ratio, run
 from .bounded_min import bounded_minimum
 from .nnls import nnls_scaled
 from ..allan.edf import _gammainccinv, CI_LEVEL
@@ -598,15 +598,8 @@ def _profile_interval(profile, chi2_min):
     def crossing(edge):
         if abs(chi2_at(edge) - chi2_min) < 1.0:
             return edge
-        a, b = sorted((logp, edge))
-        for _ in range(30):  # bisection on the monotone side of the minimum
-            mid = 0.5 * (a + b)
-            inside = chi2_at(mid) - chi2_min < 1.0
-            if (mid > logp) == inside:
-                a = mid
-            else:
-                b = mid
-        return 0.5 * (a + b)
+        a, b = sorted((logp, edge))  # bisection on the monotone side of the minimum
+        return halve(lambda x: (x > logp) == (chi2_at(x) - chi2_min < 1.0), a, b, 30)
     return math.exp(crossing(grid[0])), math.exp(crossing(grid[-1]))
 
 

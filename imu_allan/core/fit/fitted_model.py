@@ -18,7 +18,6 @@ from . import hadamard_check
 from .adequacy import assess, STATISTIC_SCALE
 from .averaging import averaged_interval, selection_gain, weights
 from .axis import (
-    ALTERNATIVE_MARGIN,
     fit_axis,
     fit_terms,
     problem_upper_limit,
@@ -163,23 +162,15 @@ class FittedModel:
         """
         Term sets the data of ``axis`` cannot reject, the selected one first.
 
-        Every candidate set whose selection criterion is within :data:`ALTERNATIVE_MARGIN`
+        Every candidate set whose criterion is within :data:`.axis.ALTERNATIVE_MARGIN`
         of the best (see there); ``[selected]`` when the terms were named, not selected.
         """
         fit = self.fits.get(axis)
         if fit is None or not fit.terms:
             return []
-        selected = list(fit.terms)
-        if not fit.candidates:
-            return [selected]
-        best = fit.candidates[0][0]
-        out = [selected]
-        rejected = fit.rejected_sets
-        for crit, names in fit.candidates:
-            if (crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected)
-                    and frozenset(names) not in rejected):
-                out.append(list(names))
-        return out
+        selected, rejected = list(fit.terms), fit.rejected_sets
+        return [selected] + [list(names) for names in hadamard_check.open_sets(fit.candidates)
+                             if set(names) != set(selected) and frozenset(names) not in rejected]
 
     def resolved(self, axis):
         """
