@@ -619,16 +619,12 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
         if unknown:
             raise ValueError(f'unknown noise term(s): {", ".join(unknown)}')
         return fit_terms(problem, terms)
-    # White noise is in every set: a rate sensor always has it, and a set without it (a flat
-    # bias instability alone, quantization alone) fits a filtered 10-s record's flattened
-    # short end and is then reported instead of the white noise it hides.
+    # White noise is in every set (docs/method.md section 11); quantization is in none beside
+    # a filter's deficit or a resonance's tail, which have its 1/tau^2 shape (section 10).
     base = tuple(problem.fixed) + ('white_noise',)
     candidates = [t for t in IEEE_TERMS if t != 'white_noise'] if problem.tau.size >= 4 else []
     if candidates and (problem.filtered or (span is not None
                                             and span.limited_by == 'resonance')):
-        # a filter's deficit, and beyond its cut a resonance's tail, have quantization's
-        # shape (1/tau^2): quantization cannot be told from them (a resonance's rest passed
-        # for it and took 10 % off N on a real gyro)
         candidates.remove('quantization')
     best, best_bic = None, math.inf
     penalty = selection_penalty(problem)
