@@ -14,22 +14,14 @@ and the noise by the frequency-PSD exponent alpha: +2 white PM (quantization), +
 0 white FM (white noise), -1 flicker FM (bias instability), -2 random-walk FM (rate random
 walk, ramp), -3, -4 (alpha + 2d must exceed 1).  Eqs (7)-(10) of the paper define the basic
 sum over J lags; where J would exceed ``J_max = 100`` the paper switches to the large-J
-asymptotes of its Tables 1-3.  Two behaviours, one implementation (:func:`edf_greenhall`'s
-``tables``):
-
-* ``tables=True``: the paper exactly, which is what Stable32's printed bounds are made of
-  (:mod:`imu_allan.core.deviations`; equal to allantools' ``edf_greenhall`` to 1e-9 in every
-  case it computes);
-* ``tables=False``: the basic sum itself wherever the paper uses a table (exactly up to 4096
-  lags; above that, in the infinite-filter limit only, where the summand is smooth between
-  kinks at j = S, 2S, ..., as Euler-Maclaurin's integral plus half end-values, the integral by
-  32-point Gauss-Legendre on each smooth piece: within 7e-7 of the exact sum at the smallest
-  such m (1366) and within 6e-8 from m = 5000 on, for alpha = 0, -1, -2; the derivative terms
-  left out fall as 1/m^2).  :func:`edf_oadev` (the package's ``allan_deviation``) is this for
-  the unmodified, fully overlapping Allan variance (d = 2, F = S = m): within 0.3 % of the
-  tables, and with M >= (d + 1) S every term of the sum is linear in 1/M, so its two M-free
-  parts are cached per (alpha, m) and the EDF of any record length costs a division (the
-  recording advice forecasts many lengths, docs/method.md section 7).
+asymptotes of its Tables 1-3.  :func:`edf_greenhall`'s ``tables=True`` is the paper exactly
+(Stable32's printed bounds, :mod:`imu_allan.core.deviations`; allantools' ``edf_greenhall``
+to 1e-9); ``tables=False`` evaluates the basic sum itself wherever the paper uses a table:
+exactly up to 4096 lags, beyond that (infinite-filter limit only) as Euler-Maclaurin's
+integral, 32-point Gauss-Legendre between the kinks at j = S, 2S, ..., plus half end-values
+(within 7e-7 of the exact sum at the smallest such m, 1366, and 6e-8 from m = 5000 on).
+:func:`edf_oadev` is that for the overlapping Allan variance, its M-free parts cached
+(:func:`_lag_moments`; docs/method.md sections 2 and 7).
 """
 
 import functools
@@ -111,24 +103,10 @@ def edf_greenhall(alpha, d, m, n_phase, overlapping, modified, tables=True):
     """
     EDF of a d-th difference variance at averaging factor ``m`` (Greenhall & Riley 2004, 3.4).
 
-    Parameters
-    ----------
-    alpha : int
-        Frequency-PSD exponent of the dominant noise (+2 .. -4), alpha + 2 d > 1.
-    d : int
-        1 first difference, 2 Allan, 3 Hadamard.
-    m : int
-        Averaging factor (tau / tau0), >= 1.
-    n_phase : int
-        Number of phase points (rate samples + 1).
-    overlapping, modified : bool
-        Stride S = m (else 1); filter F = 1 (else m).
-    tables : bool
-        Above J = 100 lags the paper's Tables 1-3 (True), or the basic sum itself (False;
-        module docstring).
-
-    Returns nan where the record holds no complete difference.
-
+    ``alpha``, ``d``: as in the module docstring (alpha + 2 d > 1); ``m`` = tau / tau0 >= 1;
+    ``n_phase``: phase points (rate samples + 1); ``overlapping``: stride S = m (else 1);
+    ``modified``: filter F = 1 (else m); ``tables``: above J = 100 lags the paper's tables
+    (True) or the basic sum (False).  Returns nan where the record holds no complete difference.
     """
     alpha, d, m = int(alpha), int(d), int(m)
     if alpha + 2 * d <= 1:

@@ -6,12 +6,9 @@ x_0 = 0, x_k = tau0 * (y_0 + ... + y_{k-1}) (N = n + 1 phase points) and tau = m
 
     AVAR(tau) = sum_{k=0}^{N-2m-1} (x_{k+2m} - 2 x_{k+m} + x_k)^2 / (2 tau^2 (N - 2m)),
 
-i.e. the fully overlapping (stride 1) estimator.  The mean of each axis is removed before the
-cumulative sum; AVAR is unchanged by a constant and the phase stays small, which keeps the
-second differences exact to float64 precision even for accelerometers reading 1 g.
-
-Intervals: Greenhall EDF (:mod:`imu_allan.core.allan.edf`) for the noise type that dominates each
-averaging time, chi-square quantiles at the 68.27 % level.
+the fully overlapping (stride 1) estimator, each axis de-meaned before the cumulative sum
+(docs/method.md section 1).  Intervals: Greenhall EDF (:mod:`.edf`) for the noise type that
+dominates each averaging time, chi-square quantiles at the 68.27 % level (section 2).
 """
 
 from dataclasses import dataclass
@@ -134,9 +131,8 @@ def _phase(data):
     """
     Phase per axis, shape (A, n + 1), in units of (sample value x samples).
 
-    The cumulative sum of the de-meaned rate with x_0 = 0, computed axis by axis along
-    contiguous memory (a cumulative sum down the columns of an (n, A) array is strided and
-    was the slowest step of the whole estimate).
+    The cumulative sum of the de-meaned rate with x_0 = 0, along contiguous memory (down the
+    columns of an (n, A) array it is strided and was the estimate's slowest step).
     """
     y = np.array(np.asarray(data, dtype=float).T, order='C')
     y -= y.mean(axis=1, keepdims=True)
@@ -149,10 +145,8 @@ def avar_reference(data, ms):
     """
     Overlapping AVAR (T, A) of rate samples ``data`` (n, A), in units of the samples squared.
 
-    The readable numpy definition the compiled kernel is tested against, the one of the whole
-    Allan family (:func:`imu_allan.core.deviations.allan_family.variance_reference`) on the
-    phase: AVAR = sum d^2 / (2 m^2 (N - 2m)), d the second difference of the phase in sample
-    units (the sample interval cancels).
+    The numpy definition the compiled kernel is tested against: the Allan family's
+    (:func:`imu_allan.core.deviations.allan_family.variance_reference`) on the phase.
     """
     from ..deviations.allan_family import variance_reference
     return variance_reference('oadev', _phase(data), ms)
@@ -169,11 +163,9 @@ def avar_function(work):
     """
     Return the AVAR implementation for ``work`` second differences: numpy reference or compiled.
 
-    Both take ``(data, ms)`` and return the same numbers (the tests compare them); the
-    compiled one lives in :mod:`.kernel`, imported here on first use so that commands
-    that never compute a long deviation (``--help``, short records) never import numba.
-    numba is optional (not every platform packages it): without it the reference runs, with
-    one log line saying so (docs/benchmarks.md: how much slower).
+    Both take ``(data, ms)`` and return the same numbers; :mod:`.kernel` is imported on first
+    use (short records never import numba).  Without numba the reference runs, with one log
+    line saying so (docs/benchmarks.md: how much slower).
     """
     if work < SMALL_WORK:
         return avar_reference

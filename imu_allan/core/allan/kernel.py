@@ -139,12 +139,10 @@ def phase(data, a_lo=0, a_hi=None, means=None):
     """
     Phase (A, n + 1) of rate samples (n, A), de-meaned, x_0 = 0: as ``allan._phase``.
 
-    Of the axes ``a_lo:a_hi`` only (all by default); ``means`` are the column means of all
-    axes (:func:`column_means`, computed here when not given).  Row-major passes over the
-    samples, each split in two ranges of rows: the column sums, the running sums of each range,
-    then the first range's end value added to the second range (exactly what running on would
-    have given, up to rounding; a start value derived from the column sums instead would carry
-    their rounding as a step into the phase).
+    Of the axes ``a_lo:a_hi`` only (all by default); ``means``: the column means of all axes
+    (:func:`column_means` when not given).  Two ranges of rows integrated on two threads, then
+    the first range's end value added to the second (a start value from the column sums would
+    carry their rounding as a step into the phase).
     """
     y = np.ascontiguousarray(data, dtype=np.float64)
     n = y.shape[0]
@@ -217,11 +215,9 @@ def phase_exact(data):
     """
     Phase (A, n + 1) of rate samples (n, A), bit for bit ``allan._phase``: one compiled pass.
 
-    The same operations in the same order as numpy there (each column's mean by numpy's
-    pairwise sum, :func:`means_exact`, then one running sum per axis), without its transposed
-    copy and temporaries: for estimators whose recursions carry the phase's rounding into the
-    result (the MDEV running sum gives 1e-11 relative on a random walk between :func:`phase`
-    and numpy's), so that compiled and numpy paths agree to their own rounding.
+    numpy's operations in numpy's order (:func:`means_exact`, then one running sum per axis),
+    without its copies: for estimators whose recursions carry the phase's rounding into the
+    result (the MDEV running sum: 1e-11 relative between :func:`phase` and numpy's).
     """
     y = np.ascontiguousarray(data, dtype=np.float64)
     means = means_exact(y)

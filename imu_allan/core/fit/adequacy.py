@@ -1,35 +1,13 @@
 """
 Does a fitted noise model describe the measured Allan variance?  The fit's adequacy test.
 
-A least-squares fit always returns numbers; whether the model behind them describes the curve is
-a separate question.  Real sensors filter, quantize and carry lines that bend the curve away
-from the IEEE 952 shapes; a fit that ignores a bend still reports intervals of +-0.1 %.
-
-Statistic
----------
-Each AVAR estimate is chi-square distributed with its EDF nu, so in the log domain
-r_i = ln(AVAR_i / model_i) - (psi(nu_i / 2) - ln(nu_i / 2)) has mean 0 and variance
-psi'(nu_i / 2) (psi: digamma, psi': trigamma; the logarithm makes even the few-EDF estimates at
-long tau nearly normal).  Neighbouring averaging times correlate strongly; the fit's own
-correlation model (:func:`.axis.correlation_matrix`) gives W = D C D, D = diag(sqrt(psi')).
-After the fit (GLS in the coefficients, sensitivities G_ij = shape_j(tau_i) / model_i) the
-residuals have covariance W - G (G' W^-1 G)^-1 G'.
-
-The residual vector is projected on the first ``SMOOTH_MODES`` Legendre polynomials of log tau
-over the fitted span, s = B' r, and T = s' (B' Cov(r) B)^-1 s ~ chi^2(k) under the model, up to
-a scale measured on records the model describes (:data:`STATISTIC_SCALE`).  Why
-smooth modes, not the whole GLS chi^2: the correlation model is right for slowly varying
-directions (the parameter intervals built on it cover the truth, docs/method.md) but not for
-point-to-point wiggles, whose variance it overstates: the full chi^2 came out 0.5-0.8 times its
-degrees of freedom on records the model describes (mean 0.58, 720 simulated axes) and could not
-be given a distribution.  The bends real sensors put in a curve (a filter, a line, a hump) are
-smooth over a decade, so they stay in the projection.  Measured (docs/method.md, "Adequacy"):
-p uniform on records the model describes, p < 1e-3 where an effect is missing.
-
+The log residuals r_i = ln(AVAR_i / model_i) - (psi(nu_i / 2) - ln(nu_i / 2)) (mean 0,
+variance psi'(nu_i / 2)), adjusted by the best log-domain change of the fitted coefficients,
+are projected on the first :data:`SMOOTH_MODES` Legendre polynomials of log tau over the
+span: s = B' r and T = s' (B' Cov(r) B)^-1 s ~ chi^2(k) up to :data:`STATISTIC_SCALE`.  Why
+smooth modes and not the GLS chi^2, and what it was measured to do: docs/method.md section 10.
 Where it fails, the misfit is localised: runs of averaging times whose standardised log
-residual r_i / sd_i exceeds 2, kept when their worst point exceeds 3.5 (a run of a correlated
-curve that is this far out by chance is rare), each with the ADEV ratio measured / model at
-its worst point.
+residual exceeds :data:`RUN_Z`, kept when their worst point exceeds :data:`PEAK_Z`.
 """
 
 from dataclasses import dataclass, field
@@ -158,10 +136,8 @@ def smooth_statistic(r, sd, corr, sensitivities, basis):
     cov = sd[:, None] * corr * sd[None, :]
     g = sensitivities
     if g.shape[1]:
-        # The residual after the best log-domain adjustment of the fitted coefficients: the
-        # test asks whether the model's shapes can describe the curve, whatever weights the
-        # fit itself used (its GLS in AVAR with model weights leaves components along G that
-        # a small change of the coefficients removes).
+        # the residual after the best log-domain adjustment of the fitted coefficients: can
+        # the model's shapes describe the curve, whatever weights the fit itself used
         w_inv_g = np.linalg.solve(cov, g)
         info_inv = np.linalg.pinv(g.T @ w_inv_g)
         r = r - g @ (info_inv @ (w_inv_g.T @ r))

@@ -1,37 +1,14 @@
 """
 The recording advisor: how much longer to record until each noise term is known well enough.
 
-ROS-free.  For every axis and fitted term it gives the relative precision now (68.3 %
-half-width / value) and the predicted additional recording time, under the same conditions,
-until that precision reaches a target; it names the pairs of terms the data cannot yet tell
-apart (grouped per axis: its open term sets), with the time until they are told apart; and
-for every term not resolved its 95 % upper limit and the time until it is resolved.
-
-Method (no new data needed)
----------------------------
-The fit's intervals come from the GLS covariance of the squared coefficients
-(:mod:`imu_allan.core.fit`), which depends only on the model AVAR curve, the averaging times and
-their EDF.  For a record of n' samples the averaging times are the grid of that record (up to
-n' / min_clusters) and the EDFs are Greenhall's for n' samples (:func:`~.edf.edf_oadev`, noise
-type identified on the model curve as :func:`~.allan.identify_noise` does on data).  Evaluating
-the covariance with the fitted model's own curve on that grid predicts the half-width a record
-of n' samples would give.  Scaled so that at the current length it equals the fit's own
-half-width (they differ only by the grid and the noise identification, a few %), the smallest
-n' that meets a target is found by bisection in log n' (guided: :mod:`.bisection`).
-
-The open term sets (:meth:`.FittedModel.alternatives`: within the margin of the best) are
-what the record cannot decide; the terms some hold and others do not are not resolved.  An
-open set is told apart from the selected one when the criterion chi^2 + k x penalty of the
-worse exceeds the better's by that margin (the rule the selection resolves terms by): each in
-turn is taken as the truth and its curve at n' is fitted with the other one (noise-free, so
-chi^2 is the non-centrality lambda of the criterion difference); told apart when
-lambda - 2 sqrt(lambda) (one standard deviation of the noisy difference below its mean)
-exceeds the margin in both directions.  Every term not resolved is also forecast at its
-95 % upper limit (delta chi^2 = 4 on the data): that term beside the selected set's others
-is the truth, resolved once each set without it that could stand in for it (the others
-alone, one other term in its place, the open sets without it) is told from it by the same
-rule.  On a short record the open sets' own sizes are often near zero and never separate;
-the time for a term as large as the data allow is the one a person can plan by.
+ROS-free.  For every axis and resolved term: the relative precision now (68.3 % half-width /
+value) and the additional recording, under the same conditions, until it meets a target; the
+open term sets the data cannot yet tell apart, with the time until they are; every term not
+resolved with its 95 % upper limit and the time until one that large would be resolved.  No
+new data needed: the fit's GLS covariance is evaluated on the fitted model's own noise-free
+curve for a record of n' samples (its averaging times and EDF), and n' found by guided
+bisection in log n' (:mod:`.bisection`).  The method, and what it was measured to predict:
+docs/method.md section 7.
 """
 
 import dataclasses
@@ -50,7 +27,7 @@ from .axis import (
     fit_terms,
     Problem,
     ramp_drift_variance,
-    SELECTION_PENALTY,
+    selection_penalty,
     shape_columns,
 )
 from .bisection import bisection, guided, log_ratio
@@ -186,12 +163,11 @@ class Advice:
 def analysis_grid(points_per_decade=DEFAULT_POINTS_PER_DECADE,
                   min_clusters=DEFAULT_MIN_CLUSTERS, m_max=None):
     """
-    ``grid(n)``: averaging factors of a record of n samples, as dense as ``analyze``'s.
+    Return ``grid(n)``: averaging factors of a record of n samples, as dense as ``analyze``'s.
 
-    The points are 10^(k / points_per_decade) up to n / min_clusters: the same density and
-    span as :func:`~.allan.tau_grid`, but anchored at m = 1 so that records of different
-    length share their factors (the sampled flicker shape is cached per factor); the last
-    point is the longest factor itself.
+    10^(k / points_per_decade) up to n / min_clusters and that longest factor itself: the
+    density and span of :func:`~.allan.tau_grid`, anchored at m = 1 so that records of
+    different length share their factors (the sampled flicker shape is cached per factor).
     """
     def grid(n):
         top = int(n // min_record(min_clusters))
@@ -212,10 +188,6 @@ def factor_grid_of(ms, min_clusters):
     return lambda n: ms[ms * int(min_clusters) <= n]
 
 
-def _main_param(term):
-    return TERM_PARAMETERS[term][0]
-
-
 def _n_params(names):
     return sum(len(TERM_PARAMETERS[t]) for t in names)
 
@@ -223,12 +195,6 @@ def _n_params(names):
 def _nonlinear(axis_terms):
     return {t: p[TERM_PARAMETERS[t][1]] for t, p in axis_terms.items()
             if len(TERM_PARAMETERS[t]) > 1}
-
-
-def _rel_halfwidth(coef, sd, deterministic=False):
-    """Relative half-width of sqrt(c) for the fit's 68.3 % interval (coefficient_interval)."""
-    lo, hi = coefficient_interval(coef, sd * sd, CI_LEVEL, deterministic)
-    return (hi - lo) / (2.0 * math.sqrt(coef))
 
 
 class _Forecast:
@@ -281,10 +247,13 @@ class _Forecast:
                 t: p['value'] ** 2 for t, p in axis_terms.items() if 'value' in p})
         out = {}
         for j, term in enumerate(names):
-            value = axis_terms[term][_main_param(term)]
+            value = axis_terms[term][TERM_PARAMETERS[term][0]]
             sd = math.sqrt(max(cov[j, j], 0.0))
-            out[term] = (_rel_halfwidth(value * value, sd, term == 'rate_ramp') if value > 0
-                         else math.inf)
+            out[term] = math.inf
+            if value > 0:  # the fit's 68.3 % interval of sqrt(c)
+                c = value * value
+                lo, hi = coefficient_interval(c, sd * sd, CI_LEVEL, term == 'rate_ramp')
+                out[term] = (hi - lo) / (2.0 * math.sqrt(c))
         return out
 
     def criterion_gap(self, n, truth, key, other_names, start=None):
@@ -298,10 +267,10 @@ class _Forecast:
             problem = self.problem(n, truth, key)
             if problem is None:
                 return 0.0
-            penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
             self._gaps[memo] = (_best_chi2(problem, other_names, start or {},
                                            _nonlinear(truth))
-                                + (_n_params(other_names) - _n_params(truth)) * penalty)
+                                + (_n_params(other_names) - _n_params(truth))
+                                * selection_penalty(problem))
         return self._gaps[memo]
 
 
@@ -341,11 +310,10 @@ def _samples(log_n):
 
 def bisection_crossing(ok, n0, n_max):
     """
-    Smallest n in [n0, n_max] with ``ok(n)`` (assumed monotone), by bisection in log n.
+    Smallest n in [n0, n_max] with ``ok(n)`` (monotone) by bisection in log n; None: not n_max.
 
-    The reference of :func:`_crossing`, which returns the same n with fewer evaluations.  A
-    generator (it yields between evaluations so a node can interleave other work); returns n,
-    or None when even n_max does not satisfy ``ok``.
+    The reference of :func:`_crossing` (same n, more evaluations); a generator that yields
+    between evaluations, as every search here.
     """
     if ok(n0):
         return n0
@@ -361,10 +329,9 @@ def _crossing(evaluate, n0, n_max, slope):
     """
     Return the n of :func:`bisection_crossing` with ``ok(n) = evaluate(n)[0]``, sooner.
 
-    ``evaluate(n)`` returns ``(ok, level)``, the level roughly linear in log n and crossing 0
-    about where ok turns true (:func:`~.bisection.guided`); ``slope`` is its expected growth
-    per unit of log n, for the first guess.  n_max is evaluated only when the crossing is not
-    found below it (a forecast of n_max samples is the most costly one).
+    ``evaluate(n)``: ``(ok, level)`` as :func:`~.bisection.guided` takes them; ``slope``: the
+    level's expected growth per unit of log n, for the first guess.  n_max (the costliest
+    forecast) is evaluated only when the crossing is not found below it.
     """
     return (yield from _crossing_point(evaluate, n0, n_max, slope))[0]
 
@@ -431,7 +398,7 @@ class _AxisAdvisor:
             target = self.targets.get(term)
             if target is None:
                 continue
-            main = _main_param(term)
+            main = TERM_PARAMETERS[term][0]
             value = params[main]
             lo, hi = self.fit.intervals[term][main]
             rel = (hi - lo) / (2.0 * value) if value > 0 else math.inf
@@ -463,14 +430,10 @@ class _AxisAdvisor:
         Return the samples after which a resolved term's interval stops carrying its selection.
 
         The post-selection lower end (:func:`.averaging.selective_lower`) matters while the
-        term's gain G is near the gain G* that resolves it; the gain grows as n, and from
-        sqrt(G) = sqrt(G*) + 2.5 on (a threshold 2.5 standard deviations below the estimate)
-        the truncation moves the interval by under 1 %.
+        gain G (growing as n) is near the G* that resolves the term; from
+        sqrt(G) = sqrt(G*) + 2.5 on it moves the interval by under 1 %.
         """
-        rejected = {frozenset(e['terms']) for e in self.fit.evidence if e['rejected']}
-        gains = (None if term == 'white_noise' else
-                 selection_gain(self.fit, term, ALTERNATIVE_MARGIN, self.fit.selection_penalty,
-                                rejected))
+        gains = selection_gain(self.fit, term)
         if gains is None or not gains[0] > 0:
             return self.n
         gain, needed = gains
@@ -486,11 +449,8 @@ class _AxisAdvisor:
         """
         Time until each open set is told from the selected one; fills :attr:`unresolved`.
 
-        Returns ``[(terms in which the two differ, n or None), ...]``.  Each alternative in
-        turn is taken as the truth and its curve at n is fitted with the selected set, and
-        the selected one's with the alternative (noise-free: the criterion gap is the
-        non-centrality of the noisy one); told apart when both exceed the margin the
-        selection resolves a term by, one standard deviation below their mean.
+        Returns ``[(terms in which the two differ, n or None), ...]``; the rule is
+        docs/method.md section 7's (:func:`_separated` in both directions).
         """
         sets = self.fitted.alternatives(self.axis)
         chosen = list(self.fit.terms)
@@ -522,11 +482,10 @@ class _AxisAdvisor:
         """
         Return the samples until the gap separates in every direction (None: not by n_max).
 
-        ``directions``: ``(truth, names, key)``, each alternative taken as the truth and fitted
-        with the other (module docstring).  The time is the latest of the directions' times,
-        so a direction that is separated already at the latest time so far (a point of the
-        same bisection grid; ok is monotone in n, as the search assumes) cannot change it and
-        is not searched, and none is after one that never separates.
+        ``directions``: ``(truth, names, key)``, each set taken as the truth and fitted with
+        the other.  The time is the latest of theirs, so a direction separated already at the
+        latest time so far (a point of the same bisection grid) is not searched, and none is
+        after one that never separates.
         """
         latest, at = None, None
         for truth, names, key in directions:
@@ -550,22 +509,14 @@ class _AxisAdvisor:
                 latest, at = n_sep, x
         return latest
 
-    def _limit(self, term):
-        limit = self.fitted.upper_limit(self.axis, term)  # cached: exports use it too
-        return limit if math.isfinite(limit) else None
-
     def _not_resolved(self, resolved, n_max):
         """
         Upper limit of each IEEE term not resolved, and when one that large would be.
 
-        A term at its upper limit (delta chi^2 = 4 on the data) beside the selected set's
-        other terms is taken as the truth of a new record; the term is resolved once every
-        set without it that could stand in for it is told from that truth by the rule of
-        :meth:`_open_sets` (:func:`_separated`): the other terms alone, each candidate set
-        with one other term in its place, and the open sets without it.  An open set's own
-        sizes are often near zero on a short record and never separate: the time is for the
-        term at the largest size the data allow ("if that large").  ``undetected=False``:
-        only the terms an open set holds.
+        The term at its upper limit beside the selected set's other terms is the truth of a
+        new record, resolved once every set that could stand in for it (:meth:`_stand_ins`)
+        is told from it by :func:`_separated` (docs/method.md section 7).
+        ``undetected=False``: only the terms an open set holds.
         """
         sets = self.fitted.alternatives(self.axis)
         held = set().union(*(set(s) for s in sets))
@@ -575,7 +526,8 @@ class _AxisAdvisor:
             in_open = term in held
             if term in resolved or not (in_open or self.undetected):
                 continue
-            limit = self._limit(term)
+            limit = self.fitted.upper_limit(self.axis, term)  # cached: exports use it too
+            limit = limit if math.isfinite(limit) else None
             yield
             if limit is None or term not in chosen:
                 self.limits[term] = Limit(limit, None, 'no upper limit from these data'
@@ -621,7 +573,7 @@ class _AxisAdvisor:
 
     def _penalty(self, n, truth, key):
         problem = self.forecast.problem(n, truth, key)
-        return SELECTION_PENALTY * math.log(max(problem.tau.size, 2)) if problem else 0.0
+        return selection_penalty(problem) if problem else 0.0
 
 
 class StagedAdvice:
@@ -666,19 +618,9 @@ def advise(result, fitted, targets=None, grid=None, undetected=True):
     """
     Return the :class:`Advice` for a record's AllanResult and its FittedModel.
 
-    Parameters
-    ----------
-    result : AllanResult
-        The measured Allan variance (its EDF and record length).
-    fitted : FittedModel
-        The fit of ``result``.
-    targets : dict, optional
-        Relative 68.3 % half-width per term (default :data:`DEFAULT_TARGETS`).
-    grid : callable, optional
-        ``grid(n)`` -> averaging factors of a record of n samples (default: ``analyze``'s).
-    undetected : bool
-        Also give the upper limits and resolution times of the terms no open set holds.
-
+    ``targets``: relative 68.3 % half-width per term (default :data:`DEFAULT_TARGETS`);
+    ``grid(n)``: averaging factors of a record of n samples (default :func:`analysis_grid`);
+    ``undetected``: as :class:`StagedAdvice`.
     """
     staged = StagedAdvice(result, fitted, targets, grid, undetected)
     while not staged.step():

@@ -1,31 +1,21 @@
 """
 Intervals that carry the choice of terms: model averaging over the candidate term sets.
 
-A coefficient's interval from the selected set alone is computed as if that set were known.
-Where other sets fit nearly as well, the coefficient moves with the choice (white noise takes
-part of an angle quantization it lacks; a bias instability reported just past the selection
-threshold was selected because the long averaging times came out high), and such an interval
-misses the truth more often than it says: 0 of 7 bias instabilities from 10 s of data, the
-white noise of a 10-s quantized gyro on 42 % instead of 68 %.
-
-Each candidate set S (every subset the selection fitted, less those another curve rejected)
-gets the weight w_S = exp(-(crit_S - crit_best) / 2) / sum with crit_S = chi^2_S + 2 k_S (k_S
-its terms: an Akaike weight, :data:`AVERAGING_PENALTY`; Buckland, Burnham & Augustin 1997,
-"Model selection: an integral part of inference", Biometrics 53, 603), and its fit a confidence
-distribution for the squared coefficient c: the one its own interval inverts
-(:func:`.axis.coefficient_interval`: c_hat nu / chi^2_nu, or normal), a point mass at zero
-where S lacks the term.  The interval is the mixture's quantiles, the model-averaged tail area
-interval of Turek & Fletcher (2012, "Model-averaged Wald confidence intervals", CSDA 56,
-2809) with those distributions.  With one set of all the weight it is that set's interval;
-a term resolved just past the margin keeps a few % of mass at zero, which the 95 % interval
-reaches and the 68.3 % one does not.  Measured: docs/method.md section 11.
+Each candidate set S (less those another curve rejected) gets the Akaike weight
+w_S = exp(-(crit_S - crit_best) / 2) / sum, crit_S = chi^2_S + 2 k_S (Buckland, Burnham &
+Augustin 1997, Biometrics 53, 603), and its fit a confidence distribution for the squared
+coefficient c: the one its own interval inverts (:func:`.axis.coefficient_interval`), a point
+mass at zero where S lacks the term.  The interval is the mixture's quantiles, the
+model-averaged tail-area interval of Turek & Fletcher (2012, CSDA 56, 2809).  Why and how well:
+docs/method.md section 11.
 """
 
 import math
 
 import numpy as np
 
-from .axis import chi_square_applies
+from .axis import ALTERNATIVE_MARGIN, chi_square_applies
+from .bisection import halve
 from ..scipy_compiled import function
 
 _gammaincc = function('special', '_special_ufuncs', 'gammaincc')
@@ -39,14 +29,15 @@ _BISECTIONS = 80
 AVERAGING_PENALTY = 2.0
 
 
-def weights(fit, rejected=()):
+def weights(fit):
     """
     Return ``[(weight, AxisFit), ...]``: every candidate set's fit of ``fit`` with its weight.
 
-    ``rejected``: term sets (frozensets) another curve contradicts, left out.  A fit without
-    candidates (named terms, a remedy's set) is the one set, weight 1.
+    Sets another curve contradicts are left out.  A fit without candidates (named terms, a
+    remedy's set) is the one set, weight 1.
     """
     scored = []
+    rejected = fit.rejected_sets
     for _, names in fit.candidates:
         key = frozenset(names)
         if key in fit.candidate_fits and key not in rejected:
@@ -84,25 +75,24 @@ def _cdf(fit, term, scale):
     return lambda x: _gammaincc(0.5 * nu, 0.5 * nu * c / np.maximum(np.asarray(x), 1e-300))
 
 
-def selection_gain(fit, term, margin, penalty, rejected=()):
+def selection_gain(fit, term):
     """
     ``(G, G*)``: the chi^2 gain that resolved a term, and the gain that would just have.
 
-    The term's size is resolved because the best of the selected set's subsets without it
-    trails the selected set by D >= ``margin`` in the criterion chi^2 + k ``penalty``: a
-    chi^2 gain G = D + (k_sel - k_without) ``penalty``, G* the same at D = ``margin``.  (A set
-    that swaps the term for another is a question of which term, not of how large: the
-    weights of :func:`weights` carry it.)  None when the selection did not choose the term
-    (named terms) or no such subset was fitted.
+    The term is resolved because the best of the selected set's subsets without it (none
+    another curve rejected) trails the selected set by D >= :data:`.axis.ALTERNATIVE_MARGIN` in
+    the criterion chi^2 + k ``fit.selection_penalty``: a chi^2 gain G = D + (k_sel - k_without)
+    penalty, G* the same at D = the margin.  (A set that swaps the term for another is a
+    question of which term, not of how large: the weights of :func:`weights` carry it.)  None
+    for white noise (in every set), a term the selection did not choose, or no such subset.
     """
-    if not fit.candidates or term not in fit.coef:
+    if term == 'white_noise' or not fit.candidate_fits or term not in fit.coef:
         return None
-    chosen = set(fit.terms)
+    chosen, rejected = set(fit.terms), fit.rejected_sets
     for crit, names in fit.candidates:
-        if (term not in names and set(names) < chosen
-                and frozenset(names) not in rejected):
-            extra = (len(fit.terms) - len(names)) * penalty
-            return crit - fit.candidates[0][0] + extra, margin + extra
+        if term not in names and set(names) < chosen and frozenset(names) not in rejected:
+            extra = (len(fit.terms) - len(names)) * fit.selection_penalty
+            return crit - fit.candidates[0][0] + extra, ALTERNATIVE_MARGIN + extra
     return None
 
 
@@ -130,16 +120,7 @@ def selective_lower(c, gain, needed, level):
         return num / den if den > 1e-300 else 0.0
     if tail(0.0) >= p:
         return 0.0
-    a, b = 0.0, c
-    for _ in range(_BISECTIONS):  # tail grows with x
-        mid = 0.5 * (a + b)
-        if tail(mid) < p:
-            a = mid
-        else:
-            b = mid
-        if b - a < 1e-9 * c:
-            break
-    return 0.5 * (a + b)
+    return halve(lambda x: tail(x) < p, 0.0, c, _BISECTIONS, 1e-9 * c)  # tail grows with x
 
 
 def averaged_interval(weighted, term, level, selected=None, scale=1.0, selection=None):
@@ -173,15 +154,7 @@ def averaged_interval(weighted, term, level, selected=None, scale=1.0, selection
             a -= 2.0 * (b - a)
         while mixture(math.exp(b)) < q:
             b += 2.0 * (b - a)
-        for _ in range(_BISECTIONS):
-            mid = 0.5 * (a + b)
-            if mixture(math.exp(mid)) < q:
-                a = mid
-            else:
-                b = mid
-            if b - a < 1e-9:
-                break
-        return math.exp(0.5 * (a + b))
+        return math.exp(halve(lambda x: mixture(math.exp(x)) < q, a, b, _BISECTIONS, 1e-9))
     lo = quantile(p)
     if selection is not None and selected is not None and term in selected.coef:
         lo = min(lo, selective_lower(selected.coef[term], *selection, level))

@@ -1,29 +1,11 @@
 """
-Joint, weighted, non-negative fit of noise terms to a measured Allan variance curve.
+Joint, weighted, non-negative fit of noise terms to a measured Allan variance curve, per axis.
 
-Method (per axis)
------------------
-* The model is AVAR(tau) = sum_j c_j g_j(tau): the five IEEE terms are linear in their squared
-  coefficients c_j = Q^2, N^2, B^2, K^2, R^2 (shapes in :mod:`imu_allan.core.terms`);
-  Gauss-Markov and sinusoid are linear in sigma^2 / A^2 once tau_c / f0 is fixed, which is
-  profiled over a grid and refined.
-* Generalised least squares with c_j >= 0 (NNLS on the whitened problem).  The covariance of
-  the AVAR estimates is V_i = 2 AVAR_i^2 / EDF_i on the diagonal (chi-square), with the
-  correlation between averaging times measured on simulated data:
-  rho_ij = (1 - c) exp(-(|u_i - u_j|)^1.5) + c exp(-|log10(tau_i / tau_j)| / 3), with
-  u = integral of d(log10 tau) / w(alpha), w = 0.41 decades for white / quantization noise,
-  0.58 for flicker, 1.08 for random walk, and the long-range share c = 0.1 for flicker, 0
-  otherwise (c enters as sqrt(c_i c_j), so the matrix stays positive definite).  Ignoring
-  this correlation (plain weighted LS) makes the intervals about twice too narrow.
-* The weights use the model AVAR, not the measured one (iteratively re-weighted), so noisy low
-  points do not pull the fit down.
-* Intervals: 68.3 % from the GLS covariance of c_j, mapped through sqrt; for tau_c and f0 from
-  the profile chi-square (delta chi^2 = 1).
-* Term selection when none are asked for: every subset of the five IEEE terms is fitted and the
-  one with the lowest chi^2 + 2 k ln(T) wins (k = terms with a non-zero coefficient; a BIC
-  with a doubled penalty, because long-tau estimates have few degrees of freedom and flicker
-  drift mimics a random walk or ramp there), so a term is only reported when the data support
-  it.
+The method is docs/method.md section 4 (model, correlation between averaging times, intervals,
+term selection by chi^2 + 2 k ln T) in the log domain of section 11 (:class:`Problem`).  The
+IEEE terms are linear in their squared coefficients c_j = Q^2, N^2, B^2, K^2, R^2 (shapes in
+:mod:`imu_allan.core.terms`); Gauss-Markov and sinusoid are linear in sigma^2 / A^2 once
+tau_c / f0 is fixed, which is profiled over a grid and refined (intervals: delta chi^2 = 1).
 """
 
 import copy
@@ -33,7 +15,7 @@ import math
 
 import numpy as np
 
-from .bisection import guided, log_ratio, run
+from .bisection import guided, halve, log_ratio, run
 from .bounded_min import bounded_minimum
 from .nnls import nnls_scaled
 from ..allan.edf import _gammainccinv, CI_LEVEL
@@ -47,6 +29,11 @@ CORRELATION_WIDTH = {2: 0.41, 1: 0.41, 0: 0.41, -1: 0.58, -2: 1.08}
 #: long-range exponential component exp(-|d log10 tau| / 3) per noise exponent.
 CORRELATION_TAIL = {-1: 0.1}
 _MIN_EDF = 1.0
+
+
+def selection_penalty(problem):
+    """Return the selection criterion's charge per term on ``problem``: 2 ln T (chi^2 units)."""
+    return SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
 
 
 def usable_points(avar, edf):
@@ -109,18 +96,19 @@ class AxisFit:
     #: the filter's deficit c (SI^2): AVAR - c tau0 / tau^2, 1.5 (D / S) N^2 (:mod:`.tau_range`;
     #: fitted for a measured filter, N's for a known one)
     filter_deficit: float = 0.0
-    #: on a problem with a given spread (:meth:`Problem.from_log_level`; the discrepancy
-    #: workflow's) every named term is in ``terms`` and ``intervals`` (68.3 %), and the fit
-    #: keeps its evidence (:func:`_sandwich_uncertainty`): the Jacobian of the residuals z
-    #: (unit-norm columns: per squared coefficient, then per ln position of each free hump, as
-    #: ``labels`` (term, 'amp' or 'pos') says), the sandwich covariance of the log parameters
-    #: (ln amplitude, ln position; same order), the 95 % intervals and {term: {param: bool}}:
-    #: which parameters sit at a bound
+    #: on a problem with a given spread (:meth:`Problem.from_log_level`) the evidence of
+    #: :func:`_sandwich_uncertainty`: Jacobian, its column ``labels`` (term, 'amp' or 'pos'),
+    #: covariance of the log parameters, 95 % intervals, {term: {param: at a bound}}
     jac: np.ndarray = None
     labels: list = field(default_factory=list)
     log_cov: np.ndarray = None
     intervals95: dict = field(default_factory=dict)
     at_bound: dict = field(default_factory=dict)
+
+    @property
+    def rejected_sets(self):
+        """Return the term sets (frozensets) another curve contradicts (:attr:`evidence`)."""
+        return {frozenset(e['terms']) for e in self.evidence if e['rejected']}
 
     @property
     def tau_range(self):
@@ -140,10 +128,12 @@ class FitError(ValueError):
 
 def correlation_matrix(tau, alpha, widths=None, tails=None):
     """
-    Correlation of AVAR estimates between averaging times (see module docstring).
+    Correlation of AVAR estimates between averaging times (docs/method.md section 4).
 
-    ``widths``, ``tails``: per noise exponent, default :data:`CORRELATION_WIDTH` and
-    :data:`CORRELATION_TAIL` (another variance has its own, e.g. the Hadamard one).
+    rho_ij = (1 - c) exp(-|u_i - u_j|^1.5) + c exp(-|log10(tau_i / tau_j)| / 3), u the
+    integral of d(log10 tau) / w(alpha); c enters as sqrt(c_i c_j), so the matrix stays
+    positive definite.  ``widths`` w, ``tails`` c: per noise exponent, default
+    :data:`CORRELATION_WIDTH` and :data:`CORRELATION_TAIL` (the Hadamard variance has its own).
     """
     widths = CORRELATION_WIDTH if widths is None else widths
     tails = CORRELATION_TAIL if tails is None else tails
@@ -162,19 +152,12 @@ class Problem:
     """
     The data of one axis in the log domain, whitened on demand for a given model curve.
 
-    Each AVAR estimate is AVAR chi^2_nu / nu, so y_i = ln(estimate_i) - (psi(nu/2) - ln(nu/2))
-    has mean ln AVAR_i and a spread s_i = sqrt(psi'(nu/2)) that does not depend on the model
-    (:mod:`..allan.log_chi2`); the estimates correlate as C (:func:`correlation_matrix`).  The
-    fit minimises chi^2 = r' (S C S)^-1 r over the log residuals r = y - ln a(tau) of a model
-    curve a: a Gaussian likelihood whose covariance is the same for every model, so criteria of
-    different term sets compare fairly.  (The relative residual (estimate - a) / a that an
-    AVAR-domain fit with model weights minimises is bounded by 1 where a model overshoots and
-    unbounded where it undershoots: it favours terms that lift the curve where the few-EDF
-    estimates at long averaging times scatter, and gave a spurious bias instability, random
-    walk or ramp on 2-17 % of simulated axes from 10 s to 30 min.)  L^-1, the inverse Cholesky
-    factor of C, is computed once per problem; each Gauss-Newton step is one small matrix
-    product.  ``expected=True``: ``avar`` is an expected curve (the advisor's noise-free
-    forecasts), taken without the log's bias correction.
+    y_i = ln(estimate_i) - (psi(nu/2) - ln(nu/2)) has mean ln AVAR_i and a spread
+    s_i = sqrt(psi'(nu/2)) that does not depend on the model (:mod:`..allan.log_chi2`); the fit
+    minimises chi^2 = r' (S C S)^-1 r over the log residuals r = y - ln a(tau) of a model curve
+    a, C the correlation (:func:`correlation_matrix`): docs/method.md section 11.  L^-1, the
+    inverse Cholesky factor of C, is computed once per problem.  ``expected=True``: ``avar``
+    is an expected curve (the advisor's noise-free forecasts), without the log's bias correction.
     """
 
     #: correlation widths and long-range shares of the estimates (:func:`correlation_matrix`)
@@ -193,13 +176,11 @@ class Problem:
         """
         Keep the usable averaging times of one axis (s, AVAR in SI units squared, EDF).
 
-        ``duration_s`` (the record length) gives a rate ramp's drift variance
-        (:func:`ramp_drift_variance`); without it a ramp's interval lacks that part.
-        ``span`` (a :class:`.tau_range.TauRange`): keep only its averaging times (those the
-        sensor's own processing does not shape), fix the frequency of its line (a
-        ``sinusoid`` fitted on this problem keeps it, unprofiled) and carry its nuisance
-        columns in every fit: its other lines, and where the sensor filters, the deficit its
-        filter makes, -tau0 / tau^2 (:mod:`.tau_range`), their sizes fitted.
+        ``duration_s`` (the record length, s) gives a rate ramp's drift variance
+        (:func:`ramp_drift_variance`).  ``span`` (a :class:`.tau_range.TauRange`): keep only
+        its averaging times, fix the frequency of its line (the ``sinusoid``'s) and carry its
+        nuisance columns in every fit: its other lines and a measured filter's deficit
+        -tau0 / tau^2 (:mod:`.tau_range`), their sizes fitted.
         """
         self.duration_s = duration_s
         tau = np.asarray(tau, dtype=float)
@@ -214,13 +195,10 @@ class Problem:
         self.span = span
         self.fixed = ({'sinusoid': span.line[0]} if span is not None and span.line is not None
                       else {})
-        #: the span's other lines (Hz) and whether its filter's deficit is fitted: nuisance
-        #: columns every fit of this problem carries (the sensor's, not noise terms), a line
-        #: per unit amplitude^2, the deficit -tau0 / tau^2 per unit (SI^2)
+        #: the span's other lines (Hz): nuisance columns per unit amplitude^2
         self.lines = tuple(f for f, _ in span.lines) if span is not None else ()
         self.filtered = bool(span is not None and span.filter_moment > 0.0)
-        #: a known filter's deficit per unit N^2, 1.5 D / S, in white noise's column (0: none,
-        #: or a measured filter's, whose size is a nuisance column: ``deficit_fitted``)
+        #: a known filter's deficit per unit N^2, 1.5 D / S, in white noise's column (0: none)
         self.deficit_per_white = span.deficit_per_white if span is not None else 0.0
         self.deficit_fitted = self.filtered and not self.deficit_per_white
         shapes = [sinusoid_shape(self.tau, f) for f in self.lines]
@@ -242,13 +220,12 @@ class Problem:
         """
         Return a problem whose ln AVAR, spread and correlation are given (a simulated band).
 
-        ``log_level``: ln AVAR (SI^2) the estimates stand for, bias-corrected; ``log_spread``:
-        its standard deviation per tau, fixed (it already holds the share of any deterministic
-        term); ``corr``: the estimates' correlation.  The fit is then working-independence,
-        chi^2 = sum z^2 with z = (log_level - ln a) / log_spread: the metric the discrepancy
-        gap is measured in, whose Satterthwaite tests take the correlation into account
-        (:mod:`..discrepancy.significance`); the correlation enters the covariance (a
-        sandwich, :func:`fit_terms`), not the weights.
+        ``log_level``: ln AVAR (SI^2), bias-corrected; ``log_spread``: its standard deviation
+        per tau (holding the share of any deterministic term); ``corr``: the estimates'
+        correlation.  The fit is then working-independence, chi^2 = sum z^2 with
+        z = (log_level - ln a) / log_spread (the discrepancy gap's metric,
+        :mod:`..discrepancy.significance`); the correlation enters only the sandwich
+        covariance (:func:`_sandwich_uncertainty`).
         """
         self = cls.__new__(cls)
         self.tau = np.asarray(tau, dtype=float)
@@ -294,13 +271,10 @@ class Problem:
         """
         Return ``columns`` (AVAR per tau, one column each) whitened for ``model`` AVAR.
 
-        A column g is a direction of the model curve: its log-domain sensitivity g / model
-        over the log residuals' covariance, L^-1 (g / (s noise)).  ``deterministic`` is the
-        part of ``model`` from a deterministic signal (a rate ramp): it adds to the expected
-        AVAR but not to the scatter of its estimate, which belongs to the noise part alone, so
-        a log residual there spreads as s noise / model.  ``spread`` (AVAR units per tau)
-        adds scatter beyond the chi-square one: a ramp's cross term with the noise's drift
-        (:func:`ramp_cross_sd`).
+        A column g becomes L^-1 (g / (s noise)).  ``deterministic``: the part of ``model`` from
+        a rate ramp, which does not scatter the estimate (noise = model - deterministic;
+        docs/method.md section 4); ``spread`` (AVAR per tau): scatter added to the chi-square
+        one (:func:`ramp_cross_sd`).
         """
         # (x - 0.0 is x: the subtraction is skipped without a ramp; whiten runs in every step)
         noise = np.maximum(model if isinstance(deterministic, float) and deterministic == 0.0
@@ -323,15 +297,12 @@ class Problem:
         """
         Gauss-Newton NNLS in the log domain; return (coefficients, chi2, whitened design).
 
-        Each step fits the linearised ln(shapes @ c + offset) about the current curve a0
-        (non-negative least squares on the whitened working response a0 (1 + y - ln a0) -
-        offset), halving the step while the exact chi^2 grows; the first step starts from the
-        measured level.  ``offset`` is a fixed model part (AVAR per tau) added to
-        ``shapes @ coef``; ``deterministic`` the column index of a deterministic term (rate
-        ramp) in ``shapes``, ``offset_deterministic`` whether the offset is one (see
-        :meth:`whiten`); ``spread(coef)`` the extra scatter of the estimates a set of
-        coefficients implies (:meth:`whiten`).  The whitened design is the Jacobian at the
-        solution: its normal matrix inverted is the coefficients' covariance.
+        Each step is NNLS on the whitened working response a0 (1 + y - ln a0) - offset about
+        the current curve a0 (first: the measured level), halved while the exact chi^2 grows.
+        ``offset``: a fixed model part (AVAR per tau); ``deterministic``: the column index of a
+        rate ramp in ``shapes``, ``offset_deterministic``: the offset is one (:meth:`whiten`);
+        ``spread(coef)``: the extra scatter those coefficients imply.  The whitened design's
+        normal matrix inverted is the coefficients' covariance.
         """
         fixed = offset if offset_deterministic else 0.0
 
@@ -375,16 +346,11 @@ def deterministic_index(names):
 
 def ramp_drift_variance(problem, coef):
     """
-    Variance of a fitted rate ramp's R^2 from the noise's own drift over the record.
+    Return the variance of a fitted rate ramp's R^2 from the noise's own drift over the record.
 
-    A deterministic ramp adds R^2 tau^2 / 2 to AVAR exactly, but the cross term R tau e of
-    the estimator (e the mean first difference of tau-averages, which telescopes to the
-    difference D of the averages at the record's two ends over M tau0 ~ T) moves R^2 by
-    2 R D / T at every tau alike: the slope the noise itself shows.  Var(D) is the noise's
-    structure function at separation T with windows w = tau_max: 2 N^2 / w (white),
-    (2 B^2 / pi) (ln(T / w) + 1.5) (flicker; the integral of (1 - cos 2 pi f T) sinc^2 / f,
-    evaluated numerically), K^2 T (random walk), 4 Q^2 / w^2 (quantization).  Returns
-    4 R^2 Var(D) / (T - 2 w)^2 (0 without a record length).
+    4 R^2 Var(D) / (T - 2 w)^2, D the difference of the noise's averages over windows
+    w = tau_max at the record's two ends (:func:`drift_structure`; docs/method.md section 4);
+    0 without a record length.  ``coef``: squared coefficients by term.
     """
     t_rec = problem.duration_s
     if not t_rec or 'rate_ramp' not in coef:
@@ -398,13 +364,9 @@ def ramp_cross_sd(problem, coef):
     """
     Return the sd (AVAR units, per tau) of a ramp's cross term with the noise's drift.
 
-    The estimator's cross term R tau^2 D / (T - 2 tau) (:func:`ramp_drift_variance`) moves
-    every estimate with one D; its shape is the ramp's tau^2 only while tau << T, so beyond
-    what R absorbs it scatters the estimates by sqrt(R^2) tau^2 / (T - 2 tau) sd(D), D the
-    noise's drift at windows tau (:func:`drift_structure`).  Taken as independent scatter (as
-    the adequacy test takes it): where a ramp dominates, the chi-square scatter of the noise
-    part alone is tiny, and the cross term's bend near T / 10 passed for a random walk on 13
-    of 24 simulated 24-h records.  ``coef``: squared coefficients by term.
+    sqrt(R^2) tau^2 / (T - 2 tau) sd(D), D the noise's drift at windows tau
+    (:func:`drift_structure`), taken as independent scatter (docs/method.md section 11).
+    ``coef``: squared coefficients by term.
     """
     r2 = coef.get('rate_ramp', 0.0)
     t_rec = problem.duration_s
@@ -419,10 +381,8 @@ def drift_structure(coef, t_rec, w):
     """
     Var(D): the difference of the noise's averages over windows ``w`` (s) ``t_rec`` apart.
 
-    The noise terms' structure function (``coef``: squared coefficients): 2 N^2 / w (white),
-    (2 B^2 / pi) (ln(T / w) + 1.5) (flicker), K^2 T (random walk), 4 Q^2 / w^2
-    (quantization); :func:`ramp_drift_variance` tells where it comes from.  ``w`` may be an
-    array.
+    The structure function of docs/method.md section 4 (``coef``: squared coefficients):
+    2 N^2 / w + (2 B^2 / pi) (ln(T / w) + 1.5) + K^2 T + 4 Q^2 / w^2; ``w`` may be an array.
     """
     w = np.asarray(w, dtype=float)
     return (2.0 * coef.get('white_noise', 0.0) / w
@@ -442,19 +402,14 @@ def _log_range(problem, name, ranges=None):
 def fit_terms(problem, names, profile_intervals=True, fixed=None, ranges=None, init=None,
               hints=None):
     """
-    Fit the named terms; return an :class:`AxisFit` (profiling tau_c / f0 when present).
+    Fit the named terms on ``problem``; return an :class:`AxisFit` (keeping the problem).
 
-    The fit keeps ``problem`` (``fit.problem``).
-
-    ``profile_intervals=False`` leaves the intervals of tau_c / f0 NaN: their profile
-    bisection is most of the cost of such a fit, and a caller comparing criteria (the
-    recording advisor) does not need them.  Positions (tau_c s, frequency_hz Hz):
-    ``fixed`` ({term: position}) holds those besides the problem's own lines; ``ranges``
-    ({term: (lo, hi)}) replaces a free one's default range (its hump's peak inside the
-    span); ``init`` (a previous fit's {term: params}) and ``hints`` ({term: position}) add
-    points to a profile's grid (:func:`_profile_positions`).  On a problem with a given
-    spread (:meth:`Problem.from_log_level`) the uncertainty is the sandwich one
-    (:func:`_sandwich_uncertainty`) and no profile interval is computed.
+    ``profile_intervals=False`` leaves the intervals of tau_c / f0 NaN (their bisection is
+    most of the cost; criteria need none).  Positions (tau_c s, frequency_hz Hz): ``fixed``
+    ({term: position}) holds those besides the problem's own line; ``ranges`` ({term: (lo,
+    hi)}) replaces a free one's default range; ``init`` (a previous fit's {term: params}) and
+    ``hints`` ({term: position}) add points to its profile's grid (:func:`_profile_positions`).
+    A problem with a given spread gets the sandwich uncertainty (:func:`_sandwich_uncertainty`).
     """
     names = list(names)
     held = {**problem.fixed, **(fixed or {})}
@@ -498,12 +453,11 @@ def _profile_positions(problem, free, nonlinear, evaluate, ranges, starts, hints
     """
     Profile the position of each ``free`` hump term in turn; set it in ``nonlinear``.
 
-    A grid of 25 over the log range (plus the ``hints`` and ``starts`` positions, {term:
-    position}), then a bounded minimum between the best point's neighbours.  A hump not yet
-    profiled is held at its start (default the middle of its range), and the humps with a
-    start are profiled last: a new hump is placed beside the ones a previous fit placed.
-    ``evaluate(positions)`` is the fit at given positions.  Returns {term: (grid, chi^2 per
-    point, ln position, chi^2 as a function of ln position)}.
+    A grid of 25 over the log range (plus the ``hints`` and ``starts`` positions), then a
+    bounded minimum between the best point's neighbours.  A hump not yet profiled is held at
+    its start (default mid-range); those with a start go last, so a new hump is placed beside
+    the ones a previous fit placed.  ``evaluate(positions)``: the fit at given positions.
+    Returns {term: (grid, chi^2 per point, ln position, chi^2 as a function of ln position)}.
     """
     held = {}
     for name in free:
@@ -536,10 +490,9 @@ def _gls_uncertainty(fit, names, nonlinear, coef, g, used, profiles):
     """
     Fill ``fit``'s terms, coefficients, GLS covariance and 68.3 % intervals.
 
-    ``g``: the whitened design at the solution (its nuisance columns after the terms'),
-    ``used`` its columns with a non-zero coefficient; ``profiles`` those of
-    :func:`_profile_positions` (None: position intervals NaN).  A term pinned at zero is left
-    out of the fit.
+    ``g``: the whitened design at the solution (nuisance columns last), ``used`` its columns
+    with a non-zero coefficient; ``profiles``: :func:`_profile_positions`' (None: position
+    intervals NaN).  A term pinned at zero is left out.
     """
     problem = fit.problem
     active = coef > 0
@@ -576,13 +529,12 @@ def _sandwich_uncertainty(fit, names, nonlinear, free, coef, ranges):
     """
     Fill ``fit``'s terms and evidence on a problem with a given spread (working independence).
 
-    The Jacobian of z (d z / d c_j per squared coefficient, d z / d ln position per ``free``
-    hump; columns scaled to unit norm, :attr:`AxisFit.jac`) and the sandwich covariance
-    (J'J)^-1 J'RJ (J'J)^-1 of the estimate under the estimates' correlation R, mapped to ln
-    amplitude and ln position: 68.3 and 95 % intervals exp(ln value -+ z sd), asymmetric.
-    Every named term is kept, one pinned at zero too (its column still enters the tests of
-    :mod:`..discrepancy.significance`): its log is unbounded (infinite variance) and it
-    counts as at its bound, as does a free position within 1 % of its log range's ends.
+    The Jacobian J of z (per squared coefficient, then per ln position of each ``free`` hump;
+    unit-norm columns) and the sandwich covariance (J'J)^-1 J'RJ (J'J)^-1 under the estimates'
+    correlation R, mapped to ln amplitude and ln position: 68.3 and 95 % intervals
+    exp(ln value -+ z sd).  Every named term is kept, one pinned at zero too (for
+    :mod:`..discrepancy.significance`): infinite log variance, at its bound, as is a free
+    position within 1 % of its log range's ends.
     """
     problem = fit.problem
     shapes = shape_columns(problem, names, nonlinear)
@@ -646,15 +598,8 @@ def _profile_interval(profile, chi2_min):
     def crossing(edge):
         if abs(chi2_at(edge) - chi2_min) < 1.0:
             return edge
-        a, b = sorted((logp, edge))
-        for _ in range(30):  # bisection on the monotone side of the minimum
-            mid = 0.5 * (a + b)
-            inside = chi2_at(mid) - chi2_min < 1.0
-            if (mid > logp) == inside:
-                a = mid
-            else:
-                b = mid
-        return 0.5 * (a + b)
+        a, b = sorted((logp, edge))  # bisection on the monotone side of the minimum
+        return halve(lambda x: (x > logp) == (chi2_at(x) - chi2_min < 1.0), a, b, 30)
     return math.exp(crossing(grid[0])), math.exp(crossing(grid[-1]))
 
 
@@ -662,9 +607,8 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
     """
     Fit one axis; ``terms=None`` selects the IEEE terms (chi^2 + 2 k ln T, module docstring).
 
-    ``duration_s`` and ``span``: see :class:`Problem`.  In a selection every candidate set
-    also holds the span's line (known from the spectrum: a nuisance term, the same in every
-    set).  The returned fit keeps its problem (``fit.problem``).
+    ``duration_s`` and ``span``: see :class:`Problem`; every candidate set also holds the
+    span's line.  The returned fit keeps its problem (``fit.problem``).
     """
     problem = Problem(np.asarray(tau, float), np.asarray(avar, float),
                       np.asarray(edf, float), np.asarray(alpha), rate_hz, duration_s, span)
@@ -675,19 +619,15 @@ def fit_axis(tau, avar, edf, alpha, rate_hz, terms=None, duration_s=None, span=N
         if unknown:
             raise ValueError(f'unknown noise term(s): {", ".join(unknown)}')
         return fit_terms(problem, terms)
-    # White noise is in every set: a rate sensor always has it, and a set without it (a flat
-    # bias instability alone, quantization alone) fits a filtered 10-s record's flattened
-    # short end and is then reported instead of the white noise it hides.
+    # White noise is in every set (docs/method.md section 11); quantization is in none beside
+    # a filter's deficit or a resonance's tail, which have its 1/tau^2 shape (section 10).
     base = tuple(problem.fixed) + ('white_noise',)
     candidates = [t for t in IEEE_TERMS if t != 'white_noise'] if problem.tau.size >= 4 else []
     if candidates and (problem.filtered or (span is not None
                                             and span.limited_by == 'resonance')):
-        # a filter's deficit, and beyond its cut a resonance's tail, have quantization's
-        # shape (1/tau^2): quantization cannot be told from them (a resonance's rest passed
-        # for it and took 10 % off N on a real gyro)
         candidates.remove('quantization')
     best, best_bic = None, math.inf
-    penalty = SELECTION_PENALTY * math.log(max(problem.tau.size, 2))
+    penalty = selection_penalty(problem)
     scored, fits = [], {}
     for k in range(0, len(candidates) + 1):
         for subset in combinations(candidates, k):
@@ -712,9 +652,8 @@ def widen(fit, scale):
     """
     Widen every interval of ``fit`` by ``scale`` (in place): its covariance by scale^2.
 
-    For a fit the adequacy test rejects (:attr:`.adequacy.Adequacy.scale`): main parameters
-    from the scaled covariance (:func:`coefficient_interval`), positions (tau_c, f0) by their
-    log half-widths times ``scale``; a fixed position stays a point.
+    For a fit the adequacy test rejects (:attr:`.adequacy.Adequacy.scale`); positions (tau_c,
+    f0) by their log half-widths times ``scale``, a fixed position stays a point.
     """
     if not scale > 1.0 or fit.cov is None:
         return
@@ -734,11 +673,11 @@ def widen(fit, scale):
 
 def upper_limit(tau, avar, edf, alpha, rate_hz, terms, term, delta_chi2=UPPER_LIMIT_DELTA_CHI2):
     """
-    Largest coefficient of an undetected ``term`` the data allow (profile likelihood).
+    Largest coefficient of an undetected ``term`` the data allow (profile likelihood, SI).
 
     The other ``terms`` are refitted for each trial value; the limit is where chi^2 exceeds
-    its minimum by ``delta_chi2`` (4: one-sided ~97.7 %, two-sided 95 %).  Used to give Kalibr,
-    which refuses zeros, an honest bound instead of nothing.  Returns NaN if not bounded.
+    its minimum by ``delta_chi2`` (4: two-sided 95 %), above the best-fitting coefficient
+    (docs/method.md section 7).  Returns NaN if not bounded.
     """
     problem = Problem(np.asarray(tau, float), np.asarray(avar, float), np.asarray(edf, float),
                       np.asarray(alpha), rate_hz)
@@ -769,14 +708,12 @@ def problem_upper_limit(problem, terms, term, delta_chi2=UPPER_LIMIT_DELTA_CHI2)
     hi = math.log(float(np.max(problem.avar / extra)))
     if not evaluate(hi)[0]:
         return math.nan
-    # Above the best-fitting coefficient the excess only grows (chi^2 is convex in c); below
-    # it, where the data may want the term, the excess can pass delta as well, and that
-    # crossing is not the limit.
+    # above the best-fitting coefficient the excess only grows (convex in c); below it, the
+    # excess can pass delta as well, and that crossing is not the limit
     lo = max(hi - 60.0, math.log(coef[-1])) if coef[-1] > 0 else hi - 60.0
     halvings = max(math.ceil(math.log2((hi - lo) / _LIMIT_RESOLUTION)), 0)
-    # First guess: the limit of the linear problem with these weights, c + sqrt(delta) sd(c)
-    # (GLS covariance; the re-weighting moves it a little).  The levels given for the ends
-    # only make that guess (near the limit the excess grows about as c^2: slope 2 in log c).
+    # first guess c + sqrt(delta) sd(c) (the linear problem's limit); near it the excess
+    # grows about as c^2: slope 2 in log c
     sd = math.sqrt(max(float(np.linalg.pinv(g.T @ g)[-1, -1]), 0.0))
     guess = math.log(max(coef[-1] + math.sqrt(delta_chi2) * sd, math.exp(lo)))
     lo, _ = run(guided(evaluate, lo, hi, halvings, (2.0 * (lo - guess), 2.0 * (hi - guess))))
@@ -785,15 +722,11 @@ def problem_upper_limit(problem, terms, term, delta_chi2=UPPER_LIMIT_DELTA_CHI2)
 
 def coefficient_interval(c, var, level=CI_LEVEL, deterministic=False):
     """
-    Two-sided ``level`` interval of sqrt(c) for a squared coefficient c with variance ``var``.
+    Two-sided ``level`` interval ``(lo, hi)`` of sqrt(c), c a squared coefficient of ``var``.
 
-    A noise term's c is a weighted sum of AVAR estimates, each chi-square distributed, so c is
-    about c_true chi^2_nu / nu with nu = 2 c^2 / var (Satterthwaite's effective degrees of
-    freedom): the interval is c nu / chi^2_nu quantiles, as SP1065 eq. 45 does for one AVAR
-    point.  With many degrees of freedom it is c +- z sd; with few (a random walk seen in the
-    last decade only) its upper side is the longer one, as the estimates' scatter is.  A
-    deterministic term (``deterministic``: the rate ramp), whose error is the noise's drift,
-    takes the normal interval c +- z sd.  Returns ``(lo, hi)`` of sqrt(c).
+    c nu / chi^2_nu quantiles with Satterthwaite's nu = 2 c^2 / var (SP1065 eq. 45,
+    docs/method.md section 4); the normal c +- z sd for a ``deterministic`` term (the rate
+    ramp) and where :func:`chi_square_applies` says no.
     """
     if not (var > 0 and c > 0):
         return (math.sqrt(max(c, 0.0)),) * 2
@@ -802,8 +735,8 @@ def coefficient_interval(c, var, level=CI_LEVEL, deterministic=False):
         z = two_sided_z(level)
         sd = math.sqrt(var)
         return math.sqrt(max(c - z * sd, 0.0)), math.sqrt(c + z * sd)
-    low_q, high_q = _chi2_quantiles(2.0 * c * c / var, level)
     nu = 2.0 * c * c / var
+    low_q, high_q = _chi2_quantiles(nu, level)
     return math.sqrt(c * nu / low_q), math.sqrt(c * nu / high_q)
 
 

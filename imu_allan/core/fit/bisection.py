@@ -35,6 +35,23 @@ def bisection(ok, lo, hi, steps):
     return lo, hi
 
 
+def halve(below, lo, hi, steps, tol=0.0):
+    """
+    Return the midpoint of [lo, hi] after ``steps`` halvings toward the crossing of ``below``.
+
+    ``below(x)``: the crossing lies above x (monotone); stops early once hi - lo < ``tol``.
+    """
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        if below(mid):
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < tol:
+            break
+    return 0.5 * (lo + hi)
+
+
 def guided(evaluate, lo, hi, steps, levels, key=None, hi_known=True):
     """
     Return the (lo, hi) of :func:`bisection` with ``ok(x) = evaluate(x)[0]``, sooner.

@@ -18,7 +18,6 @@ from . import hadamard_check
 from .adequacy import assess, STATISTIC_SCALE
 from .averaging import averaged_interval, selection_gain, weights
 from .axis import (
-    ALTERNATIVE_MARGIN,
     fit_axis,
     fit_terms,
     problem_upper_limit,
@@ -79,11 +78,9 @@ class FittedModel:
         """
         Return the two-sided ``level`` interval of a parameter, ``(nan, nan)`` if not detected.
 
-        ``level`` defaults to 68.27 % (one standard deviation), the interval stored with the
-        fit.  Main parameters: :func:`coefficient_interval` from the squared coefficient and
-        its GLS variance (chi-square with Satterthwaite's degrees of freedom; normal for the
-        deterministic ramp); tau_c / f0: the stored profile interval's log half-widths scaled
-        by z = Phi^-1((1 + level) / 2).
+        ``level`` defaults to 68.27 %, the interval stored with the fit.  Main parameters:
+        :meth:`averaged_interval`; tau_c / f0: the stored interval's log half-widths scaled by
+        z = Phi^-1((1 + level) / 2).
         """
         stored = self.intervals.get(axis, {}).get(term, {}).get(param)
         if stored is None:
@@ -101,16 +98,9 @@ class FittedModel:
         return (value * (lo / value) ** z, value * (hi / value) ** z)
 
     def set_weights(self, axis):
-        """
-        ``[(weight, AxisFit), ...]``: the candidate term sets of ``axis`` and their weights.
-
-        Schwarz weights exp(-delta criterion / 2) over every set the selection fitted and no
-        other curve rejected (:func:`.averaging.weights`); the intervals average over them.
-        """
+        """Return ``[(weight, AxisFit), ...]`` of the term sets (:func:`.averaging.weights`)."""
         if axis not in self._weights:
-            fit = self.fits[axis]
-            rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
-            self._weights[axis] = weights(fit, rejected)
+            self._weights[axis] = weights(self.fits[axis])
         return self._weights[axis]
 
     def averaged_interval(self, axis, term, level=CI_LEVEL, selective=True):
@@ -122,10 +112,7 @@ class FittedModel:
         """
         fit = self.fits[axis]
         scale = fit.adequacy.scale if fit.adequacy is not None else 1.0
-        rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
-        selection = (None if not selective or term == 'white_noise' or not fit.candidate_fits else
-                     selection_gain(fit, term, ALTERNATIVE_MARGIN, fit.selection_penalty,
-                                    rejected))
+        selection = selection_gain(fit, term) if selective else None
         return averaged_interval(self.set_weights(axis), term, level, fit, scale, selection)
 
     def alarm_low(self, axis, term):
@@ -135,12 +122,9 @@ class FittedModel:
         The lowest of its 68.3 % interval's lower end (:meth:`interval`), those of the open
         term sets' own fits (:meth:`alternatives`), and those of the resolved terms refitted
         with each term not resolved held at the largest size the data allow at that level
-        (the profile limit at delta chi^2 = 1, :func:`problem_upper_limit`): the data show a
-        budget missed only when no term set they cannot reject, and no size of a term they
-        do not resolve, puts the lower end below it.  While bias instability is not resolved
-        the set without it reads white noise 0.1-0.2 standard deviations high (its N takes
-        part of the flicker floor) and the averaged interval leans on that set: a unit
-        exactly at its budget warned on 18-20 % of publications, not 15.9 %.
+        (the profile limit at delta chi^2 = 1): a budget is missed only when no term set the
+        data cannot reject, and no size of a term they do not resolve, puts the lower end
+        below it (docs/online.md, the budget levels).
         """
         low = self.interval(axis, term)[0]
         if not math.isfinite(low):
@@ -178,33 +162,22 @@ class FittedModel:
         """
         Term sets the data of ``axis`` cannot reject, the selected one first.
 
-        Every candidate set whose selection criterion is within :data:`ALTERNATIVE_MARGIN`
+        Every candidate set whose criterion is within :data:`.axis.ALTERNATIVE_MARGIN`
         of the best (see there); ``[selected]`` when the terms were named, not selected.
         """
         fit = self.fits.get(axis)
         if fit is None or not fit.terms:
             return []
-        selected = list(fit.terms)
-        if not fit.candidates:
-            return [selected]
-        best = fit.candidates[0][0]
-        out = [selected]
-        rejected = {frozenset(e['terms']) for e in fit.evidence if e['rejected']}
-        for crit, names in fit.candidates:
-            if (crit - best < ALTERNATIVE_MARGIN and set(names) != set(selected)
-                    and frozenset(names) not in rejected):
-                out.append(list(names))
-        return out
+        selected, rejected = list(fit.terms), fit.rejected_sets
+        return [selected] + [list(names) for names in hadamard_check.open_sets(fit.candidates)
+                             if set(names) != set(selected) and frozenset(names) not in rejected]
 
     def resolved(self, axis):
         """
         Return the terms of ``axis`` the record resolves: those every open term set holds.
 
-        A term is reported only when each term set the data cannot reject
-        (:meth:`alternatives`) contains it; one that some open sets hold and others do not is
-        not resolved (its value depends on a choice the data cannot make) and is reported as
-        an upper limit (:meth:`upper_limit`).  Named terms (``fit_noise_model(terms=...)``)
-        are all resolved: they were asked for.
+        The others are reported as upper limits (:meth:`upper_limit`; docs/method.md
+        section 11).  Named terms (``fit_noise_model(terms=...)``) are all resolved.
         """
         sets = self.alternatives(axis)
         return set.intersection(*(set(s) for s in sets)) if sets else set()
@@ -247,12 +220,9 @@ class FittedModel:
         """
         95 % upper limit of a term the record does not resolve on ``axis`` (SI, cached).
 
-        The profile limit (:func:`upper_limit`) with the other terms refitted, in each open
-        term set (:meth:`alternatives`; the term added where a set lacks it), the largest of
-        them: the limit holds whichever open set is the sensor's (a rate random walk in one
-        set takes up what a ramp would in another).  NaN if the term is resolved, nothing
-        was fitted, or the data do not bound it.  Exporters write it where a consumer needs a
-        number.
+        The largest profile limit (:func:`.axis.upper_limit`) over the best :data:`LIMIT_SETS`
+        open term sets, the term added where a set lacks it: it holds whichever open set is
+        the sensor's.  NaN if the term is resolved, nothing was fitted, or it is not bounded.
         """
         fit = self.fits.get(axis)
         if fit is None:
@@ -269,10 +239,9 @@ class FittedModel:
 
     def limits(self, axis):
         """
-        ``{term: 95 % upper limit}`` (SI; NaN: not bounded) of the IEEE terms not resolved.
+        Return ``{term: 95 % upper limit}`` (SI; NaN: not bounded) of the IEEE terms not resolved.
 
-        What the record says of a term it does not resolve (:meth:`upper_limit`): the terms
-        of :data:`~imu_allan.core.units.IEEE_TERMS` order, none for an axis not fitted.
+        In :data:`~imu_allan.core.units.IEEE_TERMS` order (:meth:`upper_limit`), {} unfitted.
         """
         if axis not in self.fits or not self.fits[axis].terms:
             return {}
@@ -302,11 +271,7 @@ class FittedModel:
         return None if fit is None else fit.tau_range
 
     def model_avar(self, axis, tau):
-        """
-        Return the AVAR of an axis's fitted curve at ``tau`` (s): the selected set and lines.
-
-        The curve the fit drew through the data, unresolved terms included.
-        """
+        """Return the AVAR at ``tau`` (s) of the curve the fit drew: the selected set, lines."""
         fit = self.fits.get(axis)
         if fit is None:
             return _terms.model_avar({}, tau, self.rate_hz)
@@ -339,32 +304,15 @@ def fit_noise_model(result, terms=None, axes=None, deviations=None, processing=N
     """
     Fit noise terms to every axis of an :class:`~imu_allan.core.allan.estimate.AllanResult`.
 
-    Parameters
-    ----------
-    result : AllanResult
-        Measured Allan deviation with EDF.
-    terms : sequence of str, optional
-        Terms to fit on every axis (any of :data:`~imu_allan.core.units.ALL_TERMS`); default:
-        automatic selection among the five IEEE terms by BIC.
-    axes : sequence of str, optional
-        Axes to fit (default all).
-    deviations : dict, optional
-        ``{kind: DeviationResult}`` of the same record (:func:`imu_allan.deviation`).  With
-        ``'ohdev'`` and automatic selection, the Hadamard curve decides between a rate random
-        walk and a rate ramp where the Allan fit cannot (:mod:`.hadamard_check`).
-    processing : dict, optional
-        ``{axis: Processing}``: what the sensor's own processing does to each axis (filter,
-        lines, resonances; :class:`.tau_range.Processing`, measured by
-        :func:`imu_allan.core.sensor.measure.measure_sensor` or known from the device).  The fit
-        then leaves out the averaging times it shapes and fits a visible line as the ``sinusoid``
-        term (:mod:`.tau_range`).  Without it every usable averaging time is fitted.
-    tau_range : (float, float), optional
-        Fit only these averaging times (s) on every axis, instead of the choice above.
-
-    Returns
-    -------
-    FittedModel
-
+    ``terms``: a sequence (or comma-separated string) of
+    :data:`~imu_allan.core.units.ALL_TERMS` fitted on every axis; default: the IEEE terms
+    selected by chi^2 + 2 k ln T.  ``axes``: those to fit (default all).  ``deviations``:
+    ``{kind: DeviationResult}`` of the same record; with ``'ohdev'`` and a selection, the
+    Hadamard check (:mod:`.hadamard_check`).  ``processing``: ``{axis: Processing}``
+    (:class:`.tau_range.Processing`, measured or known from the device): the fit leaves out
+    the averaging times it shapes and fits its lines (:mod:`.tau_range`); without it every
+    usable averaging time is fitted.  ``tau_range``: (lo, hi) s, fit only these averaging
+    times on every axis.  Returns a :class:`FittedModel`.
     """
     if isinstance(terms, str):
         terms = [t.strip() for t in terms.split(',') if t.strip()]
@@ -454,19 +402,11 @@ def _bounded_drift(fit, rate_hz, processing):
     """
     Try a Gauss-Markov hump where the selected IEEE terms bend away from the curve.
 
-    Real records drift within bounds (temperature cycles, a mount that settles): the Allan
-    curve rises to a hump and flattens or falls again, which no IEEE term does (a random walk
-    or a ramp keeps rising; a fit with one overshoots the last decade, 1.4-2.4x on two real
-    ADIS16405 accelerometers).  When the selection holds a random walk and the adequacy
-    test's p is below :data:`DRIFT_TRIAL_P`, the selected set plus a Gauss-Markov term, and
-    the same with the random walk (and a ramp) replaced by it, are fitted.  Not otherwise:
-    beside white noise and flicker a hump was more often the noise's own wander (it took
-    3 % off N of a 5-min simulated gyro), beside a ramp the estimator's own curvature (kept
-    on 2 of 24 simulated ramp records).  The one the test likes best is kept if it lowers the
-    test's chi^2 by more than :data:`DRIFT_GAIN` (under the selected model the drop is about
-    chi^2 with that many degrees of freedom: kept wrongly about once in a hundred tries).  The
-    selection criterion cannot decide this: the GLS chi^2 is blind to such a smooth bend
-    (:mod:`.adequacy`).
+    Where the selection holds a random walk and the adequacy test's p is below
+    :data:`DRIFT_TRIAL_P`: the selected set plus a Gauss-Markov term, and the same with the
+    random walk (and a ramp) replaced by it; the one the test likes best is kept if it lowers
+    the test's chi^2 by more than :data:`DRIFT_GAIN` (docs/method.md section 10, "Bounded
+    drifts").
     """
     if (fit.adequacy is None or not fit.adequacy.p < DRIFT_TRIAL_P
             or 'rate_random_walk' not in fit.terms

@@ -1,35 +1,20 @@
 """
 The Hadamard check of the term selection: a rate random walk K or a rate ramp R.
 
-On the Allan curve a random walk (AVAR K^2 tau / 3) and a ramp (R^2 tau^2 / 2) both rise at the
-longest averaging times, where the estimates have few degrees of freedom: over the last decade
-or so the two shapes differ little, and the Allan fit often leaves both term sets open
-(:meth:`~imu_allan.core.fit.FittedModel.alternatives`).  The overlapping Hadamard variance
-(third differences of the phase, SP1065 eq 20) cancels a constant rate slope exactly, so a
-ramp adds nothing to it, while a random walk adds K^2 tau / 6
-(:func:`~imu_allan.core.terms.hadamard_shape`).
+Over the last decade of the Allan curve a random walk (K^2 tau / 3) and a ramp (R^2 tau^2 / 2)
+differ little, and the fit often leaves both term sets open.  The overlapping Hadamard variance
+cancels a constant rate slope (a ramp adds nothing), while a random walk adds K^2 tau / 6
+(:func:`~imu_allan.core.terms.hadamard_shape`).  Per open term set, when they differ in K, on
+the OHVAR curve (:class:`HadamardProblem`) with the set's Q / N / B terms:
 
-Test, per open term set S (criterion within the alternatives' margin) when the open sets
-differ in K, on the OHVAR curve fitted with the machinery of the Allan fit (GLS with the
-OHDEV EDF of Greenhall & Riley and a correlation between averaging times measured for OHVAR,
-:class:`HadamardProblem`), with S's Q / N / B terms, without and with K:
+* a set without K is contradicted when adding K gains more than :data:`MARGIN` in the
+  selection criterion;
+* a set with K is contradicted when the lower end of the 95 % interval of the K^2 its Allan fit
+  needs exceeds the upper end of K^2's 95 % interval on the Hadamard curve.
 
-* a set without K is contradicted when adding K to the Hadamard fit gains more than
-  :data:`MARGIN` (10, "very strong" on the scale of Kass & Raftery 1995, the advisor's
-  separation margin) in the selection criterion chi^2 + 2 k ln T of :mod:`.axis`: the
-  Hadamard curve rises where only a random walk makes it rise;
-* a set with K is contradicted when the walk its Allan fit needs (the lower end of K^2's
-  95 % interval) exceeds the most the Hadamard curve allows (the upper end of its 95 %
-  interval): the Allan rise it explains with K is a ramp's, which the Hadamard curve lacks.
-
-A contradicted set leaves the alternatives; a contradicted selection is replaced by the best
-(by the Allan criterion) open set the Hadamard curve does not contradict.  If it contradicts
-every open set, the two curves disagree and nothing is decided.
-
-Measured (docs/method.md, section 4): on the calibration records the check runs on about one
-axis in five and changes little, in both directions; it therefore runs only when the OHDEV
-curve is at hand: :func:`~imu_allan.core.fit.fit_noise_model` given it, ``analyze`` with
-``--estimators`` including ``ohdev``.
+A contradicted selection is replaced by the best open set not contradicted; if every open set
+is, the curves disagree and nothing is decided.  Opt-in (the OHDEV curve given); method and
+measurements: docs/method.md section 4.
 """
 
 import math
@@ -41,7 +26,7 @@ from .axis import (
     coefficient_interval,
     fit_terms,
     Problem,
-    SELECTION_PENALTY,
+    selection_penalty,
     shape_columns,
     two_sided_z,
 )
@@ -65,13 +50,9 @@ class HadamardProblem(Problem):
     """
     A :class:`~imu_allan.core.fit.Problem` on an OHVAR curve: Hadamard shapes and widths.
 
-    The OHVAR estimates correlate over narrower spans of log tau than the OAVAR ones (the
-    third difference is blind to more of the slow fluctuation they share): measured as the
-    fit.py widths were (400 simulated records of 20 000 samples, the package's simulator,
-    exp(-(d / w)^1.5) fitted to the correlations within one decade, which reproduces the
-    Allan widths 0.40 / 0.58 / 1.14), w = 0.30 decades for white noise, 0.34 for flicker and
-    0.38 for random walk.  Flicker keeps the Allan long-range share (0.08 +- 0.05 measured
-    at two decades).
+    The OHVAR estimates correlate over narrower spans of log tau than the OAVAR ones (widths
+    measured as the Allan ones were, docs/method.md section 4); flicker keeps the Allan
+    long-range share (0.08 +- 0.05 measured at two decades).
     """
 
     correlation_widths = {2: 0.30, 1: 0.30, 0: 0.30, -1: 0.34, -2: 0.38}
@@ -87,15 +68,10 @@ def hadamard_problem(ohdev, axis, coef=None, tau_min=None):
     """
     Build the OHVAR problem of ``axis`` from an ``ohdev`` DeviationResult (None: too short).
 
-    ``tau_min`` (s): the shortest averaging time used, the Allan fit's (:mod:`.tau_range`).
-
-    With ``coef`` (the selected Allan fit's squared coefficients) the noise at each averaging
-    time is the term that dominates the predicted Hadamard curve, as the Allan side
-    identifies it on the fitted model (:func:`~imu_allan.core.allan.estimate.identify_noise`), and
-    the OHDEV EDF is Greenhall & Riley's for that noise (d = 3, F = S = m).  The per-tau
-    identification of the curve itself (lag-1 ACF, B1 below 30 block means) is not used: at
-    the longest taus, from a handful of blocks, it returns white or flicker PM now and then
-    (alpha = 2: an EDF of 1e5 for one point of a flicker curve, which then decides the fit).
+    ``tau_min`` (s): the Allan fit's shortest averaging time.  With ``coef`` (the selected
+    Allan fit's squared coefficients) the noise at each averaging time is the term dominating
+    the predicted Hadamard curve, and the EDF Greenhall & Riley's for it (d = 3, F = S = m),
+    not the curve's own identification (unreliable at the longest taus, docs/method.md 4).
     """
     j = ohdev.axis_index(axis)
     edf, alpha = ohdev.edf[:, j], ohdev.alpha[:, j]
@@ -155,8 +131,8 @@ def hadamard_walk(hadamard, names):
     base = [n for n in _BASE if n in names or n != 'quantization']
     without = fit_terms(hadamard, base, profile_intervals=False)
     with_k = fit_terms(hadamard, base + [_WALK], profile_intervals=False)
-    penalty = SELECTION_PENALTY * math.log(max(hadamard.tau.size, 2))
-    gain = without.chi2 - with_k.chi2 - (penalty if _WALK in with_k.coef else 0.0)
+    gain = without.chi2 - with_k.chi2 - (selection_penalty(hadamard) if _WALK in with_k.coef
+                                         else 0.0)
     c, _, hi = _walk(with_k, LEVEL)
     if c == 0.0:
         coef, _, g = hadamard.solve(shape_columns(hadamard, base + [_WALK], {}))

@@ -1,37 +1,19 @@
 """
 The averaging times a fit may use, and the shape the sensor's own processing gives white noise.
 
-Real IMUs filter their samples, resonate and carry vibration lines (docs/method.md, "Sensor
-processing").  None of that is an IEEE 952 term, and each bends the short end of the Allan curve,
-where the estimates have the most degrees of freedom and so the most weight: a fit that ignores
-it puts N 15-32 % low and B 2-40x high on real ADIS16405 records, while the conventional reading
-(IEEE 952, allan_variance_ros, MATLAB's allanvar) takes N from the -1/2 region.  What each
-effect does at tau = m tau0:
+Real IMUs filter their samples, resonate and carry vibration lines; each bends the short end of
+the Allan curve, where the estimates weigh most (N 15-32 % low, B 2-40x high on real ADIS16405
+records when ignored).  Per effect at tau = m tau0 (docs/method.md section 10):
 
-* a filter (band-limited white noise; sample-and-hold repeats are one): for m at or beyond its
-  correlation length L the white part's AVAR is exactly N^2 / tau - 1.5 (D / S) N^2 / (fs tau^2)
-  (D / S the filter moment).  The fit starts at m = L + 1 (one sample beyond the closed form's
-  reach, for a correlation the measurement cut short).  A measured moment only says there is
-  a deficit: the fit adds its column -tau0 / tau^2, its size fitted (:class:`~.axis.Problem`).
-  A known one (the device's moving average, ``filter_known``) gives the deficit exactly: white
-  noise's own shape is then N^2 (1 / tau - 1.5 (D / S) tau0 / tau^2), nothing more fitted (a
-  free deficit trades against N, doubles N's spread and lets N take an unresolved flicker
-  floor from the longer averaging times: issue 35).  A negative moment is white phase noise's
-  own (quantization Q, a term of the fit): no correction then.
-* a narrow line of amplitude A at f (aliased or not): A^2 sin^4(pi f tau) / (pi f tau)^2.  Every
-  line visible in the curve is fitted at the frequency the spectrum shows, the most visible one
-  as the ``sinusoid`` term (one per axis: the noise model holds one sinusoid), the others as
-  nuisance columns of the fit (``AxisFit.lines``): a line is the sensor's, not a reason to
-  lose the averaging times it crosses.
+* a filter (moment D / S, correlation length L): from m = L + 1 on the white part's AVAR is
+  N^2 / tau - 1.5 (D / S) N^2 / (fs tau^2); a measured moment's deficit is a fitted nuisance
+  column -tau0 / tau^2 (:class:`~.axis.Problem`), a known one's (``filter_known``) is tied to
+  N in white noise's own shape.  A negative moment is quantization's own: no correction;
+* a narrow line of amplitude A at f: A^2 sin^4(pi f tau) / (pi f tau)^2, fitted at the
+  spectrum's frequency, the most visible as the ``sinusoid`` term, the others as nuisance;
 * a broad resonance of excess variance P over [f_lo, f_hi]: P times
-  :func:`~imu_allan.core.terms.band_shape`, on average 3 P / (4 (pi f tau)^2) beyond 1 / f_lo.
-
-What is not fitted (a resonance) is cut away: the fit starts at the shortest averaging time from
-which each of them stays below :data:`KAPPA` standard deviations of the AVAR estimate
-(sqrt(2 / EDF)) at that time and every longer one.  Why a fraction of the estimate's own scatter:
-a systematic shift of a third of a standard deviation over strongly correlated points moves a
-coefficient by a small part of its interval; shifts of many deviations are what bias the
-ADIS16405 fits.
+  :func:`~imu_allan.core.terms.band_shape`, not fitted: the span starts where it stays below
+  :data:`KAPPA` standard deviations of the AVAR estimate (sqrt(2 / EDF)) at every longer tau.
 """
 
 from dataclasses import dataclass
