@@ -188,10 +188,7 @@ class NoiseSource:
         self.i = 0
 
     def prime(self, settings):
-        """Make the first block for ``settings`` now (the first records are then on time)."""
-        self._refill(settings)
-
-    def _refill(self, settings):
+        """Make a new block for ``settings`` now (at start: the first records are then on time)."""
         key = (settings.filter_window, settings.decimation)
         if key != self.key:
             self.stream.processing = processing_of(settings)
@@ -204,7 +201,7 @@ class NoiseSource:
         """Next sample (6 values in AXES order) for the 0xDB ``settings`` in effect."""
         if (settings.filter_window, settings.decimation) != self.key \
                 or self.i >= len(self.block):
-            self._refill(settings)
+            self.prime(settings)
         row = self.block[self.i]
         self.i += 1
         return row
@@ -382,8 +379,8 @@ class Device:
         if code == p.SAMPLING_SETTINGS:
             function = cmd[3]
             if function in (1, 2, 3):
-                dec, flags, fw, mw, up, north, power = struct.unpack_from('>HHBBHHB', cmd, 4)
-                new = p.SamplingSettings(dec, flags, fw, mw, up, north, power).clamped()
+                new = p.SamplingSettings(*struct.unpack_from('>' + p.SAMPLING_LAYOUT, cmd,
+                                                             4)).clamped()
                 changed = new.decimation != self.settings.decimation
                 self.settings = new
                 if changed and self.stream_code:
