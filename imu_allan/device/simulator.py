@@ -1,9 +1,9 @@
 """
 The simulated 3DM-GX3-25: its protocol state, noise, terminal, faults and run loop.
 
-Used by the ``gx3_sim`` command (:mod:`imu_allan.cli.gx3_sim`, which documents the behaviour)
-and by tests: ``Simulator(model, rate_hz=200.0, seed=1, ...)`` takes the :class:`SimConfig`
-fields as keyword arguments.
+Used by the ``gx3_sim`` command (:mod:`imu_allan.cli.gx3_sim` and docs/driver.md describe the
+behaviour) and by tests: ``Simulator(model, rate_hz=200.0, seed=1, ...)`` takes the
+:class:`SimConfig` fields as keyword arguments.
 """
 
 from dataclasses import dataclass
@@ -299,11 +299,8 @@ class Device:
                  'raw_accel': accel, 'raw_gyro': gyro, 'delta_angle': gyro,
                  'delta_velocity': accel, 'stab_accel': accel, 'stab_mag': mag,
                  'update_matrix': matrix, 'quaternion': _f32([1, 0, 0, 0])}
-        values = []
-        truth = {}
-        for name, _ in p.DATA_RECORDS[code]:
-            values += parts[name]
-            truth[name] = parts[name]
+        truth = {name: parts[name] for name, _ in p.DATA_RECORDS[code]}
+        values = [v for group in truth.values() for v in group]
         truth['temperature_c'] = celsius
         return p.encode_record(code, values, timer), truth
 
