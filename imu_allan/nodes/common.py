@@ -226,6 +226,27 @@ def apply_changes(params, table, changes):
     return changed
 
 
+def sensor_publisher(node, msg_type, topic):
+    """Return a publisher with sensor-data QoS and QoS overrides enabled (``qos_overrides.``)."""
+    from rclpy.qos import qos_profile_sensor_data
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+    overrides = QoSOverridingOptions.with_default_policies()
+    return node.create_publisher(msg_type, topic, qos_profile_sensor_data,
+                                 qos_overriding_options=overrides)
+
+
+def log(node, level, text):
+    """Log ``text`` at ``level`` ('info', 'warn', 'error') on the node's logger."""
+    # One call site per severity: rclpy refuses to change the severity of a call site.
+    logger = node.get_logger()
+    if level == 'info':
+        logger.info(text)
+    elif level == 'warn':
+        logger.warning(text)
+    else:
+        logger.error(text)
+
+
 def polled_subscription(node, msg_type, topic, depth, overrides=True, raw=False):
     """
     Return a deep sensor-data subscription that the executor never waits on.

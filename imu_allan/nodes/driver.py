@@ -8,21 +8,12 @@ Each read of the port (every ``read_period``) gives one batch, decoded with nump
 serialized at once (:class:`CdrPacker`); the session thread publishes it directly (rclpy
 publishers are thread-safe), so the executor only wakes for /diagnostics and parameters.
 
-Published (names relative, sensor-data QoS with QoS overrides enabled):
-
-* ``imu/data_raw`` (sensor_msgs/Imu): angular velocity rad/s, linear acceleration m/s^2
-  (device g times ``gravity``), orientation not provided (orientation_covariance[0] = -1);
-* ``imu/data`` (sensor_msgs/Imu, orientation modes only): the same plus the orientation
-  quaternion of the device's orientation matrix (sensor frame in the device's
-  north-east-down earth frame);
-* ``imu/mag`` (sensor_msgs/MagneticField, mag modes only): tesla (device gauss * 1e-4);
-* ``imu/temperature`` (sensor_msgs/Temperature, unless ``temperature_period`` is 0): the
-  board temperature in deg C, polled with 0xD1 every ``temperature_period`` s between data
-  records (DCP-GX3 Eq. 15 on the TemperatureMag channel's 12-bit code; variance 0 = unknown;
-  stamp: the reply's device timer mapped like the records');
-* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once per ``diagnostics_period``, with the
-  device's processing as confirmed by 0xDB: ``filter_window_taps``, ``filter_window_s``,
-  ``decimation``, ``internal_rate_hz``.
+Published (names relative, sensor-data QoS with QoS overrides enabled; content and units in
+docs/driver.md, section Topics): ``imu/data_raw`` (sensor_msgs/Imu, no orientation),
+``imu/data`` (orientation modes: plus the quaternion of the device's orientation matrix),
+``imu/mag`` (mag modes; tesla), ``imu/temperature`` (unless ``temperature_period`` is 0: the
+board deg C polled with 0xD1, DCP-GX3 Eq. 15) and ``/diagnostics`` (with the device's
+processing as confirmed by 0xDB).
 
 Stamps are the device timer mapped to the ROS clock (method: see
 :mod:`imu_allan.device.serial_link` and ``docs/driver.md``) plus ``time_offset``.
@@ -33,16 +24,16 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
-from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from .common import (
     apply_changes,
     declare_parameter_table,
     diagnostic_status,
+    log,
     node_main,
     Param,
+    sensor_publisher,
     validate_on_set,
 )
 from ..device import gx3_protocol as p
@@ -115,21 +106,13 @@ class DriverNode(Node):
         self.cfg = cfg
         self.decimation, _ = check_rate(cfg['rate_hz'], cfg['baud'], cfg['mode'])
         self.code = MODES[cfg['mode']]
-        qos = qos_profile_sensor_data
-        overrides = QoSOverridingOptions.with_default_policies()
-        self.pub_raw = self.create_publisher(Imu, 'imu/data_raw', qos,
-                                             qos_overriding_options=overrides)
         self.orientation = 'orientation' in cfg['mode']
         self.has_mag = 'mag' in cfg['mode']
-        self.pub_data = self.create_publisher(
-            Imu, 'imu/data', qos, qos_overriding_options=overrides) \
-            if self.orientation else None
-        self.pub_mag = self.create_publisher(
-            MagneticField, 'imu/mag', qos, qos_overriding_options=overrides) \
-            if self.has_mag else None
-        self.pub_temperature = self.create_publisher(
-            Temperature, 'imu/temperature', qos, qos_overriding_options=overrides) \
-            if cfg['temperature_period'] > 0 else None
+        self.pub_raw = sensor_publisher(self, Imu, 'imu/data_raw')
+        self.pub_data = sensor_publisher(self, Imu, 'imu/data') if self.orientation else None
+        self.pub_mag = sensor_publisher(self, MagneticField, 'imu/mag') if self.has_mag else None
+        self.pub_temperature = (sensor_publisher(self, Temperature, 'imu/temperature')
+                                if cfg['temperature_period'] > 0 else None)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.msg_raw, self.msg_data = Imu(), Imu()
         self.msg_mag = MagneticField()
@@ -143,7 +126,8 @@ class DriverNode(Node):
         try:
             self.session = Gx3Session(
                 cfg['port'], cfg['baud'], cfg['mode'], cfg['rate_hz'],
-                SessionHooks(self._on_batch, self._now, self._log, self._on_temperature),
+                SessionHooks(self._on_batch, self._now, lambda level, text: log(self, level, text),
+                             self._on_temperature),
                 SessionOptions(stall_timeout=stall, poll_interval=cfg['read_period'],
                                temperature_period=cfg['temperature_period'],
                                filter_window=cfg['filter_window'],
@@ -206,16 +190,6 @@ class DriverNode(Node):
         handle = self._clock_handle
         with handle:
             return handle.get_now().nanoseconds * 1e-9
-
-    def _log(self, level, text):
-        # One call site per severity (rclpy refuses to change it at a call site).
-        logger = self.get_logger()
-        if level == 'info':
-            logger.info(text)
-        elif level == 'warn':
-            logger.warning(text)
-        else:
-            logger.error(text)
 
     # ------------------------------------------------------------ publishing
     def _on_batch(self, code, rec, stamps):
