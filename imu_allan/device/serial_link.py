@@ -416,7 +416,6 @@ class Gx3Session:
     # ------------------------------------------------------------------ main loop
     def run(self):
         """Open, configure, stream, recover; until :meth:`stop`."""
-        failures = 0
         needs_setup = True
         last_data = 0.0
         try:
@@ -424,24 +423,18 @@ class Gx3Session:
                 if not self.link.is_open:
                     if not self._open():
                         continue
-                    needs_setup, failures = True, 0
+                    needs_setup = True
                 try:
                     if needs_setup:
-                        if self._setup():
-                            needs_setup, failures = False, 0
-                            last_data = time.monotonic()
-                            self.state = 'streaming'
-                        else:
-                            failures += 1
+                        if not self._setup():
                             self.stats.setup_failures += 1
                             # Keep reading while backing off: a device that resumes on its
                             # own (end of a stall) is taken as it comes, nothing is lost.
-                            if self._idle(self.backoff.next()):
-                                needs_setup, failures = False, 0
-                                last_data = time.monotonic()
-                                self.state = 'streaming'
-                                self.log('info', f'{self.link.port}: streaming again')
-                            continue
+                            if not self._idle(self.backoff.next()):
+                                continue
+                            self.log('info', f'{self.link.port}: streaming again')
+                        needs_setup, last_data = False, time.monotonic()
+                        self.state = 'streaming'
                     got = self._pump()
                     now = time.monotonic()
                     if self.temperature_period > 0 and now >= self._next_temperature:

@@ -445,6 +445,18 @@ class Device:
         return due
 
 
+def _unless_idle(call, *args):
+    """Return ``call(*args)``, or None when the pty would block or has no other end (EIO)."""
+    try:
+        return call(*args)
+    except (BlockingIOError, InterruptedError):
+        return None
+    except OSError as exc:
+        if exc.errno != errno.EIO:
+            raise
+        return None
+
+
 class Terminal:
     """
     The pseudo-terminal pair.
@@ -474,14 +486,7 @@ class Terminal:
 
     def read(self):
         """Bytes the host wrote (b'' if none)."""
-        try:
-            return os.read(self.master, 4096)
-        except (BlockingIOError, InterruptedError):
-            return b''
-        except OSError as exc:
-            if exc.errno == errno.EIO:
-                return b''
-            raise
+        return _unless_idle(os.read, self.master, 4096) or b''
 
     def host_speed(self):
         """Return the termios output speed constant the host set (None if unknown)."""
@@ -492,14 +497,7 @@ class Terminal:
 
     def write(self, data):
         """Write what fits; return the number of bytes written (0 when nobody reads)."""
-        try:
-            return os.write(self.master, data)
-        except (BlockingIOError, InterruptedError):
-            return 0
-        except OSError as exc:
-            if exc.errno == errno.EIO:
-                return 0
-            raise
+        return _unless_idle(os.write, self.master, data) or 0
 
     def close(self):
         """Close both ends (the port vanishes) and remove the link."""
