@@ -487,8 +487,7 @@ TEMPERATURE_CHANNELS = ('mag', 'gyro_y_accel_x', 'gyro_x_accel_z_accel_y', 'gyro
 #: The channels are 12-bit ADC codes (0..4095) with a 3.0 V reference.
 TEMPERATURE_ADC_MAX = 4095
 TEMPERATURE_VREF_V = 3.0
-# DCP-GX3 Eq. 15 (TemperatureMag only; the other channels have no absolute calibration):
-# deg C = -1481.96 + sqrt(2.1962e6 + (1.8639 - V) / 3.88e-6), V = 3.0 * counts / 4096.
+# The constants of DCP-GX3 Eq. 15 (:func:`counts_to_celsius`).
 _T_OFFSET_C = 1481.96
 _T_SQUARE = 2.1962e6
 _T_V0 = 1.8639
@@ -503,8 +502,7 @@ class Temperatures:
     A decoded 0xD1 reply.
 
     ``counts``: the 4 raw 12-bit codes in :data:`TEMPERATURE_CHANNELS` order; ``timer``:
-    ticks.  :attr:`celsius` is the board temperature from the magnetometer-side channel, the
-    only one with an absolute calibration (DCP-GX3 Eq. 15); the others are relative only.
+    ticks.  Only the first channel has an absolute calibration; the others are relative.
     """
 
     counts: tuple

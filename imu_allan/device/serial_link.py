@@ -508,11 +508,9 @@ class Gx3Session:
         """
         End the byte stream of a port that closed: deliver what the parser still holds.
 
-        As :func:`~imu_allan.device.gx3_stream.parse_bytes` ends a capture: a header-like byte
-        near the end announces a packet past the last byte and holds back up to a packet's
-        length (79 bytes) behind it; :meth:`StreamParser.flush` frames the good records there
-        (delivered, stamped by the last read) and counts the rest in ``rejected_bytes``,
-        instead of forgetting them uncounted.
+        As :func:`~imu_allan.device.gx3_stream.parse_bytes` ends a capture
+        (:meth:`StreamParser.flush`): the good records held back behind a header-like byte
+        are delivered (stamped by the last read), the rest counted in ``rejected_bytes``.
         """
         packets = self.parser.flush()
         if packets:
@@ -520,7 +518,7 @@ class Gx3Session:
         self._wait(self.backoff.next())
 
     def _new_epoch(self):
-        """Return a discontinuity: the next record starts a new gap reference and time anchor."""
+        """Mark a discontinuity: the next record starts a new gap reference and time anchor."""
         self.unwrapper = p.TimerUnwrapper()
         self.sync.reset()
 
