@@ -595,13 +595,7 @@ class Simulator:
         return 'ok' if written == len(data) else 'unread'
 
     def baud_matches(self):
-        """
-        Return True when the host opened the port at the device's baud rate (or did not say).
-
-        A pty carries no real baud rate, but its settings are shared by both ends, so the
-        simulator sees the speed the host configured and behaves like a UART at another
-        rate: it cannot read the host, and the host receives garbage.
-        """
+        """Return False if the host opened the pty at a baud other than the device's."""
         if self.cfg.ignore_host_baud:
             return True
         speed = self.term.host_speed()
