@@ -206,10 +206,9 @@ def render(state, topics, width=99, verbose=False):
     """
     Return the table as a list of text lines wrapped at ``width`` columns.
 
-    A term the node resolves shows its value and 68.3 % interval, one it does not its 95 %
-    upper limit ("< x"); the recording advice is the node's own sentences (the record's, then
-    each axis's: the words ``analyze`` and its page use); ``verbose`` adds the raw key-value
-    lists of the stream and advice statuses.
+    The advice is the node's own sentences (the record's, then each axis's: the words
+    ``analyze`` uses, :mod:`imu_allan.report.advice`); ``verbose`` adds the raw key-value lists
+    of the stream and advice statuses.
     """
     now = time.monotonic()
     ago = {k: f'{now - t:.0f} s ago' for k, t in state.arrived.items()}

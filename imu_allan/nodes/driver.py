@@ -101,11 +101,8 @@ class DriverNode(Node):
     def __init__(self, **node_options):
         """Declare the parameters, open the publishers, start the session thread."""
         super().__init__('driver', **node_options)
-        values = declare_parameter_table(self, PARAMETERS)
-        cfg = self._validate(values)
-        self.cfg = cfg
-        self.decimation, _ = check_rate(cfg['rate_hz'], cfg['baud'], cfg['mode'])
-        self.code = MODES[cfg['mode']]
+        self.cfg = cfg = declare_parameter_table(self, PARAMETERS)
+        self.decimation = self._decimation(cfg)
         self.orientation = 'orientation' in cfg['mode']
         self.has_mag = 'mag' in cfg['mode']
         self.pub_raw = sensor_publisher(self, Imu, 'imu/data_raw')
@@ -141,9 +138,8 @@ class DriverNode(Node):
         self.session.start()
 
     # ------------------------------------------------------------ parameters
-    def _validate(self, values):
-        """Cross-field checks the table cannot do: the rate the baud and mode can carry."""
-        cfg = dict(values)
+    def _decimation(self, cfg):
+        """Return the decimation of ``rate_hz``; InputError if baud and mode cannot carry it."""
         try:
             decimation, _ = check_rate(cfg['rate_hz'], cfg['baud'], cfg['mode'])
         except ValueError as exc:
@@ -153,7 +149,7 @@ class DriverNode(Node):
             self.get_logger().warning(
                 f'rate_hz {cfg["rate_hz"]:g} is not 1000/integer: the device runs at '
                 f'{actual:.6g} Hz (decimation {decimation})')
-        return cfg
+        return decimation
 
     def _post_set(self, params):
         """Run-time changes (covariances, time_offset; the others are read-only)."""
