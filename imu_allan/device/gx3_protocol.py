@@ -387,12 +387,8 @@ def decode_record(packet, little_endian=False):
     if code not in DATA_RECORDS:
         raise ValueError(f'0x{code:02X} is not a data record')
     _check(packet, code)
-    n = (len(packet) - 7) // 4
-    values = struct.unpack_from(('<' if little_endian else '>') + f'{n}f', packet, 1)
-    fields, i = {}, 0
-    for name, k in DATA_RECORDS[code]:
-        fields[name] = values[i:i + k]
-        i += k
+    rec = np.frombuffer(packet, dtype=record_fields_dtype(code, little_endian))[0]
+    fields = {name: tuple(rec[name].tolist()) for name, _ in DATA_RECORDS[code]}
     return Record(code, timer_of(packet), fields)
 
 
