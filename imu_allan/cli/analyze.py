@@ -18,7 +18,7 @@ from .common import (
     guarded,
 )
 from .export_args import add_arguments as add_export_arguments
-from .export_args import check_overbound_args
+from .export_args import check_overbound_args, export_options
 from .one_input import run_one
 from .progress import Progress
 from ..core.units import IEEE_TERMS, parse_terms
@@ -112,7 +112,6 @@ def _options(args):
     from ..core.analysis import AnalysisOptions
     from ..core.fit.advisor import parse_targets
     targets = parse_targets(args.target, '--target')
-    from .export_args import export_options
     from ..core.deviations import parse_kinds
     from ..core.record import RecordOptions
     analysis = AnalysisOptions(terms=terms, points_per_decade=args.points_per_decade,

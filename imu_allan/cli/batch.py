@@ -163,10 +163,7 @@ class History:
                  'error': outcome.get('error'), 'analyzed_at': now, 'version': __version__}
         rows = measurement_rows(outcome['report'], key, now, self.imu_id) if outcome['ok'] \
             else []
-        if self.con is None:
-            with self.session():
-                self.db.record(self.con, entry, rows)
-        else:
+        with self.session() if self.con is None else contextlib.nullcontext():
             self.db.record(self.con, entry, rows)
 
 

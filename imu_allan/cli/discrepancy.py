@@ -109,13 +109,6 @@ def _read(path, args):
     return samples, rate, stated, notes
 
 
-def _stated_model(model, sim, rate_hz):
-    """Return the stated model at one rate (a simulator file: its keys as documented), a note."""
-    if sim is None:
-        return model, None
-    return sim.intended_model(rate_hz)
-
-
 def _moving(samples, rate_hz):
     """Return the axes that moved (the check analyze makes), or None for a static IMU."""
     from ..core.analysis import motion_verdict
@@ -145,7 +138,8 @@ def _one(args, model, sim, terms):
                             f'describe the motion, not the sensor noise')
     findings = None
     if model is not None or sim is not None:
-        stated_model, note = _stated_model(model, sim, rate)
+        # the stated model at this rate (a simulator file: its keys as documented), a note
+        stated_model, note = sim.intended_model(rate) if sim is not None else (model, None)
         # the workflow's measured curve: the same data, rate, axes and averaging times
         findings = find_discrepancies([Recording(samples.data, rate, samples.axes, source,
                                                  stated, result.measured)], stated_model,
@@ -188,7 +182,7 @@ def _several(args, model, sim):
             errors.append(str(exc) if isinstance(exc, InputError) else
                           f'{path}: {exc.strerror or exc}')
             continue
-        stated_model, note = _stated_model(model, sim, rate)
+        stated_model, note = sim.intended_model(rate) if sim is not None else (model, None)
         if note and note not in notes:
             notes.append(note)
         moving = _moving(samples, rate)

@@ -1,13 +1,12 @@
 """
 gx3_sim: a simulated LORD MicroStrain 3DM-GX3-25 on a pseudo-terminal.
 
-The simulator opens a pseudo-terminal in raw mode, prints the path a driver should open as the
-first line on stdout, and then behaves like a 3DM-GX3-25 with single-byte firmware
-(the DCP manual, docs/references.md): it answers the commands, streams continuous mode at
-1000 Hz / decimation, paced by the baud rate, with the noise model's samples through the
-device's own processing: generated at the internal 1 kHz, averaged over the current 0xDB
-gyro/accel window (power-up 15 samples), decimated, sent as float32; one continuous stream
-for the whole run (:class:`imu_allan.core.simulation.noise_stream.NoiseStream`).
+Prints the path a driver should open as its first stdout line, then behaves like a 3DM-GX3-25
+with single-byte firmware (the DCP manual, docs/references.md): it answers the commands and
+streams continuous mode at 1000 Hz / decimation, paced by the baud rate, with the noise
+model's samples through the device's own processing.  docs/driver.md (section gx3_sim)
+describes the values sent, the fault injection, the temperature profile and the truth CSV;
+``--help`` the options and their units.
 
 Choices where the DCP manual is silent: unknown command bytes and a bare
 ``FA`` are ignored; an invalid continuous-command byte is ignored and the current one echoed;
@@ -18,30 +17,8 @@ before the next record is due (baud too low for the rate) is not sent, as a UART
 would lose it; its timer value is skipped, so the host sees a gap.  The pty's settings are
 shared by both ends, so the simulator sees the baud rate the host opened the port at: at a
 rate other than the device's it ignores what the host sends and the host receives garbage,
-as with a real UART (``--ignore-host-baud`` turns this off).
-
-Values on the wire, in device units: angular rate rad/s (noise only), acceleration g (noise
-plus 1 g along ``--gravity-axis``; the real unit reads about -1 g on z when level, the
-default), magnetic field gauss (a fixed field plus small noise), orientation matrix identity,
-Euler angles zero.
-
-Fault injection: ``--corrupt-rate`` flips one data byte of a record (the checksum then fails),
-``--drop-rate`` silently skips records, ``--garbage-rate`` inserts bursts of non-header junk
-bytes before records, ``--stall-after/--stall-seconds`` makes the device go silent (it
-ignores commands) and then resume, ``--disconnect-after/--disconnect-seconds`` closes the
-terminal (the port vanishes), then comes back as a freshly powered-up device on a new
-terminal (use ``--link`` for a stable path).
-
-Temperature (command 0xD1): ``--temperature`` sets the board temperature against time since
-the simulator started (``constant:T``, ``ramp:T0:T1:SECONDS``, ``warmup:T0:T1:TAU``: deg C
-and s); 0xD1 returns it as ADC codes through the inverse of the DCP manual's Eq. 15.  Polled
-while streaming, the reply follows the next record and carries its timer (the order the
-manual gives for the GX2).  ``--temperature-slope`` shifts the biases by ``slope * (T -
-T0)`` (gyro rad/s/K, optionally accel m/s^2/K), so a test knows the true slope.
-
-``--record-truth FILE`` writes a CSV row per record (``index,status,code,timer`` then the
-float32 values exactly as sent, device units, and the temperature in deg C) and per command
-reply, so tests can compare a driver's output with what was sent.
+as with a real UART (``--ignore-host-baud`` turns this off).  0xD1 polled while streaming is
+answered after the next record, with its timer (the order the manual gives for the GX2).
 """
 
 import dataclasses

@@ -3,23 +3,13 @@ monitor: the live view of a running allan node, for an operator standing next to
 
 Subscribes ``imu/allan_coeffs``, ``imu/allan_deviation`` (relative names: ``--namespace`` or
 ROS remapping after ``--ros-args`` move them) and ``/diagnostics``, and shows per axis the
-white noise N and bias instability B (and any other term it resolves) with their 68.3 %
-intervals in conventional units, or the 95 % upper limit of a term not resolved yet, the
-health of the IMU stream and the recording advice, when the node publishes one.  On a
-terminal the table is redrawn in place; otherwise each new estimate is printed as plain
-lines.  ``--once`` prints one snapshot and exits (status 1, one line on
-stderr, if no coefficients arrive within ``--timeout``); ``--json`` prints the decoded snapshot
-(one JSON object per line without ``--once``).  The recording advice is the node's own
-sentences (the words ``analyze`` and its page use, :mod:`imu_allan.report.advice`);
-``--verbose`` adds the raw ``key=value`` lists of the stream and advice statuses, which
-``--json`` always carries.
-
-Diagnostic statuses are read generically: every status named ``<node>: ...`` (``--node``,
-default ``allan``) is shown; ``<node>: IMU stream`` and ``<node>: recording advice`` get their
-own lines.
+resolved terms with their 68.3 % intervals in conventional units (or the 95 % upper limit of a
+term not resolved yet), the stream health and the node's recording advice; docs/online.md
+(section monitor) shows the table and the options.  Diagnostic statuses are read generically:
+every status named ``<node>: ...`` (``--node``, default ``allan``) is shown;
+``<node>: IMU stream`` and ``<node>: recording advice`` get their own lines.
 """
 
-import json
 import math
 import os
 import shutil
@@ -34,6 +24,7 @@ from ..core.fit.adequacy import ADEQUACY_LEVEL
 from ..core.live.health import LEVEL_NAMES
 from ..core.units import AXES, conventional, IEEE_TERMS
 from ..errors import InputError
+from ..report import strict_json
 from ..report.coeffs_layout import (
     coefficient_terms,
     decode_adequacy,
@@ -80,11 +71,6 @@ def split_ros_args(argv):
     argv = list(sys.argv[1:] if argv is None else argv)
     own = argv[:argv.index('--ros-args')] if '--ros-args' in argv else argv
     return own, argv
-
-
-def _finite(value):
-    """JSON-safe float: None for NaN and infinities."""
-    return float(value) if value is not None and math.isfinite(value) else None
 
 
 def _level(status):
@@ -151,7 +137,7 @@ class MonitorState:
         return self.statuses.get(self.prefix + suffix)
 
     def snapshot(self, topics=None):
-        """JSON-ready dictionary of everything known (SI and conventional units)."""
+        """Return everything known as a dictionary (SI and conventional units; NaN: unknown)."""
         now = time.monotonic()
         out = {'node': self.prefix[:-2], 'topics': dict(topics or {}),
                'received': dict(self.received),
@@ -161,16 +147,13 @@ class MonitorState:
                'axes': {} if self.coeffs is None else coefficient_terms(self.coeffs),
                'deviation': None, 'status': dict(self.statuses),
                'adequacy_p': (None if self.adequacy is None else
-                              {a: _finite(p) for a, p in zip(AXES, self.adequacy)}),
+                              dict(zip(AXES, self.adequacy.tolist()))),
                'upper_limits': (None if self.limits is None else
-                                {a: {t: _finite(v) for t, v in zip(IEEE_TERMS, row)
-                                     if math.isfinite(v)}
-                                 for a, row in zip(AXES, self.limits)})}
+                                {a: {t: v for t, v in zip(IEEE_TERMS, row) if math.isfinite(v)}
+                                 for a, row in zip(AXES, self.limits.tolist())})}
         if self.deviation is not None:
             tau, adev = self.deviation
-            out['deviation'] = {'tau': [_finite(v) for v in tau],
-                                'adev': {a: [_finite(v) for v in adev[:, i]]
-                                         for i, a in enumerate(AXES)}}
+            out['deviation'] = {'tau': tau.tolist(), 'adev': dict(zip(AXES, adev.T.tolist()))}
         return out
 
 
@@ -223,10 +206,9 @@ def render(state, topics, width=99, verbose=False):
     """
     Return the table as a list of text lines wrapped at ``width`` columns.
 
-    A term the node resolves shows its value and 68.3 % interval, one it does not its 95 %
-    upper limit ("< x"); the recording advice is the node's own sentences (the record's, then
-    each axis's: the words ``analyze`` and its page use); ``verbose`` adds the raw key-value
-    lists of the stream and advice statuses.
+    The advice is the node's own sentences (the record's, then each axis's: the words
+    ``analyze`` uses, :mod:`imu_allan.report.advice`); ``verbose`` adds the raw key-value lists
+    of the stream and advice statuses.
     """
     now = time.monotonic()
     ago = {k: f'{now - t:.0f} s ago' for k, t in state.arrived.items()}
@@ -305,7 +287,7 @@ def _topic_names(node):
 
 def _emit(out, state, topics, args, tty):
     if args.json:
-        out.write(json.dumps(state.snapshot(topics), allow_nan=False) + '\n')
+        out.write(strict_json.dumps(state.snapshot(topics)) + '\n')
     elif tty:  # lines cut at the terminal's width, so a redraw never scrolls
         width = shutil.get_terminal_size((99, 24)).columns
         lines = [line[:width] for line in render(state, topics, min(width, 99), args.verbose)]

@@ -16,7 +16,7 @@ gauss, Euler angles in rad, timer in ticks.  Conversion to SI happens in the con
 (``g * gravity`` -> m/s^2, gauss * 1e-4 -> tesla).
 """
 
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 import functools
 import math
 import struct
@@ -74,8 +74,6 @@ ERROR = 0x21
 
 #: The 3-byte reply to a command with wrong confirmation bytes.
 ERROR_REPLY = b'\x21\x00\x21'
-STOP_CONTINUOUS_COMMAND = b'\xFA\x75\xB4'
-DEVICE_RESET_COMMAND = b'\xFE\x9E\x3A'
 
 #: Total reply length (header .. checksum) per reply code.
 REPLY_LENGTHS = {
@@ -130,6 +128,8 @@ FLAG_DISABLE_NORTH = 0x0400
 FLAG_DISABLE_GRAVITY = 0x0800
 FLAG_QUATERNION = 0x1000
 DEFAULT_FLAGS = FLAG_ORIENTATION | FLAG_CONING_SCULLING
+#: struct layout of the 0xDB settings (the :class:`SamplingSettings` fields in order), big-endian.
+SAMPLING_LAYOUT = 'HHBBHHB'
 
 
 def checksum(data):
@@ -196,6 +196,11 @@ def max_rate(baud, record_length=31):
 # Command encoders (host -> device)
 
 
+def _command(code, layout='', *values):
+    """Encode command ``code``: its confirmation bytes (if any), then ``values`` by ``layout``."""
+    return bytes([code]) + CONFIRM.get(code, b'') + struct.pack('>' + layout, *values)
+
+
 def cmd_poll(code):
     """Encode a one-byte data command (poll one record), e.g. 0xC2, 0xCB, 0xCC, 0xCF."""
     if code not in DATA_RECORDS and code != TEMPERATURES:
@@ -207,17 +212,12 @@ def cmd_continuous(code):
     """Start streaming data command ``code`` (0 stops): ``C4 C1 29 cc``; 8-byte reply."""
     if code != 0 and code not in DATA_RECORDS:
         raise ValueError(f'0x{code:02X} is not a data command')
-    return bytes([SET_CONTINUOUS]) + CONFIRM[SET_CONTINUOUS] + bytes([code])
+    return _command(SET_CONTINUOUS, 'B', code)
 
 
 def cmd_stop_continuous():
     """Stop continuous mode silently: ``FA 75 B4`` (no reply)."""
-    return STOP_CONTINUOUS_COMMAND
-
-
-def cmd_device_reset():
-    """Soft reset: ``FE 9E 3A`` (no reply)."""
-    return DEVICE_RESET_COMMAND
+    return _command(STOP_CONTINUOUS)
 
 
 @dataclass
@@ -263,13 +263,10 @@ def cmd_sampling_settings(settings=None, function=1):
     """
     if function not in (0, 1, 2, 3):
         raise ValueError('sampling settings function must be 0, 1, 2 or 3')
-    head = bytes([SAMPLING_SETTINGS]) + CONFIRM[SAMPLING_SETTINGS] + bytes([function])
     if function == 0:
-        return head + bytes(16)
-    s = settings or SamplingSettings()
-    return head + struct.pack('>HHBBHHB5x', s.decimation, s.flags, s.filter_window,
-                              s.mag_window, s.up_compensation, s.north_compensation,
-                              s.mag_power)
+        return _command(SAMPLING_SETTINGS, 'B16x', 0)
+    return _command(SAMPLING_SETTINGS, 'B' + SAMPLING_LAYOUT + '5x', function,
+                    *astuple(settings or SamplingSettings()))
 
 
 def cmd_read_sampling_settings():
@@ -285,35 +282,24 @@ def cmd_comm_settings(baud=DEFAULT_BAUD, function=1, port=1, config=0x02):
     """
     if function not in (0, 1, 2):
         raise ValueError('communications settings function must be 0, 1 or 2')
-    return (bytes([COMM_SETTINGS]) + CONFIRM[COMM_SETTINGS]
-            + struct.pack('>BBIBB', port, function, int(baud), config, 0))
+    return _command(COMM_SETTINGS, 'BBIBB', port, function, int(baud), config, 0)
 
 
 def cmd_firmware_version():
     """Firmware version 0xE9 (7-byte reply)."""
-    return bytes([FIRMWARE_VERSION])
+    return _command(FIRMWARE_VERSION)
 
 
 def cmd_device_id(selector):
     """Device identifier string 0xEA: 0 model number, 1 serial, 2 model name, 3 options, 4 lot."""
     if selector not in range(5):
         raise ValueError('device id selector must be 0..4')
-    return bytes([DEVICE_ID, selector])
-
-
-def cmd_mode(mode):
-    """Mode 0xD4: 0 read, 1 active, 2 continuous, 3 idle, 4 sleep, 5 deep sleep."""
-    return bytes([MODE]) + CONFIRM[MODE] + bytes([mode])
+    return _command(DEVICE_ID, 'B', selector)
 
 
 def cmd_timer(function=0, value=0):
     """Timer 0xD7: function 0 read, 1 restart the timer at ``value`` ticks."""
-    return bytes([TIMER]) + CONFIRM[TIMER] + struct.pack('>BI', function, value)
-
-
-def cmd_continuous_preset(code):
-    """Continuous preset 0xD6: the data command streamed by mode 2."""
-    return bytes([CONTINUOUS_PRESET]) + CONFIRM[CONTINUOUS_PRESET] + bytes([code])
+    return _command(TIMER, 'BI', function, value)
 
 
 # --------------------------------------------------------------------------------------------
@@ -338,10 +324,8 @@ def encode_continuous_reply(code, timer):
 
 def encode_sampling_reply(settings):
     """Encode the 19-byte reply to 0xDB (the settings in effect)."""
-    s = settings
-    return with_checksum(struct.pack('>BHHBBHHB5x', SAMPLING_SETTINGS, s.decimation, s.flags,
-                                     s.filter_window, s.mag_window, s.up_compensation,
-                                     s.north_compensation, s.mag_power))
+    return with_checksum(struct.pack('>B' + SAMPLING_LAYOUT + '5x', SAMPLING_SETTINGS,
+                                     *astuple(settings)))
 
 
 def encode_comm_reply(baud, port=1, config=0x02):
@@ -387,12 +371,14 @@ class Record:
     fields: dict
 
 
-def _check(packet, code):
+def _check(packet, code, layout=''):
+    """Check a ``code`` reply (length, header, checksum); unpack ``layout`` after its header."""
     if len(packet) != REPLY_LENGTHS[code] or packet[0] != code:
         raise ValueError(f'not a 0x{code:02X} reply ({len(packet)} bytes, header '
                          f'0x{packet[0] if packet else 0:02X})')
     if not checksum_ok(packet):
         raise ValueError(f'0x{code:02X} reply has a bad checksum')
+    return struct.unpack_from('>' + layout, packet, 1)
 
 
 def decode_record(packet, little_endian=False):
@@ -401,31 +387,21 @@ def decode_record(packet, little_endian=False):
     if code not in DATA_RECORDS:
         raise ValueError(f'0x{code:02X} is not a data record')
     _check(packet, code)
-    n = (len(packet) - 7) // 4
-    values = struct.unpack_from(('<' if little_endian else '>') + f'{n}f', packet, 1)
-    fields, i = {}, 0
-    for name, k in DATA_RECORDS[code]:
-        fields[name] = values[i:i + k]
-        i += k
+    rec = np.frombuffer(packet, dtype=record_fields_dtype(code, little_endian))[0]
+    fields = {name: tuple(rec[name].tolist()) for name, _ in DATA_RECORDS[code]}
     return Record(code, timer_of(packet), fields)
 
 
-def record_dtype(code, little_endian=False):
-    """Numpy structured dtype of one record (for decoding many records at once)."""
-    n = (REPLY_LENGTHS[code] - 7) // 4
-    return np.dtype([('code', 'u1'), ('values', ('<' if little_endian else '>') + 'f4', (n,)),
-                     ('timer', '>u4'), ('checksum', '>u2')])
-
-
 @functools.lru_cache(maxsize=None)
-def record_fields_dtype(code):
+def record_fields_dtype(code, little_endian=False):
     """
-    Structured dtype of one big-endian record with one field per value group.
+    Structured dtype of one record with one field per value group.
 
-    Fields: ``code`` (u1), one ``>f4`` sub-array per entry of :data:`DATA_RECORDS` (device
-    units), ``timer`` (``>u4`` ticks), ``checksum``.  Built once per code.
+    Fields: ``code`` (u1), one f4 sub-array per entry of :data:`DATA_RECORDS` (device units;
+    big-endian unless ``little_endian``), ``timer`` (``>u4`` ticks), ``checksum``.
     """
-    fields = [('code', 'u1')] + [(name, '>f4', (k,)) for name, k in DATA_RECORDS[code]]
+    floats = ('<' if little_endian else '>') + 'f4'
+    fields = [('code', 'u1')] + [(name, floats, (k,)) for name, k in DATA_RECORDS[code]]
     return np.dtype(fields + [('timer', '>u4'), ('checksum', '>u2')])
 
 
@@ -448,34 +424,25 @@ def decode_records(code, packets, little_endian=False):
     :data:`DATA_RECORDS` (device units).
     """
     buf = b''.join(packets) if isinstance(packets, (list, tuple)) else bytes(packets)
-    arr = np.frombuffer(buf, dtype=record_dtype(code, little_endian))
-    values = arr['values'].astype(np.float32)
+    arr = np.frombuffer(buf, dtype=record_fields_dtype(code, little_endian))
     out = {'timer': arr['timer'].astype(np.int64)}
-    i = 0
-    for name, k in DATA_RECORDS[code]:
-        out[name] = values[:, i:i + k]
-        i += k
+    out.update((name, arr[name].astype(np.float32)) for name, _ in DATA_RECORDS[code])
     return out
 
 
 def decode_continuous_reply(packet):
     """Return ``(code, timer)`` from the 8-byte 0xC4 reply."""
-    _check(packet, SET_CONTINUOUS)
-    return packet[1], timer_of(packet)
+    return _check(packet, SET_CONTINUOUS, 'BI')
 
 
 def decode_sampling_reply(packet):
     """Return the :class:`SamplingSettings` of a 19-byte 0xDB reply."""
-    _check(packet, SAMPLING_SETTINGS)
-    dec, flags, fw, mw, up, north, power = struct.unpack_from('>HHBBHHB', packet, 1)
-    return SamplingSettings(dec, flags, fw, mw, up, north, power)
+    return SamplingSettings(*_check(packet, SAMPLING_SETTINGS, SAMPLING_LAYOUT))
 
 
 def decode_comm_reply(packet):
     """Return ``(port, baud, config)`` from a 10-byte 0xD9 reply."""
-    _check(packet, COMM_SETTINGS)
-    port, baud, config = struct.unpack_from('>BIB', packet, 1)
-    return port, baud, config
+    return _check(packet, COMM_SETTINGS, 'BIB')
 
 
 def firmware_text(version):
@@ -486,27 +453,24 @@ def firmware_text(version):
 
 def decode_firmware_reply(packet):
     """Return ``(version_int, 'x.y.zz')`` from a 7-byte 0xE9 reply."""
-    _check(packet, FIRMWARE_VERSION)
-    version = struct.unpack_from('>I', packet, 1)[0]
+    version, = _check(packet, FIRMWARE_VERSION, 'I')
     return version, firmware_text(version)
 
 
 def decode_device_id_reply(packet):
     """Return ``(selector, text)`` from a 20-byte 0xEA reply (leading spaces stripped)."""
-    _check(packet, DEVICE_ID)
-    return packet[1], packet[2:18].decode('ascii', errors='replace').strip()
+    selector, = _check(packet, DEVICE_ID, 'B')
+    return selector, packet[2:18].decode('ascii', errors='replace').strip()
 
 
 def decode_mode_reply(packet):
     """Return the mode byte of a 4-byte 0xD4/0xD5/0xD6 reply."""
-    _check(packet, packet[0])
-    return packet[1]
+    return _check(packet, packet[0], 'B')[0]
 
 
 def decode_timer_reply(packet):
     """Return the timer ticks of a 7-byte 0xD7 reply."""
-    _check(packet, TIMER)
-    return timer_of(packet)
+    return _check(packet, TIMER, 'I')[0]
 
 
 # --------------------------------------------------------------------------------------------
@@ -519,8 +483,7 @@ TEMPERATURE_CHANNELS = ('mag', 'gyro_y_accel_x', 'gyro_x_accel_z_accel_y', 'gyro
 #: The channels are 12-bit ADC codes (0..4095) with a 3.0 V reference.
 TEMPERATURE_ADC_MAX = 4095
 TEMPERATURE_VREF_V = 3.0
-# DCP-GX3 Eq. 15 (TemperatureMag only; the other channels have no absolute calibration):
-# deg C = -1481.96 + sqrt(2.1962e6 + (1.8639 - V) / 3.88e-6), V = 3.0 * counts / 4096.
+# The constants of DCP-GX3 Eq. 15 (:func:`counts_to_celsius`).
 _T_OFFSET_C = 1481.96
 _T_SQUARE = 2.1962e6
 _T_V0 = 1.8639
@@ -535,8 +498,7 @@ class Temperatures:
     A decoded 0xD1 reply.
 
     ``counts``: the 4 raw 12-bit codes in :data:`TEMPERATURE_CHANNELS` order; ``timer``:
-    ticks.  :attr:`celsius` is the board temperature from the magnetometer-side channel, the
-    only one with an absolute calibration (DCP-GX3 Eq. 15); the others are relative only.
+    ticks.  Only the first channel has an absolute calibration; the others are relative.
     """
 
     counts: tuple
@@ -585,9 +547,8 @@ def encode_temperature_reply(counts, timer):
 
 def decode_temperature_reply(packet):
     """Return the :class:`Temperatures` of a 15-byte 0xD1 reply (ValueError if malformed)."""
-    _check(packet, TEMPERATURES)
-    counts = struct.unpack_from('>4H', packet, 1)
-    return Temperatures(counts, timer_of(packet))
+    values = _check(packet, TEMPERATURES, '4HI')
+    return Temperatures(values[:4], values[4])
 
 
 # --------------------------------------------------------------------------------------------
@@ -673,30 +634,23 @@ def matrix_to_quaternion(matrix):
     """
     m = np.asarray(matrix, dtype=np.float64).reshape(-1, 3, 3)
     r = np.transpose(m, (0, 2, 1))
-    r00, r01, r02 = r[:, 0, 0], r[:, 0, 1], r[:, 0, 2]
-    r10, r11, r12 = r[:, 1, 0], r[:, 1, 1], r[:, 1, 2]
-    r20, r21, r22 = r[:, 2, 0], r[:, 2, 1], r[:, 2, 2]
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = (
+        [r[:, i, j] for j in range(3)] for i in range(3))
     traces = np.stack([1 + r00 + r11 + r22, 1 + r00 - r11 - r22,
                        1 - r00 + r11 - r22, 1 - r00 - r11 + r22], axis=1)
+    # Shepperd's method: the largest of 4w^2, 4x^2, 4y^2, 4z^2 (case k) gives that component
+    # s, the others are off-diagonal sums or differences divided by 4 s (numerically stable).
     k = np.argmax(traces, axis=1)
-    s = 0.5 * np.sqrt(np.maximum(traces[np.arange(len(k)), k], 1e-300))
-    q = np.empty((len(k), 4))
-    # Shepperd's method: divide by the largest component for numerical stability.
-    cand = {
-        0: (r21 - r12, r02 - r20, r10 - r01, None),
-        1: (None, r01 + r10, r02 + r20, r21 - r12),
-        2: (r01 + r10, None, r12 + r21, r02 - r20),
-        3: (r02 + r20, r12 + r21, None, r10 - r01),
-    }
-    for case, (a, b, c, d) in cand.items():
-        sel = k == case
-        if not np.any(sel):
-            continue
-        big = s[sel]
-        parts = [a, b, c, d]
-        big_index = 3 if case == 0 else case - 1
-        for j in range(4):
-            q[sel, j] = big if j == big_index else parts[j][sel] / (4.0 * big)
+    rows = np.arange(len(k))
+    s = 0.5 * np.sqrt(np.maximum(traces[rows, k], 1e-300))
+    zero = np.zeros_like(r00)
+    numerators = np.array([                             # (case, x y z w, row)
+        (r21 - r12, r02 - r20, r10 - r01, zero),        # w largest
+        (zero, r01 + r10, r02 + r20, r21 - r12),        # x largest
+        (r01 + r10, zero, r12 + r21, r02 - r20),        # y largest
+        (r02 + r20, r12 + r21, zero, r10 - r01)])       # z largest
+    q = numerators[k, :, rows] / (4.0 * s)[:, None]
+    q[rows, (k + 3) % 4] = s
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q[q[:, 3] < 0] *= -1.0
     return q

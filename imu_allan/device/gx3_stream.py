@@ -1,22 +1,12 @@
 """
 Stream framer for the 3DM-GX3-25 single-byte protocol (ROS-free).
 
-The protocol has no sync pattern and no length field: a reply is recognised by its header
-byte, the fixed length that header implies, and a valid checksum.  Header values also occur
-inside float data, so a header match alone is not a frame boundary.  :class:`StreamParser`
-therefore slides one byte at a time (the method of MicroStrain's own sample code)
+The protocol has no sync pattern and no length field, and header values also occur inside
+float data, so a header match alone is not a frame boundary: :class:`StreamParser` slides one
+byte at a time (the method of MicroStrain's own sample code; docs/driver.md, section Framing)
 over a buffer fed with arbitrary chunks, and accepts a packet only when the header is known,
-the full length is available and the checksum matches.  Its output does not depend on how
-the bytes were chunked.
-
-What it rejects is counted (:class:`ParserStats`):
-
-* ``bad_checksums``: a complete candidate with a wrong checksum found where a packet was
-  expected (right after a good packet, or right after the previous counted bad packet) -
-  i.e. a damaged packet, not a header-like byte inside other data;
-* ``rejected_bytes``: every byte not part of an accepted packet;
-* ``resyncs``: good packets found somewhere other than the expected position (after junk,
-  lost bytes or a truncated packet).
+the full length is available and the checksum matches.  Its output does not depend on how the
+bytes were chunked.
 """
 
 from dataclasses import dataclass
@@ -27,7 +17,14 @@ from .gx3_protocol import REPLY_LENGTHS
 
 @dataclass
 class ParserStats:
-    """Counters of a :class:`StreamParser` (all cumulative)."""
+    """
+    Counters of a :class:`StreamParser` (all cumulative).
+
+    ``bad_checksums``: complete candidates with a wrong checksum where a packet was expected
+    (right after a good packet or the previous counted bad one: a damaged packet, not a
+    header-like byte inside other data); ``rejected_bytes``: every byte not in an accepted
+    packet; ``resyncs``: good packets found elsewhere than the expected position.
+    """
 
     bytes_in: int = 0
     packets: int = 0

@@ -10,26 +10,12 @@ Serial transport to a 3DM-GX3-25 and the device session loop (ROS-free).
   stream, detect gaps, stalls and vanished ports, and recover from all of them.  Decoded
   batches go to a callback; nothing here imports ROS.
 
-Time stamping (:class:`TimeSync`)
----------------------------------
-Each record carries the device timer (62,500 ticks/s).  It is unwrapped to 64 bits
-(rollovers added, :class:`~imu_allan.device.gx3_protocol.TimerUnwrapper`) and converted to device
-seconds ``d``.  Each record also gets a host arrival time ``h``: the clock reading right after
-the read that returned it, minus the time the bytes after it took on the wire
-(``bytes * 10 / baud``).  ``h - d`` is then the clock offset plus a transport delay that is
-never negative and is sometimes close to its minimum.  The published stamp is ``d + o`` where
-the offset ``o`` follows ``T = min(h - d)`` over the last ``window`` seconds (the passive
-synchronisation of Olson, IROS 2010, as in the pronto/libbot GX3 driver), but ``o`` may move
-towards ``T`` by at most ``max_slew`` seconds per second of device time (default 5e-4, five
-times the device clock's 1e-4 tolerance).  So:
-
-* stamps keep the device's even spacing: two stamps differ by the device timer difference
-  times a factor within ``1 +- max_slew`` (host read jitter never reaches them);
-* slow drift between the clocks is followed (the minimum moves with it);
-* stamps sit at the earliest plausible arrival time, a small constant latency after the true
-  sampling time (``time_offset`` in the driver corrects a known latency);
-* a rollover is invisible; a timer reset, a reconnect, a stall, or ``|T - o|`` above
-  ``jump_threshold`` re-anchors ``o`` at once (counted in ``jumps``).
+Time stamping (:class:`TimeSync`; docs/driver.md, section "Time stamps", gives the method and
+its consequences): the unwrapped device timer ``d`` (s) is mapped to the host clock as
+``d + o``, the offset ``o`` following ``T = min(h - d)`` over the last ``window`` seconds, ``h``
+each record's host arrival time (the passive synchronisation of Olson, IROS 2010), moving at
+most ``max_slew`` s per s of device time and re-anchored at once after a discontinuity or a
+jump above ``jump_threshold``.
 """
 
 from collections import deque
@@ -296,22 +282,21 @@ def check_rate(rate_hz, baud, mode):
     return decimation, flags
 
 
+@dataclass
 class SessionStats:
     """Counters of a session (read by the driver's diagnostics; ints only, no lock needed)."""
 
-    def __init__(self):
-        """All zero."""
-        self.records = 0
-        self.dropped = 0
-        self.stalls = 0
-        self.reconnects = 0
-        self.opens = 0
-        self.setups = 0
-        self.setup_failures = 0
-        self.timer_resets = 0
-        self.rollovers = 0
-        self.internal_errors = 0
-        self.temperatures = 0
+    records: int = 0
+    dropped: int = 0
+    stalls: int = 0
+    reconnects: int = 0
+    opens: int = 0
+    setups: int = 0
+    setup_failures: int = 0
+    timer_resets: int = 0
+    rollovers: int = 0
+    internal_errors: int = 0
+    temperatures: int = 0
 
 
 @dataclass(frozen=True)
@@ -431,7 +416,6 @@ class Gx3Session:
     # ------------------------------------------------------------------ main loop
     def run(self):
         """Open, configure, stream, recover; until :meth:`stop`."""
-        failures = 0
         needs_setup = True
         last_data = 0.0
         try:
@@ -439,24 +423,18 @@ class Gx3Session:
                 if not self.link.is_open:
                     if not self._open():
                         continue
-                    needs_setup, failures = True, 0
+                    needs_setup = True
                 try:
                     if needs_setup:
-                        if self._setup():
-                            needs_setup, failures = False, 0
-                            last_data = time.monotonic()
-                            self.state = 'streaming'
-                        else:
-                            failures += 1
+                        if not self._setup():
                             self.stats.setup_failures += 1
                             # Keep reading while backing off: a device that resumes on its
                             # own (end of a stall) is taken as it comes, nothing is lost.
-                            if self._idle(self.backoff.next()):
-                                needs_setup, failures = False, 0
-                                last_data = time.monotonic()
-                                self.state = 'streaming'
-                                self.log('info', f'{self.link.port}: streaming again')
-                            continue
+                            if not self._idle(self.backoff.next()):
+                                continue
+                            self.log('info', f'{self.link.port}: streaming again')
+                        needs_setup, last_data = False, time.monotonic()
+                        self.state = 'streaming'
                     got = self._pump()
                     now = time.monotonic()
                     if self.temperature_period > 0 and now >= self._next_temperature:
@@ -530,11 +508,9 @@ class Gx3Session:
         """
         End the byte stream of a port that closed: deliver what the parser still holds.
 
-        As :func:`~imu_allan.device.gx3_stream.parse_bytes` ends a capture: a header-like byte
-        near the end announces a packet past the last byte and holds back up to a packet's
-        length (79 bytes) behind it; :meth:`StreamParser.flush` frames the good records there
-        (delivered, stamped by the last read) and counts the rest in ``rejected_bytes``,
-        instead of forgetting them uncounted.
+        As :func:`~imu_allan.device.gx3_stream.parse_bytes` ends a capture
+        (:meth:`StreamParser.flush`): the good records held back behind a header-like byte
+        are delivered (stamped by the last read), the rest counted in ``rejected_bytes``.
         """
         packets = self.parser.flush()
         if packets:
@@ -542,7 +518,7 @@ class Gx3Session:
         self._wait(self.backoff.next())
 
     def _new_epoch(self):
-        """Return a discontinuity: the next record starts a new gap reference and time anchor."""
+        """Mark a discontinuity: the next record starts a new gap reference and time anchor."""
         self.unwrapper = p.TimerUnwrapper()
         self.sync.reset()
 

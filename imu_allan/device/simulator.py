@@ -1,9 +1,9 @@
 """
 The simulated 3DM-GX3-25: its protocol state, noise, terminal, faults and run loop.
 
-Used by the ``gx3_sim`` command (:mod:`imu_allan.cli.gx3_sim`, which documents the behaviour)
-and by tests: ``Simulator(model, rate_hz=200.0, seed=1, ...)`` takes the :class:`SimConfig`
-fields as keyword arguments.
+Used by the ``gx3_sim`` command (:mod:`imu_allan.cli.gx3_sim` and docs/driver.md describe the
+behaviour) and by tests: ``Simulator(model, rate_hz=200.0, seed=1, ...)`` takes the
+:class:`SimConfig` fields as keyword arguments.
 """
 
 from dataclasses import dataclass
@@ -188,10 +188,7 @@ class NoiseSource:
         self.i = 0
 
     def prime(self, settings):
-        """Make the first block for ``settings`` now (the first records are then on time)."""
-        self._refill(settings)
-
-    def _refill(self, settings):
+        """Make a new block for ``settings`` now (at start: the first records are then on time)."""
         key = (settings.filter_window, settings.decimation)
         if key != self.key:
             self.stream.processing = processing_of(settings)
@@ -204,7 +201,7 @@ class NoiseSource:
         """Next sample (6 values in AXES order) for the 0xDB ``settings`` in effect."""
         if (settings.filter_window, settings.decimation) != self.key \
                 or self.i >= len(self.block):
-            self._refill(settings)
+            self.prime(settings)
         row = self.block[self.i]
         self.i += 1
         return row
@@ -302,11 +299,8 @@ class Device:
                  'raw_accel': accel, 'raw_gyro': gyro, 'delta_angle': gyro,
                  'delta_velocity': accel, 'stab_accel': accel, 'stab_mag': mag,
                  'update_matrix': matrix, 'quaternion': _f32([1, 0, 0, 0])}
-        values = []
-        truth = {}
-        for name, _ in p.DATA_RECORDS[code]:
-            values += parts[name]
-            truth[name] = parts[name]
+        truth = {name: parts[name] for name, _ in p.DATA_RECORDS[code]}
+        values = [v for group in truth.values() for v in group]
         truth['temperature_c'] = celsius
         return p.encode_record(code, values, timer), truth
 
@@ -382,8 +376,8 @@ class Device:
         if code == p.SAMPLING_SETTINGS:
             function = cmd[3]
             if function in (1, 2, 3):
-                dec, flags, fw, mw, up, north, power = struct.unpack_from('>HHBBHHB', cmd, 4)
-                new = p.SamplingSettings(dec, flags, fw, mw, up, north, power).clamped()
+                new = p.SamplingSettings(*struct.unpack_from('>' + p.SAMPLING_LAYOUT, cmd,
+                                                             4)).clamped()
                 changed = new.decimation != self.settings.decimation
                 self.settings = new
                 if changed and self.stream_code:
@@ -451,6 +445,18 @@ class Device:
         return due
 
 
+def _unless_idle(call, *args):
+    """Return ``call(*args)``, or None when the pty would block or has no other end (EIO)."""
+    try:
+        return call(*args)
+    except (BlockingIOError, InterruptedError):
+        return None
+    except OSError as exc:
+        if exc.errno != errno.EIO:
+            raise
+        return None
+
+
 class Terminal:
     """
     The pseudo-terminal pair.
@@ -480,14 +486,7 @@ class Terminal:
 
     def read(self):
         """Bytes the host wrote (b'' if none)."""
-        try:
-            return os.read(self.master, 4096)
-        except (BlockingIOError, InterruptedError):
-            return b''
-        except OSError as exc:
-            if exc.errno == errno.EIO:
-                return b''
-            raise
+        return _unless_idle(os.read, self.master, 4096) or b''
 
     def host_speed(self):
         """Return the termios output speed constant the host set (None if unknown)."""
@@ -498,14 +497,7 @@ class Terminal:
 
     def write(self, data):
         """Write what fits; return the number of bytes written (0 when nobody reads)."""
-        try:
-            return os.write(self.master, data)
-        except (BlockingIOError, InterruptedError):
-            return 0
-        except OSError as exc:
-            if exc.errno == errno.EIO:
-                return 0
-            raise
+        return _unless_idle(os.write, self.master, data) or 0
 
     def close(self):
         """Close both ends (the port vanishes) and remove the link."""
@@ -603,13 +595,7 @@ class Simulator:
         return 'ok' if written == len(data) else 'unread'
 
     def baud_matches(self):
-        """
-        Return True when the host opened the port at the device's baud rate (or did not say).
-
-        A pty carries no real baud rate, but its settings are shared by both ends, so the
-        simulator sees the speed the host configured and behaves like a UART at another
-        rate: it cannot read the host, and the host receives garbage.
-        """
+        """Return False if the host opened the pty at a baud other than the device's."""
         if self.cfg.ignore_host_baud:
             return True
         speed = self.term.host_speed()

@@ -1,32 +1,13 @@
 """
 allan: live Allan deviation and noise coefficients of an IMU stream, with health diagnostics.
 
-Subscribes ``imu/data_raw`` (sensor_msgs/Imu, sensor-data QoS with a deep queue, overridable)
-and publishes every ``publish_period`` seconds:
-
-* ``imu/allan_coeffs`` (std_msgs/Float64MultiArray): dims ``axis`` (6) x ``term`` (5:
-  quantization, white_noise, bias_instability, rate_random_walk, rate_ramp) x ``stat`` (3:
-  value, ci_low, ci_high; 68.3 %), row-major, data_offset 0, SI units, NaN where a term is not
-  detected;
-* ``imu/allan_deviation`` (std_msgs/Float64MultiArray): dims ``row`` (7: tau, gyro_x .. accel_z)
-  x ``tau`` (T);
-* ``imu/allan_deviation/<kind>`` for each other kind of the ``estimators`` parameter (``mdev``,
-  ``ohdev``: streaming modified Allan and overlapping Hadamard deviations), the same layout;
-* ``imu/allan_plot/compressed`` (sensor_msgs/CompressedImage, PNG): the Allan deviation figure,
-  rendered in a worker thread only while something subscribes (:mod:`.allan_plot`);
-* ``/diagnostics``: the stream (rate, gaps, out-of-order stamps, motion share), each axis
-  against the noise budget (OK / WARN / ERROR / STALE) and the recording advice (OK when every
-  precision target is met, WARN with the longest additional recording time otherwise;
-  :mod:`imu_allan.core.fit.advisor`, recomputed every ``advice_period`` s in steps).
-
-With ``covariance_topic`` set, every ``imu/data_raw`` message is also republished there as it
-is drained, its angular-velocity and linear-acceleration covariance diagonals set to the live
-per-sample variance N^2 rate_hz of the latest coefficients (robot_localization reads these),
-patched in the serialized bytes (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`);
-with ``covariance_mode`` ``overbound``, N is the white noise whose Allan variance lies at or
-above the measured upper 95 % bound at every published averaging time
-(:func:`imu_allan.core.overbound.white_overbound`): conservative for a filter without bias
-states.
+Subscribes ``imu/data_raw`` (sensor-data QoS, deep queue, overridable) and ``imu/temperature``
+and publishes every ``publish_period`` seconds ``imu/allan_coeffs``, ``imu/allan_deviation``
+(and ``imu/allan_deviation/<kind>`` per extra kind of ``estimators``), the figure on
+``imu/allan_plot/compressed`` while subscribed (:mod:`.allan_plot`) and ``/diagnostics``; with
+``covariance_topic`` set it republishes every message there with the live per-sample
+variances patched in (:func:`imu_allan.formats.imu_cdr.set_covariance_diagonals`).  Layouts,
+units and statuses: docs/interfaces.md (Topics) and docs/online.md (The allan node).
 
 The node declares parameters (:mod:`.allan_parameters`), converts messages and publishes;
 everything it computes is one :class:`imu_allan.core.live.session.LiveSession` (the estimate
@@ -46,8 +27,6 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
-from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, Temperature
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -64,8 +43,10 @@ from .common import (
     apply_changes,
     declare_parameter_table,
     diagnostic_status,
+    log,
     node_main,
     polled_subscription,
+    sensor_publisher,
     take_batch,
     validate_on_set,
 )
@@ -107,7 +88,7 @@ class AllanNode(Node):
         self.params = declare_parameter_table(self, PARAMETERS)
         check_parameters(self.params)  # InputError: main() prints it, exit status 2
         self._pending, self._fed_at = [], 0.0  # messages taken, not yet fed (FEED_PERIOD_S)
-        self.session = LiveSession(self.params, self._log)
+        self.session = LiveSession(self.params, lambda level, text: log(self, level, text))
         self.add_on_set_parameters_callback(validate_on_set(self.params, PARAMETERS,
                                                             check_parameters))
         self.add_post_set_parameters_callback(self._post_set)
@@ -124,10 +105,8 @@ class AllanNode(Node):
         # executor waits on would cost every drain's wake-up more (its wait set is built anew).
         self._temperature_sub = polled_subscription(self, Temperature, 'imu/temperature',
                                                     TEMPERATURE_DEPTH, overrides=False)
-        self._pub_cov = self.create_publisher(
-            Imu, self.params['covariance_topic'], qos_profile_sensor_data,
-            qos_overriding_options=QoSOverridingOptions.with_default_policies()) \
-            if self.params['covariance_topic'] else None
+        self._pub_cov = (sensor_publisher(self, Imu, self.params['covariance_topic'])
+                         if self.params['covariance_topic'] else None)
         self._cov_variance = None  # per-sample N^2 f per axis, once estimated
         self._plot = PlotPublisher(self)
         self._last_arrival = None
@@ -146,13 +125,6 @@ class AllanNode(Node):
     def close(self):
         """Stop the figure's worker thread (run_node calls this before destroy_node)."""
         self._plot.close()
-
-    def _log(self, level, text):
-        # one call site per severity: rclpy refuses a second severity from the same line
-        if level == 'warn':
-            self.get_logger().warn(text)
-        else:
-            self.get_logger().info(text)
 
     def _post_set(self, params):
         self._feed_pending()  # the samples taken before the change go where they went before

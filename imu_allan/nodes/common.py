@@ -34,24 +34,6 @@ def handle_help(executable, description, parameters, argv=None):
     sys.exit(0)
 
 
-def float_range(low, high, step=0.0):
-    """Return a ``FloatingPointRange`` for a parameter descriptor."""
-    from rcl_interfaces.msg import FloatingPointRange
-    return [FloatingPointRange(from_value=float(low), to_value=float(high), step=float(step))]
-
-
-def int_range(low, high, step=1):
-    """Return an ``IntegerRange`` for a parameter descriptor."""
-    from rcl_interfaces.msg import IntegerRange
-    return [IntegerRange(from_value=int(low), to_value=int(high), step=int(step))]
-
-
-def descriptor(description, read_only=False, **kwargs):
-    """Return a ``ParameterDescriptor`` with a description (and optional ranges)."""
-    from rcl_interfaces.msg import ParameterDescriptor
-    return ParameterDescriptor(description=description, read_only=read_only, **kwargs)
-
-
 def diagnostic_status(name, level, message, hardware_id='', values=None):
     """
     Build a ``diagnostic_msgs/DiagnosticStatus``; ``level`` is 0 OK, 1 WARN, 2 ERROR, 3 STALE.
@@ -164,27 +146,30 @@ def declare_parameter_table(node, table):
     Raises InputError (the node's ``main`` prints it as one line, exit status 2) for a value
     given on the command line or in a parameter file that the table refuses.
     """
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
     values = {}
     for param in table:
         kwargs = {}
+        low, high = param.range or (None, None)
         if isinstance(param.default, float):
             # dynamic typing, so that an integer given for a float (-p rate_hz:=200) is taken;
             # the range is then checked by check_value, not by rclpy
             kwargs['dynamic_typing'] = True
             if param.range is not None:
-                kwargs['floating_point_range'] = float_range(*param.range)
+                kwargs['floating_point_range'] = [FloatingPointRange(
+                    from_value=float(low), to_value=float(high), step=0.0)]
         elif param.range is not None and isinstance(param.default, int) \
                 and not isinstance(param.default, bool):
-            kwargs['integer_range'] = int_range(*param.range)
+            kwargs['integer_range'] = [IntegerRange(from_value=int(low), to_value=int(high),
+                                                    step=1)]
         elif isinstance(param.default, list):
             # dynamic typing: a string array or one comma-separated string
             # (-p estimators:=oadev,mdev); the node's own check parses and validates it
             kwargs['dynamic_typing'] = True
         if param.choices is not None:
             kwargs['additional_constraints'] = 'one of ' + ', '.join(map(str, param.choices))
-        node.declare_parameter(param.name, param.default,
-                               descriptor(param.description, read_only=param.read_only,
-                                          **kwargs))
+        node.declare_parameter(param.name, param.default, ParameterDescriptor(
+            description=param.description, read_only=param.read_only, **kwargs))
         values[param.name] = check_value(param, node.get_parameter(param.name).value)
     return values
 
@@ -224,6 +209,27 @@ def apply_changes(params, table, changes):
             params[change.name] = check_value(rows[change.name], change.value)
             changed.add(change.name)
     return changed
+
+
+def sensor_publisher(node, msg_type, topic):
+    """Return a publisher with sensor-data QoS and QoS overrides enabled (``qos_overrides.``)."""
+    from rclpy.qos import qos_profile_sensor_data
+    from rclpy.qos_overriding_options import QoSOverridingOptions
+    overrides = QoSOverridingOptions.with_default_policies()
+    return node.create_publisher(msg_type, topic, qos_profile_sensor_data,
+                                 qos_overriding_options=overrides)
+
+
+def log(node, level, text):
+    """Log ``text`` at ``level`` ('info', 'warn', 'error') on the node's logger."""
+    # One call site per severity: rclpy refuses to change the severity of a call site.
+    logger = node.get_logger()
+    if level == 'info':
+        logger.info(text)
+    elif level == 'warn':
+        logger.warning(text)
+    else:
+        logger.error(text)
 
 
 def polled_subscription(node, msg_type, topic, depth, overrides=True, raw=False):

@@ -17,8 +17,6 @@ from collections import deque
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
-from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
@@ -28,6 +26,7 @@ from .common import (
     node_main,
     Param,
     polled_subscription,
+    sensor_publisher,
     take_batch,
     validate_on_set,
 )
@@ -121,9 +120,7 @@ class DenoiseNode(Node):
         depth = int(self.params['queue_depth'])
         self._sub = polled_subscription(self, Imu, 'imu/data_raw', depth)
         self._max_batch = depth
-        self._pub = self.create_publisher(
-            Imu, 'imu/data_denoised', qos_profile_sensor_data,
-            qos_overriding_options=QoSOverridingOptions.with_default_policies())
+        self._pub = sensor_publisher(self, Imu, 'imu/data_denoised')
         self._coeff_sub = self.create_subscription(
             Float64MultiArray, 'imu/allan_coeffs', self._on_coeffs, 10)
         self._log_latency()

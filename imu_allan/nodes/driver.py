@@ -8,21 +8,12 @@ Each read of the port (every ``read_period``) gives one batch, decoded with nump
 serialized at once (:class:`CdrPacker`); the session thread publishes it directly (rclpy
 publishers are thread-safe), so the executor only wakes for /diagnostics and parameters.
 
-Published (names relative, sensor-data QoS with QoS overrides enabled):
-
-* ``imu/data_raw`` (sensor_msgs/Imu): angular velocity rad/s, linear acceleration m/s^2
-  (device g times ``gravity``), orientation not provided (orientation_covariance[0] = -1);
-* ``imu/data`` (sensor_msgs/Imu, orientation modes only): the same plus the orientation
-  quaternion of the device's orientation matrix (sensor frame in the device's
-  north-east-down earth frame);
-* ``imu/mag`` (sensor_msgs/MagneticField, mag modes only): tesla (device gauss * 1e-4);
-* ``imu/temperature`` (sensor_msgs/Temperature, unless ``temperature_period`` is 0): the
-  board temperature in deg C, polled with 0xD1 every ``temperature_period`` s between data
-  records (DCP-GX3 Eq. 15 on the TemperatureMag channel's 12-bit code; variance 0 = unknown;
-  stamp: the reply's device timer mapped like the records');
-* ``/diagnostics`` (diagnostic_msgs/DiagnosticArray) once per ``diagnostics_period``, with the
-  device's processing as confirmed by 0xDB: ``filter_window_taps``, ``filter_window_s``,
-  ``decimation``, ``internal_rate_hz``.
+Published (names relative, sensor-data QoS with QoS overrides enabled; content and units in
+docs/driver.md, section Topics): ``imu/data_raw`` (sensor_msgs/Imu, no orientation),
+``imu/data`` (orientation modes: plus the quaternion of the device's orientation matrix),
+``imu/mag`` (mag modes; tesla), ``imu/temperature`` (unless ``temperature_period`` is 0: the
+board deg C polled with 0xD1, DCP-GX3 Eq. 15) and ``/diagnostics`` (with the device's
+processing as confirmed by 0xDB).
 
 Stamps are the device timer mapped to the ROS clock (method: see
 :mod:`imu_allan.device.serial_link` and ``docs/driver.md``) plus ``time_offset``.
@@ -33,16 +24,16 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
-from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import Imu, MagneticField, Temperature
 
 from .common import (
     apply_changes,
     declare_parameter_table,
     diagnostic_status,
+    log,
     node_main,
     Param,
+    sensor_publisher,
     validate_on_set,
 )
 from ..device import gx3_protocol as p
@@ -110,26 +101,15 @@ class DriverNode(Node):
     def __init__(self, **node_options):
         """Declare the parameters, open the publishers, start the session thread."""
         super().__init__('driver', **node_options)
-        values = declare_parameter_table(self, PARAMETERS)
-        cfg = self._validate(values)
-        self.cfg = cfg
-        self.decimation, _ = check_rate(cfg['rate_hz'], cfg['baud'], cfg['mode'])
-        self.code = MODES[cfg['mode']]
-        qos = qos_profile_sensor_data
-        overrides = QoSOverridingOptions.with_default_policies()
-        self.pub_raw = self.create_publisher(Imu, 'imu/data_raw', qos,
-                                             qos_overriding_options=overrides)
+        self.cfg = cfg = declare_parameter_table(self, PARAMETERS)
+        self.decimation = self._decimation(cfg)
         self.orientation = 'orientation' in cfg['mode']
         self.has_mag = 'mag' in cfg['mode']
-        self.pub_data = self.create_publisher(
-            Imu, 'imu/data', qos, qos_overriding_options=overrides) \
-            if self.orientation else None
-        self.pub_mag = self.create_publisher(
-            MagneticField, 'imu/mag', qos, qos_overriding_options=overrides) \
-            if self.has_mag else None
-        self.pub_temperature = self.create_publisher(
-            Temperature, 'imu/temperature', qos, qos_overriding_options=overrides) \
-            if cfg['temperature_period'] > 0 else None
+        self.pub_raw = sensor_publisher(self, Imu, 'imu/data_raw')
+        self.pub_data = sensor_publisher(self, Imu, 'imu/data') if self.orientation else None
+        self.pub_mag = sensor_publisher(self, MagneticField, 'imu/mag') if self.has_mag else None
+        self.pub_temperature = (sensor_publisher(self, Temperature, 'imu/temperature')
+                                if cfg['temperature_period'] > 0 else None)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.msg_raw, self.msg_data = Imu(), Imu()
         self.msg_mag = MagneticField()
@@ -143,7 +123,8 @@ class DriverNode(Node):
         try:
             self.session = Gx3Session(
                 cfg['port'], cfg['baud'], cfg['mode'], cfg['rate_hz'],
-                SessionHooks(self._on_batch, self._now, self._log, self._on_temperature),
+                SessionHooks(self._on_batch, self._now, lambda level, text: log(self, level, text),
+                             self._on_temperature),
                 SessionOptions(stall_timeout=stall, poll_interval=cfg['read_period'],
                                temperature_period=cfg['temperature_period'],
                                filter_window=cfg['filter_window'],
@@ -157,9 +138,8 @@ class DriverNode(Node):
         self.session.start()
 
     # ------------------------------------------------------------ parameters
-    def _validate(self, values):
-        """Cross-field checks the table cannot do: the rate the baud and mode can carry."""
-        cfg = dict(values)
+    def _decimation(self, cfg):
+        """Return the decimation of ``rate_hz``; InputError if baud and mode cannot carry it."""
         try:
             decimation, _ = check_rate(cfg['rate_hz'], cfg['baud'], cfg['mode'])
         except ValueError as exc:
@@ -169,7 +149,7 @@ class DriverNode(Node):
             self.get_logger().warning(
                 f'rate_hz {cfg["rate_hz"]:g} is not 1000/integer: the device runs at '
                 f'{actual:.6g} Hz (decimation {decimation})')
-        return cfg
+        return decimation
 
     def _post_set(self, params):
         """Run-time changes (covariances, time_offset; the others are read-only)."""
@@ -206,16 +186,6 @@ class DriverNode(Node):
         handle = self._clock_handle
         with handle:
             return handle.get_now().nanoseconds * 1e-9
-
-    def _log(self, level, text):
-        # One call site per severity (rclpy refuses to change it at a call site).
-        logger = self.get_logger()
-        if level == 'info':
-            logger.info(text)
-        elif level == 'warn':
-            logger.warning(text)
-        else:
-            logger.error(text)
 
     # ------------------------------------------------------------ publishing
     def _on_batch(self, code, rec, stamps):
