@@ -44,10 +44,7 @@ from ..units import discrete_random_walk_step
 GRAVITY_LEVEL = 1.0
 #: Fewest runs for a run-to-run test.
 MIN_RUNS = 3
-_P68 = norm.cdf(1.0) - norm.cdf(-1.0)
-
-
-_P95 = 0.95
+_P68, _P95 = norm.cdf(1.0) - norm.cdf(-1.0), 0.95
 
 
 def _tq(dof, level=_P68):
@@ -162,16 +159,11 @@ def turn_on_tests(axis, evidences, stated):
     last = np.array([e.means['last'] for e in evidences])
     noise = np.array([e.mean_noise_var.get('first', 0.0) for e in evidences])
     gravity = not axis.startswith('gyro') and abs(float(np.median(first))) > GRAVITY_LEVEL
-    out = []
-    decay = _decay(first, last, noise, gravity)
-    if decay is not None:
-        out.append(decay)
+    out = [_decay(first, last, noise, gravity)]
     if not gravity:
-        bimodal = _bimodal(first, noise, stated['mean'], stated['sigma'])
-        if bimodal is not None:
-            out.append(bimodal)
-        out.append(_mean(first, noise, stated['mean'], stated['sigma']))
-    out.append(_spread(first, noise, stated['sigma']))
+        out += [_bimodal(first, noise, stated['mean'], stated['sigma']),
+                _mean(first, noise, stated['mean'], stated['sigma'])]
+    out = [t for t in out + [_spread(first, noise, stated['sigma'])] if t is not None]
     for test in out:
         test['evidence']['gravity_axis'] = gravity
     return out

@@ -79,47 +79,15 @@ class AxisSensor:
     """
     What the samples of one axis say about the sensor's processing (SI; None: not measured).
 
-    Attributes
-    ----------
-    axis, unit : str
-        Axis name and the SI unit of its samples (``rad/s`` or ``m/s^2``).
-    rate_hz : float
-        Sample rate, Hz.
-    n_examined : int
-        Finite samples examined (at most :data:`MAX_EXAMINED` in :func:`measure_sensor`).
-    segment_length, segments : int
-        Welch segment length L (samples) and segments averaged (0: no spectrum).
-    resolution : float or None
-        The LSB (SI); None when the values are not on a grid.
-    distinct_values, distinct_counted_over : int or None
-        Distinct values among ``distinct_counted_over`` samples: all examined ones on a grid,
-        else the first :data:`GRID_SAMPLES`.
-    repeated_fraction : float or None
-        Fraction of consecutive sample pairs exactly equal.
-    off_grid_fraction : float or None
-        Fraction of examined values off the grid (at most 1e-3 when ``resolution`` is set).
-    quantization : str or None
-        ``'fine'`` or ``'coarse'`` (module docstring); None without a grid.
-    quantization_density : float or None
-        Fine regime: the white-noise density rounding adds, resolution / sqrt(12 fs),
-        continuous time (rad/s/sqrt(Hz), m/s^2/sqrt(Hz)).
-    noise_to_lsb : float or None
-        Std of the white part before rounding, in LSB.
-    lag_correlation, lag_correlation_se : tuple or None
-        rho_1 .. rho_8 of the white part and their standard errors.
-    filter_length : int or None
-        Largest lag (samples) with significant correlation; 0 for uncorrelated samples.
-    bandwidth_hz : float or None
-        Noise-equivalent bandwidth of the white part, (R_0 / S) fs / 2 (fs / 2 when white).
-    filter_moment : float or None
-        D / S, samples.
-    white_autocovariance : tuple or None
-        R_0 .. R_filter_length, per sample, SI^2.
-    white_variance : float or None
-        S = R_0 + 2 sum R_k, per sample, SI^2.
-    lines, humps : list
-        :class:`~.spectrum.Line` and :class:`~.spectrum.Hump` found.
-
+    The quantities are those of the module docstring, their units :data:`JSON_UNITS`;
+    ``unit`` is the SI unit of the samples (``rad/s`` or ``m/s^2``), ``rate_hz`` their rate
+    (Hz), ``n_examined`` the finite samples examined, ``segment_length`` and ``segments`` the
+    Welch segment length L (samples) and the segments averaged (0: no spectrum).
+    ``distinct_values`` counts the distinct values among ``distinct_counted_over`` samples
+    (all examined ones on a grid, else the first :data:`GRID_SAMPLES`); ``off_grid_fraction``
+    is at most 1e-3 when ``resolution`` is set; ``quantization`` is None without a grid and
+    ``quantization_density`` is set in the fine regime only; ``filter_length`` is 0 for
+    uncorrelated samples (``bandwidth_hz`` then fs / 2).
     """
 
     axis: str
