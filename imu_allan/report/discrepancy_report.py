@@ -399,12 +399,9 @@ def write_plots(result, out_dir):
     # gap per step, one line per axis
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     for axis in result.axes:
-        gaps = [result.initial_gaps[axis].value]
-        labels = []
-        for step in (s for s in result.steps if s.axis == axis):
-            gaps.append(step.gap_after)
-            labels.append(step.effect)
-        text = ' → '.join(f'+{e}' for e in labels) if labels else 'nothing added'
+        gaps = [result.initial_gaps[axis].value] + [s.gap_after for s in result.steps
+                                                    if s.axis == axis]
+        text = ' → '.join(f'+{e}' for e in result.effects(axis)) or 'nothing added'
         ax.plot(range(len(gaps)), gaps, 'o-', label=f'{axis}: {text}')
     thr = max(result.final_gaps[a].threshold for a in result.axes)
     ax.axhspan(0, thr, color='tab:green', alpha=0.10, lw=0)

@@ -1,27 +1,14 @@
 """
 What one recording says about each term of a stated (intended) noise model.
 
-For every axis the stated terms are refitted to the measured Allan deviation with their
-amplitudes free and their positions (Gauss-Markov tau_c, sinusoid frequency) held as stated, in
-the gap's own metric (:meth:`.band.Band.problem`); each amplitude's ratio to the stated one is a
-*factor* with a standard error in log space from the sandwich covariance.  Around that:
-
-* a stated term the data do not need (dropping it costs no significant Q) while its stated
-  size is rejected is *absent*, with an upper limit on its factor (profile of Q);
-* a stated Gauss-Markov's correlation time is freed (over a range wider than the span: the
-  data may show no bend at all) and its factor measured; a fitted tau_c beyond the longest
-  averaging time where the stated one bends inside the span is an unbounded walk; a stated
-  random walk is tried as a bounded Gauss-Markov;
-* when the refitted model still leaves the band, the effects the model lacks compete as in the
-  single-recording workflow (:func:`.workflow.evaluate_candidates`), up to two per axis;
-* a stated term whose amplitude is zero (a simulator key set to 0) is left out of the fit
-  and listed as *zeroed*: when the data show it, it is among the effects the model lacks;
-* the raw numbers the run-to-run, drive and metadata evidence need: the means of the first and
-  last tenth of the record, the least-squares slope, the record's RMS (the per-sample std of
-  everything in it) and the per-sample white variance (the Allan variance at the shortest
-  averaging time).
-
-SI units throughout; factors are measured / stated.  ROS-free.
+Per axis (:class:`AxisEvidence`) the stated terms are refitted with their amplitudes free and
+their positions held as stated, in the gap's own metric (:meth:`.band.Band.problem`); each
+amplitude / stated is a *factor* with a log-space standard error from the sandwich covariance.
+Around that: absent terms with upper limits, a freed Gauss-Markov tau_c, a stated walk tried as
+a bounded Gauss-Markov, up to :data:`MAX_MISSING` effects the model lacks
+(:func:`.workflow.evaluate_candidates`), zeroed terms, and the raw numbers the run-to-run,
+drive and metadata evidence need.  docs/discrepancy.md section 8 ("One recording's evidence")
+describes each step.  SI units throughout; factors are measured / stated.  ROS-free.
 """
 
 from dataclasses import dataclass, field
@@ -208,43 +195,38 @@ def _q_with_fixed(prob, names, term, amp, fit, fixed):
     return refit.chi2
 
 
-def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated, q_target):
-    """
-    Largest amplitude factor (of the stated one) whose Q stays below ``q_target``.
-
-    ``q_stated`` is the Q with the amplitude held at ``stated_amp`` (:func:`_q_with_fixed`).
-    """
-    lo = math.log(max(amplitude(fit.terms[term], term), stated_amp * 1e-6))
-    hi = math.log(stated_amp)
-    if q_stated <= q_target:
-        return 1.0
-    for _ in range(18):  # bisection in log amplitude: 18 halvings of a <= 14-e-fold span
-        mid = 0.5 * (lo + hi)
-        if _q_with_fixed(prob, names, term, math.exp(mid), fit, fixed) <= q_target:
-            lo = mid
-        else:
-            hi = mid
-    return math.exp(lo) / stated_amp
-
-
 def _absent(prob, fit, names, term, fixed, stated_amp, z_crit):
     """
     Return the p-value of an unneeded term's stated size and, if rejected, upper limits.
 
     A change of Q by c z^2 (c: :func:`_q_scale`) is a z-sigma move of the term's amplitude:
-    the 68.3 % and ``z_crit`` upper limits of its factor are where Q has grown by c and
-    c z_crit^2 (the other terms refitted each time).
+    the 68.3 % and ``z_crit`` upper limits of its factor (of the stated amplitude) are where Q
+    has grown by c and c z_crit^2 (the other terms refitted each time).
     """
     from scipy.stats import norm
+
+    def q_at(amp):
+        return _q_with_fixed(prob, names, term, amp, fit, fixed)
+
+    def upper(q_target):  # the largest factor whose Q stays below q_target
+        if q_stated <= q_target:
+            return 1.0
+        lo = math.log(max(amplitude(fit.terms[term], term), stated_amp * 1e-6))
+        hi = math.log(stated_amp)
+        for _ in range(18):  # bisection in log amplitude: 18 halvings of a <= 14-e-fold span
+            mid = 0.5 * (lo + hi)
+            if q_at(math.exp(mid)) <= q_target:
+                lo = mid
+            else:
+                hi = mid
+        return math.exp(lo) / stated_amp
     scale = _q_scale(prob, fit, term)
-    q_stated = _q_with_fixed(prob, names, term, stated_amp, fit, fixed)
+    q_stated = q_at(stated_amp)
     p_stated = float(2.0 * norm.sf(math.sqrt(max(q_stated - fit.chi2, 0.0) / scale)))
     out = {'p_stated': p_stated, 'upper68': 1.0, 'upper_crit': 1.0}
     if p_stated < REJECTED_P:  # the stated size does not fit: how large could it be?
-        out['upper68'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
-                                      fit.chi2 + scale)
-        out['upper_crit'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
-                                         fit.chi2 + scale * z_crit ** 2)
+        out['upper68'] = upper(fit.chi2 + scale)
+        out['upper_crit'] = upper(fit.chi2 + scale * z_crit ** 2)
     return out
 
 
