@@ -18,6 +18,7 @@ Units: the PSD is one-sided, SI^2/Hz; inside the fit it is scaled by fs/2 to per
 variance per unit normalised frequency, the units of R_k.
 """
 
+import dataclasses
 from dataclasses import dataclass
 import functools
 import itertools
@@ -82,8 +83,7 @@ class Line:
 
     def to_json(self):
         """Return a JSON-ready dict (SI)."""
-        return {'frequency_hz': self.frequency_hz, 'amplitude': self.amplitude,
-                'snr': self.snr, 'false_alarm_probability': self.false_alarm_probability}
+        return dataclasses.asdict(self)
 
 
 @dataclass(frozen=True)
@@ -103,8 +103,7 @@ class Hump:
 
     def to_json(self):
         """Return a JSON-ready dict (SI)."""
-        return {'frequency_range_hz': list(self.frequency_range_hz), 'peak_hz': self.peak_hz,
-                'peak_ratio': self.peak_ratio, 'excess_variance': self.excess_variance}
+        return {**dataclasses.asdict(self), 'frequency_range_hz': list(self.frequency_range_hz)}
 
 
 @dataclass
