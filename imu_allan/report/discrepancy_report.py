@@ -18,23 +18,9 @@ import tempfile
 import numpy as np
 
 from . import strict_json
+from .strict_json import finite_or_none
 from ..core.terms import TERMS
 from ..core.units import conventional
-
-
-def _clean(value):
-    """JSON-safe copy: NaN and inf become null, numpy scalars become Python numbers."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, (np.bool_, bool)):
-        return bool(value)
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    return value
 
 
 def report_dict(result, source, findings=None):
@@ -56,7 +42,7 @@ def report_dict(result, source, findings=None):
                            if step.effect != 'recalibration']
         out['consistent'] = not out['findings']
     _add_sentences(out)
-    return _clean(out)
+    return finite_or_none(out)
 
 
 def _add_sentences(out):
@@ -70,7 +56,7 @@ def runs_report_dict(findings, model, sources):
     out = {'sources': list(sources), 'model': model.to_dict()['axes']}
     out.update(findings.to_dict())
     _add_sentences(out)
-    return _clean(out)
+    return finite_or_none(out)
 
 
 def _step_finding(step):
@@ -413,12 +399,9 @@ def write_plots(result, out_dir):
     # gap per step, one line per axis
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     for axis in result.axes:
-        gaps = [result.initial_gaps[axis].value]
-        labels = []
-        for step in (s for s in result.steps if s.axis == axis):
-            gaps.append(step.gap_after)
-            labels.append(step.effect)
-        text = ' → '.join(f'+{e}' for e in labels) if labels else 'nothing added'
+        gaps = [result.initial_gaps[axis].value] + [s.gap_after for s in result.steps
+                                                    if s.axis == axis]
+        text = ' → '.join(f'+{e}' for e in result.effects(axis)) or 'nothing added'
         ax.plot(range(len(gaps)), gaps, 'o-', label=f'{axis}: {text}')
     thr = max(result.final_gaps[a].threshold for a in result.axes)
     ax.axhspan(0, thr, color='tab:green', alpha=0.10, lw=0)

@@ -42,26 +42,14 @@ def _term_edf(term, params, tau, ms, n_samples):
 @dataclass
 class Band:
     """
-    Expected measured log-deviation of one axis under a model.
+    Expected measured log-deviation of one axis under a model (arrays over ``tau``, s).
 
-    Attributes
-    ----------
-    tau : numpy.ndarray
-        Averaging times, s.
-    avar : numpy.ndarray
-        Analytic model AVAR (unit^2).
-    edf : numpy.ndarray
-        Model EDF of each AVAR estimate (harmonic mix of the terms' EDFs weighted by their AVAR
-        share).
-    alpha : numpy.ndarray
-        Exponent of the dominant random term (drives the correlation between averaging times).
-    center : numpy.ndarray
-        Expected ln(adev) of the estimator: 0.5 ln AVAR + 0.5 (psi(nu/2) - ln(nu/2)).
-    sd : numpy.ndarray
-        Standard deviation of ln(adev) (analytic 0.5 sqrt(psi'(nu/2)), pooled with simulations).
-    sims : numpy.ndarray or None
-        (K, T) ln(adev) of the simulated runs.
-
+    ``avar`` is the analytic model AVAR (unit^2), ``edf`` the model EDF of each estimate (the
+    terms' EDFs mixed harmonically by AVAR share), ``alpha`` the exponent of the dominant
+    random term (it sets the correlation between averaging times), ``center`` the expected
+    ln(adev) 0.5 ln AVAR + 0.5 (psi(nu/2) - ln(nu/2)), ``sd`` its standard deviation (analytic
+    0.5 sqrt(psi'(nu/2)), pooled with simulations), ``sims`` the (K, T) ln(adev) of the
+    simulated runs or None.
     """
 
     tau: np.ndarray
@@ -108,10 +96,7 @@ def model_band(axis_terms, tau, ms, n_samples, rate_hz):
     tau = np.asarray(tau, dtype=float)
     contrib = {t: np.maximum(TERMS[t].avar(p, tau, rate_hz), 0.0)
                for t, p in axis_terms.items()}
-    total = np.zeros(tau.shape)
-    for value in contrib.values():
-        total = total + value
-    total = np.maximum(total, 1e-300)
+    total = np.maximum(sum(contrib.values(), np.zeros(tau.shape)), 1e-300)
     inv_nu = np.zeros(tau.shape)
     best = np.zeros(tau.shape)
     alpha = np.zeros(tau.shape, dtype=int)

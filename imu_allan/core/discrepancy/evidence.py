@@ -1,31 +1,19 @@
 """
 What one recording says about each term of a stated (intended) noise model.
 
-For every axis the stated terms are refitted to the measured Allan deviation with their
-amplitudes free and their positions (Gauss-Markov tau_c, sinusoid frequency) held as stated, in
-the gap's own metric (:meth:`.band.Band.problem`); each amplitude's ratio to the stated one is a
-*factor* with a standard error in log space from the sandwich covariance.  Around that:
-
-* a stated term the data do not need (dropping it costs no significant Q) while its stated
-  size is rejected is *absent*, with an upper limit on its factor (profile of Q);
-* a stated Gauss-Markov's correlation time is freed (over a range wider than the span: the
-  data may show no bend at all) and its factor measured; a fitted tau_c beyond the longest
-  averaging time where the stated one bends inside the span is an unbounded walk; a stated
-  random walk is tried as a bounded Gauss-Markov;
-* when the refitted model still leaves the band, the effects the model lacks compete as in the
-  single-recording workflow (:func:`.workflow.evaluate_candidates`), up to two per axis;
-* a stated term whose amplitude is zero (a simulator key set to 0) is left out of the fit
-  and listed as *zeroed*: when the data show it, it is among the effects the model lacks;
-* the raw numbers the run-to-run, drive and metadata evidence need: the means of the first and
-  last tenth of the record, the least-squares slope, the record's RMS (the per-sample std of
-  everything in it) and the per-sample white variance (the Allan variance at the shortest
-  averaging time).
-
-SI units throughout; factors are measured / stated.  ROS-free.
+Per axis (:class:`AxisEvidence`) the stated terms are refitted with their amplitudes free and
+their positions held as stated, in the gap's own metric (:meth:`.band.Band.problem`); each
+amplitude / stated is a *factor* with a log-space standard error from the sandwich covariance.
+Around that: absent terms with upper limits, a freed Gauss-Markov tau_c, a stated walk tried as
+a bounded Gauss-Markov, up to :data:`MAX_MISSING` effects the model lacks
+(:func:`.workflow.evaluate_candidates`), zeroed terms, and the raw numbers the run-to-run,
+drive and metadata evidence need.  docs/discrepancy.md section 8 ("One recording's evidence")
+describes each step.  SI units throughout; factors are measured / stated.  ROS-free.
 """
 
 from dataclasses import dataclass, field
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -151,6 +139,19 @@ class AxisEvidence:
     tau_range: tuple = (math.nan, math.nan)
 
 
+class _Axis(NamedTuple):
+    """One measured axis: ln(adev) ``y`` of column ``j`` of ``measured``, at ``rate`` Hz."""
+
+    y: np.ndarray
+    measured: object
+    j: int
+    rate: float
+
+    def fit(self, names, init=None, fixed=None, ranges=None):
+        """Return :func:`.workflow.two_pass_fit` of ``names`` here: ``(problem, fit)``."""
+        return two_pass_fit(self.y, self.measured, self.j, names, init, fixed, ranges)
+
+
 def _log_sd(fit, term, kind):
     """Return the standard error of a fitted log parameter (``kind`` 'amp', 'pos'), or inf."""
     i = fit.labels.index((term, kind))
@@ -194,43 +195,38 @@ def _q_with_fixed(prob, names, term, amp, fit, fixed):
     return refit.chi2
 
 
-def _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated, q_target):
-    """
-    Largest amplitude factor (of the stated one) whose Q stays below ``q_target``.
-
-    ``q_stated`` is the Q with the amplitude held at ``stated_amp`` (:func:`_q_with_fixed`).
-    """
-    lo = math.log(max(amplitude(fit.terms[term], term), stated_amp * 1e-6))
-    hi = math.log(stated_amp)
-    if q_stated <= q_target:
-        return 1.0
-    for _ in range(18):  # bisection in log amplitude: 18 halvings of a <= 14-e-fold span
-        mid = 0.5 * (lo + hi)
-        if _q_with_fixed(prob, names, term, math.exp(mid), fit, fixed) <= q_target:
-            lo = mid
-        else:
-            hi = mid
-    return math.exp(lo) / stated_amp
-
-
 def _absent(prob, fit, names, term, fixed, stated_amp, z_crit):
     """
     Return the p-value of an unneeded term's stated size and, if rejected, upper limits.
 
     A change of Q by c z^2 (c: :func:`_q_scale`) is a z-sigma move of the term's amplitude:
-    the 68.3 % and ``z_crit`` upper limits of its factor are where Q has grown by c and
-    c z_crit^2 (the other terms refitted each time).
+    the 68.3 % and ``z_crit`` upper limits of its factor (of the stated amplitude) are where Q
+    has grown by c and c z_crit^2 (the other terms refitted each time).
     """
     from scipy.stats import norm
+
+    def q_at(amp):
+        return _q_with_fixed(prob, names, term, amp, fit, fixed)
+
+    def upper(q_target):  # the largest factor whose Q stays below q_target
+        if q_stated <= q_target:
+            return 1.0
+        lo = math.log(max(amplitude(fit.terms[term], term), stated_amp * 1e-6))
+        hi = math.log(stated_amp)
+        for _ in range(18):  # bisection in log amplitude: 18 halvings of a <= 14-e-fold span
+            mid = 0.5 * (lo + hi)
+            if q_at(math.exp(mid)) <= q_target:
+                lo = mid
+            else:
+                hi = mid
+        return math.exp(lo) / stated_amp
     scale = _q_scale(prob, fit, term)
-    q_stated = _q_with_fixed(prob, names, term, stated_amp, fit, fixed)
+    q_stated = q_at(stated_amp)
     p_stated = float(2.0 * norm.sf(math.sqrt(max(q_stated - fit.chi2, 0.0) / scale)))
     out = {'p_stated': p_stated, 'upper68': 1.0, 'upper_crit': 1.0}
     if p_stated < REJECTED_P:  # the stated size does not fit: how large could it be?
-        out['upper68'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
-                                      fit.chi2 + scale)
-        out['upper_crit'] = _upper_limit(prob, names, term, fit, fixed, stated_amp, q_stated,
-                                         fit.chi2 + scale * z_crit ** 2)
+        out['upper68'] = upper(fit.chi2 + scale)
+        out['upper_crit'] = upper(fit.chi2 + scale * z_crit ** 2)
     return out
 
 
@@ -286,14 +282,14 @@ def _wide(measured):
                              WIDE_FACTOR * float(measured.tau[-1]))}
 
 
-def _free_position(y, measured, j, names, fit, fixed):
+def _free_position(ax, names, fit, fixed):
     """Fit the stated Gauss-Markov with its tau_c free; return the fit and the p-value."""
     others = {t: p for t, p in fixed.items() if t != 'gauss_markov'}
-    prob, free = two_pass_fit(y, measured, j, names, fit.terms, others, _wide(measured))
+    prob, free = ax.fit(names, fit.terms, others, _wide(ax.measured))
     return free, _position_p(prob, free, names, fit, fixed)
 
 
-def _bounded_walk(y, measured, j, names, fit, fixed, rate):
+def _bounded_walk(ax, names, fit, fixed):
     """
     Try a stated random walk as a Gauss-Markov with its tau_c free.
 
@@ -302,12 +298,12 @@ def _bounded_walk(y, measured, j, names, fit, fixed, rate):
     ``(None, None)``.  The evidence's p-value is that of the position (a walk is the
     Gauss-Markov's tau_c -> inf limit), with the look-elsewhere factor.
     """
-    t_max = float(measured.tau[-1])
+    t_max = float(ax.measured.tau[-1])
     alt = [t for t in names if t != 'rate_random_walk'] + ['gauss_markov']
     k_stated = fit.terms['rate_random_walk']['value']
     init = {t: fit.terms[t] for t in alt if t in fit.terms}
     init['gauss_markov'] = {'sigma': stationary_sigma(k_stated, t_max), 'tau_c': t_max}
-    prob, bounded = two_pass_fit(y, measured, j, alt, init, fixed, _wide(measured))
+    prob, bounded = ax.fit(alt, init, fixed, _wide(ax.measured))
     p = _position_p(prob, bounded, names, fit, fixed)
     tau_fit = bounded.terms['gauss_markov']['tau_c']
     if bounded.at_bound['gauss_markov']['tau_c'] or \
@@ -315,44 +311,40 @@ def _bounded_walk(y, measured, j, names, fit, fixed, rate):
         return None, None
     log_k, se_k = _log_drive(bounded)
     return {'term': 'rate_random_walk', 'kind': 'bounded', 'p_value': p,
-            'estimate': LogEstimate(log_k, se_k, rate), 'tau_c_fit': tau_fit}, bounded
+            'estimate': LogEstimate(log_k, se_k, ax.rate), 'tau_c_fit': tau_fit}, bounded
 
 
-def _process_tests(y, measured, j, names, fit, fixed, stated, rate, needed, freed=None):
+def _gauss_markov_tests(ev, ax, names, fit, fixed, freed=None):
     """
-    Position factors of stated Gauss-Markov terms, and the wrong-process evidence.
+    Fill the position factors of ``ev``'s stated Gauss-Markov and the wrong-process evidence.
 
-    Only terms the data need (``needed``) are tested; ``freed`` is the (free fit, p-value)
-    of :func:`_free_position` when already made with these terms.  Returns ``(positions,
-    position_p, free_scales, process)``; see :class:`AxisEvidence`.
+    The process is a walk where the Gauss-Markov is stated.  ``freed`` is the (free fit,
+    p-value) of :func:`_free_position` when already made with these terms.
     """
-    tau = measured.tau
-    t_max = float(tau[-1])
-    spec = TERMS['gauss_markov']
-    positions, position_p, free_scales, process = {}, {}, {}, None
-    if 'gauss_markov' in needed:
-        free, p = freed or _free_position(y, measured, j, names, fit, fixed)
-        tau_fit = free.terms['gauss_markov']['tau_c']
-        tau_stated = stated['gauss_markov']['tau_c']
-        se = _log_sd(free, 'gauss_markov', 'pos') * POSITION_SE_INFLATION
-        position_p['gauss_markov'] = p
-        # only a resolved bend is a measurement: an unresolved tau_c wanders along the
-        # sigma-tau_c ridge of a hump seen from one side, and such estimates are biased (the
-        # decision itself is the position test's p-value, combined over the recordings)
-        if not free.at_bound['gauss_markov']['tau_c'] and se < MAX_POSITION_SE:
-            positions['gauss_markov'] = LogEstimate(math.log(tau_fit / tau_stated), se, rate)
-            free_scales['gauss_markov'] = LogEstimate(
-                math.log(amplitude(free.terms['gauss_markov'], 'gauss_markov')
-                         / amplitude(stated['gauss_markov'], 'gauss_markov')),
-                _log_sd(free, 'gauss_markov', 'amp') * POSITION_SE_INFLATION, rate)
-        # the data keep rising where the stated Gauss-Markov would have levelled off
-        if tau_fit > t_max and spec.peak_ratio * tau_stated < 0.5 * t_max:
-            log_k, se_k = _log_drive(free)
-            s0 = stated['gauss_markov']['sigma']
-            process = {'term': 'gauss_markov', 'kind': 'walk', 'p_value': p,
-                       'estimate': LogEstimate(log_k - math.log(driving_density(
-                           s0, tau_stated)), se_k, rate), 'tau_c_fit': tau_fit}
-    return positions, position_p, free_scales, process
+    t_max = float(ax.measured.tau[-1])
+    stated = ev.stated['gauss_markov']
+    free, p = freed or _free_position(ax, names, fit, fixed)
+    tau_fit = free.terms['gauss_markov']['tau_c']
+    se = _log_sd(free, 'gauss_markov', 'pos') * POSITION_SE_INFLATION
+    ev.position_p['gauss_markov'] = p
+    # only a resolved bend is a measurement: an unresolved tau_c wanders along the
+    # sigma-tau_c ridge of a hump seen from one side, and such estimates are biased (the
+    # decision itself is the position test's p-value, combined over the recordings)
+    if not free.at_bound['gauss_markov']['tau_c'] and se < MAX_POSITION_SE:
+        ev.positions['gauss_markov'] = LogEstimate(math.log(tau_fit / stated['tau_c']), se,
+                                                   ax.rate)
+        ev.free_scales['gauss_markov'] = LogEstimate(
+            math.log(amplitude(free.terms['gauss_markov'], 'gauss_markov')
+                     / amplitude(stated, 'gauss_markov')),
+            _log_sd(free, 'gauss_markov', 'amp') * POSITION_SE_INFLATION, ax.rate)
+    # the data keep rising where the stated Gauss-Markov would have levelled off
+    if ev.process is None and tau_fit > t_max and \
+            TERMS['gauss_markov'].peak_ratio * stated['tau_c'] < 0.5 * t_max:
+        log_k, se_k = _log_drive(free)
+        ev.process = {'term': 'gauss_markov', 'kind': 'walk', 'p_value': p,
+                      'estimate': LogEstimate(log_k - math.log(driving_density(
+                          stated['sigma'], stated['tau_c'])), se_k, ax.rate),
+                      'tau_c_fit': tau_fit}
 
 
 def split_zeroed(terms):
@@ -418,12 +410,12 @@ def measure_recording(recording, model, z_crit=3.0, alpha=ALPHA, points_per_deca
         ev.white_variance = (float(measured.avar[0, j]), float(measured.edf[0, j]))
         adev = measured.adev[:, j]
         if stated and np.all(np.isfinite(adev) & (adev > 0)):
-            _fit_axis(ev, np.log(adev), measured, j, stated, rate, z_crit, alpha)
+            _fit_axis(ev, _Axis(np.log(adev), measured, j, rate), z_crit, alpha)
         out[axis] = ev
     return out
 
 
-def _free_gauss_markov(y, measured, j, names, fit, fixed):
+def _free_gauss_markov(ax, names, fit, fixed):
     """
     Free a stated Gauss-Markov's tau_c and keep it when that fits significantly better.
 
@@ -433,25 +425,26 @@ def _free_gauss_markov(y, measured, j, names, fit, fixed):
     """
     if 'gauss_markov' not in fixed:
         return fixed, fit, None
-    free, p = _free_position(y, measured, j, names, fit, fixed)
+    free, p = _free_position(ax, names, fit, fixed)
     if p >= ADOPT_P:
         return fixed, fit, (free, p)
     adopted = dict(fixed, gauss_markov=free.terms['gauss_markov']['tau_c'])
-    return adopted, two_pass_fit(y, measured, j, names, free.terms, adopted)[1], (free, p)
+    return adopted, ax.fit(names, free.terms, adopted)[1], (free, p)
 
 
-def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
+def _fit_axis(ev, ax, z_crit, alpha):
     """Fill the Allan-variance evidence of one axis (see the module docstring)."""
+    measured, y, rate, stated = ax.measured, ax.y, ax.rate, ev.stated
     tau = measured.tau
     names = list(stated)
     fixed = _positions(stated)
     ev.gap_stated = measure_gap(y, model_band(stated, tau, measured.m, measured.n_samples,
                                               rate), alpha).value
-    first = two_pass_fit(y, measured, j, names, stated, fixed)
-    held, fit, freed = _free_gauss_markov(y, measured, j, names, first[1], fixed)
+    first = ax.fit(names, stated, fixed)
+    held, fit, freed = _free_gauss_markov(ax, names, first[1], fixed)
     replaced = None
     if 'rate_random_walk' in stated and 'gauss_markov' not in stated:
-        ev.process, bounded = _bounded_walk(y, measured, j, names, fit, fixed, rate)
+        ev.process, bounded = _bounded_walk(ax, names, fit, fixed)
         if ev.process is not None:
             # the stated walk stands in for the data's bounded bias; the process is kept in
             # the walk's place (with its fitted tau_c) for what follows, so that a missing
@@ -463,14 +456,14 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
                 fixed = dict(fixed, gauss_markov=bounded.terms['gauss_markov']['tau_c'])
                 held = dict(fixed)
                 fit = bounded
-                first = two_pass_fit(y, measured, j, names, bounded.terms, fixed)
+                first = ax.fit(names, bounded.terms, fixed)
     # effects the stated terms lack: only when the refitted stated terms leave the band
     for _ in range(MAX_MISSING):
         band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
         gap = measure_gap(y, band, alpha)
         if gap.consistent:
             break
-        cands, _ = evaluate_candidates(y, tau, rate, band, fit.terms, alpha, gap=gap)
+        cands = evaluate_candidates(y, band, gap, rate, fit.terms, alpha)
         winner = next((c for c in cands if c.significant and c.effect in c.fit.terms), None)
         if winner is None:
             break
@@ -484,7 +477,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
             fixed[added] = held[added] = position
         init = dict(fit.terms)
         init[added] = winner.fit.terms[added]
-        fit = two_pass_fit(y, measured, j, names, init, held)[1]
+        fit = ax.fit(names, init, held)[1]
     band = model_band(fit.terms, tau, measured.m, measured.n_samples, rate)
     gap = measure_gap(y, band, alpha)
     ev.gap_fitted, ev.consistent_fitted = gap.value, gap.consistent
@@ -492,7 +485,7 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
     ev.mean_noise_var = _mean_noise(fit.terms, rate, ev.duration_s)
     # the factors: amplitudes with the stated positions (and any added effect's)
     if ev.missing:
-        prob, fit = two_pass_fit(y, measured, j, names, fit.terms, fixed)
+        prob, fit = ax.fit(names, fit.terms, fixed)
         freed = None  # the freed tau_c is tried again beside the added effects
     else:
         prob, fit = first
@@ -512,7 +505,5 @@ def _fit_axis(ev, y, measured, j, stated, rate, z_crit, alpha):
         ev.scales[term] = LogEstimate(math.log(amplitude(fit.terms[term], term) / a0),
                                       _log_sd(fit, term, 'amp') * AMPLITUDE_SE_INFLATION,
                                       rate)
-    positions, position_p, free_scales, process = _process_tests(
-        y, measured, j, names, fit, fixed, stated, rate, needed, freed)
-    ev.positions, ev.position_p, ev.free_scales = positions, position_p, free_scales
-    ev.process = ev.process or process
+    if 'gauss_markov' in needed:
+        _gauss_markov_tests(ev, ax, names, fit, fixed, freed)

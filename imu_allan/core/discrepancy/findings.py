@@ -436,28 +436,14 @@ def _with_drive_findings(findings, per_axis, decaying, p_crit):
 def find_discrepancies(recordings, model, alpha=ALPHA, points_per_decade=10,
                        min_clusters=10, materiality=None):
     """
-    Compare recordings of one configuration with the noise model it states: findings.
+    Compare recordings of one configuration with the noise model it states; FindingsResult.
 
-    Parameters
-    ----------
-    recordings : list of Recording
-        Any sample rates, any number of runs (:class:`.evidence.Recording`).
-    model : NoiseModel or list of NoiseModel
-        The stated (intended) model, SI, continuous time; one per recording when it depends
-        on the rate (a per-sample quantity stated by a simulator file).
-    alpha : float
-        Family-wise level of the whole analysis (Bonferroni over :func:`count_tests`).
-    points_per_decade, min_clusters : int
-        Averaging-time grid of the estimator (as
-        :func:`~imu_allan.core.allan.estimate.allan_deviation`).
-    materiality : Materiality, optional
-        The band of scale factors that do not matter (default 0.8-1.25,
-        :mod:`.materiality`); a significant factor inside it goes to ``within``.
-
-    Returns
-    -------
-    FindingsResult
-
+    ``recordings``: :class:`.evidence.Recording` s at any rates, any number of runs;
+    ``model``: the stated model (SI, continuous time), or one per recording when it depends on
+    the rate (a per-sample quantity stated by a simulator file).  ``alpha`` is the family-wise
+    level (Bonferroni over :func:`count_tests`); ``points_per_decade`` and ``min_clusters`` the
+    estimator's averaging-time grid; ``materiality`` the band of factors that do not matter
+    (default 0.8-1.25, :mod:`.materiality`): a significant factor inside it goes to ``within``.
     """
     models = list(model) if isinstance(model, (list, tuple)) else [model] * len(recordings)
     if len(models) != len(recordings):

@@ -1,26 +1,12 @@
 """
 Which findings matter: a factor must leave a band the user cares about, not only exclude 1.
 
-With long records at several rates a factor's interval gets tight enough to exclude 1 for a
-difference nobody would change a simulator for (a white noise 1.01 x the stated).  A finding
-whose class has a ratio for its factor (1 = as stated) is *material* only when that factor
-lies outside the band [lo, hi] (default 0.8-1.25, symmetric in log) at some recorded rate;
-below it the finding is kept aside as *consistent within X %*, X the farthest end of its 95 %
-interval from 1 at the recorded rates (the data then say the true factor is within X % of the
-stated one).  The band applies to
-
-* ``white_scale``, ``bias_scale``, ``time_constant``: amplitude and correlation-time ratios;
-* ``metadata``: a ratio of variances, so the band squared (0.64-1.5625 by default);
-* ``run_to_run`` of kind ``spread``, ``mean`` and ``decay`` (ratios of sigmas, means and of the
-  last level to the first).
-
-Every other class is a different kind of process, not a size, and is always material: a term
-absent or set to zero that the data show, a walk for a bounded bias or the reverse, a drive
-with a mean, a turn-on bias of random sign, an effect the model lacks.
-
-A factor that scales with the rate (``rate_exponent``) is judged at each recorded rate (the
-per-rate factors in its evidence): a per-sample value read as a density is 1 at 1 Hz and far
-off at every rate recorded.
+A finding of a class in :data:`RATIO_CLASSES` (``run_to_run``: :data:`RATIO_KINDS` only) is
+*material* only when its factor lies outside the band [lo, hi] (default 0.8-1.25; squared for
+:data:`VARIANCE_CLASSES`) at some recorded rate: a factor that scales with the rate is judged at
+each recorded rate.  Below it the finding is kept aside as *consistent within X %*, X the
+farthest end of its 95 % interval from 1.  Every other class is a different process, not a
+size, and always material.  docs/discrepancy.md section 8 ("Materiality") gives the reasons.
 """
 
 from dataclasses import dataclass

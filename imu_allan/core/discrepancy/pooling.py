@@ -81,12 +81,17 @@ def _rate_groups(estimates):
     return groups
 
 
-def _weighted_mean(logs, ses):
-    w = 1.0 / ses ** 2
+def _weighted_mean(estimates):
+    """Inverse-variance mean of the logs and its error (widened by excess scatter)."""
+    logs = np.array([e.log for e in estimates])
+    w = 1.0 / np.array([e.se for e in estimates]) ** 2
     mean = float(np.sum(w * logs) / np.sum(w))
     se = math.sqrt(1.0 / float(np.sum(w)))
     chi2 = float(np.sum(w * (logs - mean) ** 2))
-    return mean, se, chi2
+    dof = len(estimates) - 1
+    if dof >= 3 and chi2 / dof > 1.0:
+        se *= math.sqrt(chi2 / dof)
+    return mean, se
 
 
 def pool(estimates, z_crit):
@@ -99,25 +104,18 @@ def pool(estimates, z_crit):
     usable = [e for e in estimates if e.usable]
     if not usable:
         return None
-    logs = np.array([e.log for e in usable])
-    ses = np.array([e.se for e in usable])
-    mean, se, chi2 = _weighted_mean(logs, ses)
-    dof = len(usable) - 1
-    if dof >= 3 and chi2 / dof > 1.0:
-        se *= math.sqrt(chi2 / dof)
+    mean, se = _weighted_mean(usable)
     per_rate = []
     for group in _rate_groups(usable):
-        m, s, c = _weighted_mean(np.array([e.log for e in group]),
-                                 np.array([e.se for e in group]))
-        if len(group) >= 4 and c / (len(group) - 1) > 1.0:
-            s *= math.sqrt(c / (len(group) - 1))
+        m, s = _weighted_mean(group)
         per_rate.append({'rate_hz': float(np.exp(np.mean(np.log([e.rate_hz for e in group])))),
                          'log': m, 'se': s, 'runs': len(group)})
     out = Pooled(mean, se, abs(mean) / se, per_rate=per_rate, n=len(usable))
     if len(per_rate) < 2:
         return out
+    logs = np.array([e.log for e in usable])
     x = np.log([e.rate_hz for e in usable])
-    w = 1.0 / ses ** 2
+    w = 1.0 / np.array([e.se for e in usable]) ** 2
     design = np.column_stack([np.ones_like(x), x])
     info = design.T @ (design * w[:, None])
     cov = np.linalg.inv(info)

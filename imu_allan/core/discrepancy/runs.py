@@ -1,33 +1,18 @@
 """
 Evidence that needs several runs: the turn-on bias and the sign of a drift.
 
-Turn-on bias (the model's ``turn_on_bias: {mean, sigma}``, one value drawn per start): each run's
-mean over its first tenth, b_r, estimates the bias it started with, give or take the noise within
-the run (variance v_r, :func:`.evidence._mean_noise`).  Under the model b_r ~ N(mean,
-sigma^2 + v_r).  Four tests, each against that distribution:
+Turn-on bias (``turn_on_bias: {mean, sigma}``, one value drawn per start): each run's mean over
+its first tenth, b_r, estimates the bias it started with; under the model b_r ~ N(mean,
+sigma^2 + v_r), v_r the noise within the run (:func:`.evidence._mean_noise`).  Four tests
+against it (:func:`turn_on_tests`): *decay* (b_last = beta b_first across runs, corrected for
+the noise in b_first; factor beta), *bimodal* (runs of the opposite sign against
+Phi(-|mean| / sd); factor the sign agreement 1 - 2 share), *spread* (chi-square; factor
+sqrt(var - v) / sigma) and *mean* (factor observed / stated).  An accelerometer axis whose runs
+sit beyond :data:`GRAVITY_LEVEL` carries gravity: decay (with an intercept) and spread only.
 
-* **decay**: the last tenth's mean against the first's across runs, b_last = beta b_first
-  (through the origin; with an intercept on an axis that carries gravity), beta corrected for
-  the noise in b_first; a constant bias has beta = 1, one that decays with tau has
-  exp(-0.9 T / tau).  The factor is beta.
-* **bimodal**: runs whose b_r has the opposite sign to the stated mean, against the binomial
-  with the stated probability Phi(-|mean| / sd); the factor is the sign agreement
-  1 - 2 (opposite share): 1 as stated, 0 for a sign drawn at random.
-* **spread**: the sample variance of b_r against sigma^2 + v (chi-square); the factor is
-  sqrt(var - v) / sigma (0 when a stated spread is missing).
-* **mean**: the mean of b_r against the stated mean; the factor is observed / stated.
-
-An accelerometer axis whose runs sit at more than 1 m/s^2 carries gravity: only decay (with an
-intercept) and spread are tested there.
-
-Drift with a biased drive: a random walk or Gauss-Markov driven by noise with a non-zero mean
-(a uniform draw in [0, 1) used as a zero-mean normal one) drifts the same way in every run and
-on every axis.  The least-squares slope of each run is a sign: under a zero-mean drive the signs
-are fair coins (binomial(n, 1/2) over all runs and axes of a sensor), and the drive factors the
-slopes give (the drive's mean in units of its stated standard deviation per step) scatter about
-0; :func:`drive_test` tests both.
-
-All intervals are 68.3 % (t or chi-square quantiles for the few runs there are).
+Drift with a biased drive (a drive with a non-zero mean drifts the same way in every run and
+axis): :func:`drive_test`.  All intervals are 68.3 % and 95 % (t or chi-square quantiles for the
+few runs there are).  docs/discrepancy.md section 8 ("Across runs") gives the reasoning.
 """
 
 import math
@@ -44,10 +29,7 @@ from ..units import discrete_random_walk_step
 GRAVITY_LEVEL = 1.0
 #: Fewest runs for a run-to-run test.
 MIN_RUNS = 3
-_P68 = norm.cdf(1.0) - norm.cdf(-1.0)
-
-
-_P95 = 0.95
+_P68, _P95 = norm.cdf(1.0) - norm.cdf(-1.0), 0.95
 
 
 def _tq(dof, level=_P68):
@@ -162,16 +144,11 @@ def turn_on_tests(axis, evidences, stated):
     last = np.array([e.means['last'] for e in evidences])
     noise = np.array([e.mean_noise_var.get('first', 0.0) for e in evidences])
     gravity = not axis.startswith('gyro') and abs(float(np.median(first))) > GRAVITY_LEVEL
-    out = []
-    decay = _decay(first, last, noise, gravity)
-    if decay is not None:
-        out.append(decay)
+    out = [_decay(first, last, noise, gravity)]
     if not gravity:
-        bimodal = _bimodal(first, noise, stated['mean'], stated['sigma'])
-        if bimodal is not None:
-            out.append(bimodal)
-        out.append(_mean(first, noise, stated['mean'], stated['sigma']))
-    out.append(_spread(first, noise, stated['sigma']))
+        out += [_bimodal(first, noise, stated['mean'], stated['sigma']),
+                _mean(first, noise, stated['mean'], stated['sigma'])]
+    out = [t for t in out + [_spread(first, noise, stated['sigma'])] if t is not None]
     for test in out:
         test['evidence']['gravity_axis'] = gravity
     return out
@@ -245,16 +222,11 @@ def drive_test(per_axis, stated_terms):
     """
     Test one sensor's drift over all its runs and axes for a drive with a mean; each axis's factor.
 
-    Two tests, the smaller p-value doubled (Bonferroni): the *sign* test (the slopes' signs
-    against binomial(n, 1/2), exact under any zero-mean drive) and a *t test* of the runs'
-    drive factors (each run's mean step over the stated step sd, weighted by the relative
-    variance the stated model gives its slope, :func:`_slope_variance`): their weighted mean
-    against 0 with the scale estimated from their scatter about it, t(n - 1).  The t test needs
-    no stated scale, so a mis-scaled bias term does not make a drift of it, and it tells a
-    drift every axis shares in one run of three axes (the sign test needs 13 slopes to reach
-    a Bonferroni level of 1e-4).  An axis's factor is its runs' weighted mean with that pooled
-    scatter (t intervals, n - 1 degrees of freedom): the axes of a sensor share the drive.
-
+    Two tests, the smaller p-value doubled (Bonferroni): the slopes' signs against
+    binomial(n, 1/2), and a t test, t(n - 1), of the runs' drive factors (mean step / stated
+    step sd) weighted by :func:`_slope_variance`, the scale from their scatter (it needs no
+    stated scale; docs/discrepancy.md section 8 says why both).  An axis's factor is its runs'
+    weighted mean with that pooled scatter (t intervals): the axes of a sensor share the drive.
     ``per_axis``: ``{axis: [AxisEvidence per run]}``; ``stated_terms``: ``{axis: terms}``.
     Returns ``(p_value, {axis: {'factor', 'factor_ci', 'factor_ci95', 'evidence'}})``; both
     tests need at least :data:`MIN_RUNS` slopes.

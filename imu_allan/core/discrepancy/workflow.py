@@ -112,26 +112,22 @@ def _n_params(term):
     return len(TERMS[term].params)
 
 
-def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False,
-                        gap=None):
+def evaluate_candidates(y, band, gap, rate_hz, current, alpha=ALPHA, fixed=False):
     """
-    Fit every effect the axis lacks; return (candidates, best first; baseline fit).
+    Fit every effect the axis lacks; return the candidates, best first.
 
-    ``current`` is the axis's ``{term: params}``; with ``fixed`` the current parameters came
-    from a model file and a pure refit ('recalibration') competes as well.
+    ``y`` is the measured ln(adev) on ``band``'s averaging times, ``gap`` its
+    :func:`~.band.measure_gap`, ``current`` the axis's ``{term: params}``; with ``fixed`` the
+    current parameters came from a model file and a pure refit ('recalibration') competes too.
     """
     prob = band.problem(y, rate_hz)
     t_eff = effective_count(prob.corr)
-    gap = gap or measure_gap(y, band, alpha)
     hints = {t: TERMS[t].position_at_peak(gap.peak_tau) for t in ('gauss_markov', 'sinusoid')}
     base_names = list(current)
-    scale = t_eff / tau.size
+    scale = t_eff / band.tau.size
     results = []
-    if base_names:
-        base = fit_terms(prob, _ordered(base_names), init=current)
-    else:
-        base = None
-    q0 = base.chi2 if base else prob.chi2(np.full(tau.shape, 1e-300))
+    base = fit_terms(prob, _ordered(base_names), init=current) if base_names else None
+    q0 = base.chi2 if base else prob.chi2(np.full(band.tau.shape, 1e-300))
     others = [t for t in ALL_TERMS if t not in current]
     n_tests = len(others) + (1 if fixed and base_names else 0)
     for term in others:
@@ -156,7 +152,7 @@ def evaluate_candidates(y, tau, rate_hz, band, current, alpha=ALPHA, fixed=False
                                  p_adj, p_adj < alpha, (scale * delta - 2.0 * k) / k))
     # the effect that lowers the (effective) AIC most per added parameter ranks first
     results.sort(key=lambda c: -c.gain)
-    return results, base
+    return results
 
 
 @dataclass
@@ -286,14 +282,7 @@ def start_model(measured, axes, terms, alpha=ALPHA):
 
 @dataclass(frozen=True)
 class DiscrepancyOptions:
-    """
-    Options of one discrepancy run (:func:`run_discrepancy`'s keywords of the same names).
-
-    ``n_sims`` simulated runs per round pooled into the spread (0: analytic spread only),
-    ``seed`` of those simulations, ``max_steps`` most effects added per axis, ``alpha``
-    significance level for "inconsistent" and for adding an effect; ``points_per_decade`` and
-    ``min_clusters`` set the estimator's averaging-time grid.
-    """
+    """Options of one discrepancy run: :func:`run_discrepancy`'s keywords of the same names."""
 
     n_sims: int = 4
     seed: int = 0
@@ -439,8 +428,8 @@ class _Search:
         """
         tau, rate = self.measured.tau, self.measured.rate_hz
         y, band, g = self.ys[axis], self.bands[axis], self.gaps[axis]
-        cands, _ = evaluate_candidates(y, tau, rate, band, self.current[axis],
-                                       self.options.alpha, axis in self.fixed, g)
+        cands = evaluate_candidates(y, band, g, rate, self.current[axis], self.options.alpha,
+                                    axis in self.fixed)
         was_fixed = axis in self.fixed
         self.fixed.discard(axis)
         cands = [c for c in cands if c.effect not in self.refused[axis]]
@@ -498,38 +487,16 @@ def run_discrepancy(data, rate_hz, axes=None, model=None, terms=None, n_sims=4, 
                     max_steps=4, alpha=ALPHA, points_per_decade=10, min_clusters=10,
                     measured=None):
     """
-    Run the discrepancy workflow on rate samples.
+    Run the discrepancy workflow on rate samples; return a :class:`DiscrepancyResult`.
 
-    Parameters
-    ----------
-    data : array_like
-        (n_samples, n_axes) rate samples, SI (rad/s, m/s^2).
-    rate_hz : float
-        Sample rate, Hz.
-    axes : sequence of str, optional
-        Column names (default: the first n_axes of the package axis order).
-    model : NoiseModel, optional
-        Starting model (parameters as given, e.g. a datasheet budget).
-    terms : sequence of str, optional
-        Starting terms fitted to the data (default: white noise + bias instability when no
-        model is given).
-    n_sims : int
-        Simulated runs per round pooled into the spread (0: analytic spread only).
-    seed : int
-        Seed of the simulations.
-    max_steps : int
-        Most effects added per axis.
-    alpha : float
-        Significance level for "inconsistent" and for adding an effect.
-    points_per_decade, min_clusters : int
-        Averaging-time grid of the estimator.
-    measured : AllanResult, optional
-        Precomputed measured curve (skips the estimator).
-
-    Returns
-    -------
-    DiscrepancyResult
-
+    ``data`` (n_samples, n_axes) rate samples, SI (rad/s, m/s^2), at ``rate_hz`` (Hz); ``axes``
+    their column names (default: the first n_axes of the package axis order).  The start is
+    ``model`` (a NoiseModel, parameters as given, e.g. a datasheet budget), else ``terms``
+    fitted to the data (default :data:`DEFAULT_START`).  ``n_sims`` simulated runs per round
+    are pooled into the spread (0: analytic spread only), drawn from ``seed``; at most
+    ``max_steps`` effects are added per axis; ``alpha`` is the significance level for
+    "inconsistent" and for adding an effect; ``points_per_decade`` and ``min_clusters`` set the
+    estimator's averaging-time grid; ``measured`` (an AllanResult) skips the estimator.
     """
     options = DiscrepancyOptions(n_sims, seed, max_steps, alpha, points_per_decade,
                                  min_clusters)
@@ -556,36 +523,15 @@ def sample_rate(t):
     return 1.0 / float(np.median(dt))
 
 
-def run_samples(samples, **kwargs):
-    """
-    :func:`run_discrepancy` on a :class:`~imu_allan.formats.samples.Samples` recording.
-
-    The sample rate is :func:`sample_rate` of the time stamps.
-    """
-    return run_discrepancy(samples.data, sample_rate(samples.t), axes=samples.axes, **kwargs)
-
-
 def gap_summary(model, result, alpha=ALPHA):
     """
     Gap per axis and the effect that fits the excess, for online monitoring.
 
-    Parameters
-    ----------
-    model : NoiseModel
-        The reference model (e.g. loaded from a model file).
-    result : AllanResult
-        The latest measured curve (batch or streaming, with ``.tau``, ``.m``, ``.adev``,
-        ``.n_samples``, ``.rate_hz``, ``.axes``).
-    alpha : float
-        Significance level.
-
-    Returns
-    -------
-    dict
-        ``{axis: {'gap': float, 'effect': str or None, 'consistent': bool, 'p_value': float,
-        'tau_range_s': [lo, hi] or None}}`` for the axes both the model and the result have.
-        Analytic spread only (no simulation), so it costs milliseconds per axis.
-
+    ``model`` is the reference NoiseModel (e.g. a model file), ``result`` the latest measured
+    AllanResult (batch or streaming), ``alpha`` the significance level.  Returns ``{axis:
+    {'gap': float, 'effect': str or None, 'consistent': bool, 'p_value': float, 'tau_range_s':
+    [lo, hi] or None}}`` for the axes both have; analytic spread only (no simulation), so it
+    costs milliseconds per axis.
     """
     out = {}
     for j, axis in enumerate(result.axes):
@@ -601,8 +547,8 @@ def gap_summary(model, result, alpha=ALPHA):
         gap = measure_gap(y, band, alpha)
         effect = None
         if not gap.consistent:
-            cands, _ = evaluate_candidates(y, tau, result.rate_hz, band, axis_terms, alpha,
-                                           fixed=True, gap=gap)
+            cands = evaluate_candidates(y, band, gap, result.rate_hz, axis_terms, alpha,
+                                        fixed=True)
             winner = _choose_winner(cands)
             if winner is not None:
                 effect = winner.effect

@@ -1,46 +1,29 @@
 """
 The sensor's own processing, measured from its samples: LSB grid, repeats, filter, lines, humps.
 
-A real IMU does not hand out the continuous rate its noise model describes.  It rounds each
-sample to an LSB, filters at an internal rate before decimating (consecutive samples correlate),
-may hold a sample when no new one is ready, and carries lines (vibration, aliased resonances)
-and broad resonances.  :func:`measure_sensor` reads that from a record ``(n, A)`` in SI units;
-:class:`SensorAccumulator` from blocks as they arrive.  Per axis (:class:`AxisSensor`):
+A real IMU rounds each sample to an LSB, filters at an internal rate before decimating, may
+hold a sample, and carries lines and broad resonances.  :func:`measure_sensor` reads that from a
+record ``(n, A)`` in SI units, :class:`SensorAccumulator` from blocks as they arrive.  Per axis
+(:class:`AxisSensor`; docs/method.md section 9 gives the rules and the derivation):
 
-* **Grid** (``resolution``, the LSB, SI): the smallest step between distinct values of the
-  first :data:`GRID_SAMPLES` examined, refined by least squares, kept when all but 1e-3 of
-  the examined values lie within 1e-3 steps of its multiples and it is coarser than 2^-18 of
-  the largest magnitude: a finer "grid" is float storage (float32 values in one binade lie on
-  a grid of 2^-23 of their size; the 3DM-GX3-25 sends float32).
-* **Repeats** (``repeated_fraction``): consecutive samples exactly equal (sample-and-hold, or
-  coarse quantization).
-* **Quantization regime**: rounding to an LSB q adds white noise of variance q^2 / 12 (density
-  q / sqrt(12 fs), continuous time) when the noise before rounding dithers it: with its std
-  sigma >= q / 2 the Gaussian's characteristic function at 2 pi / q, exp(-2 pi^2 sigma^2 / q^2),
-  is <= 0.007, so the rounding error is uniform and uncorrelated with the signal to better
-  than 1 % (Widrow's quantization theorem): ``'fine'``.  Below, the output sits on one or two
-  levels and the error follows the signal: ``'coarse'``.  sigma = sqrt(R_0 - q^2 / 12) with
-  R_0 the white part's per-sample variance (which contains the rounding).
-* **The white part** (the sensor's filter): the short-correlation noise, autocovariance R_k
-  (k = 0..filter_length, zero beyond), fitted as the coefficients of its spectrum
-  (:func:`.spectrum.fit_white`): no moving average is subtracted, so the lags carry no
-  bias from one (a 1-s moving-average subtraction lowers every rho_k by about 1/101), and the
-  low-frequency noise is a column of the fit, not a filter.  S = R_0 + 2 sum R_k is the
-  per-sample variance of a white sequence with the same low-frequency density (N = sqrt(S/fs)),
-  D = 2 sum k R_k; ``bandwidth_hz`` = (R_0 / S) fs / 2, ``filter_moment`` = D / S samples, and
-  for averaging factors m >= filter_length the part's Allan variance is exactly
-  S tau0 / tau - 1.5 D tau0^2 / tau^2 (:meth:`AxisSensor.white_avar`, derived in
-  docs/method.md, "Sensor processing").
-* **Lines** and **humps** (:mod:`.spectrum`): narrow lines at a false-alarm probability
-  of 1 % per axis, amplitude as the ``sinusoid`` term's peak amplitude; broad resonances with
-  their range, peak and excess variance.
+* **Grid** (``resolution``, the LSB): the smallest step of the first :data:`GRID_SAMPLES`
+  values, refined; coarser than :data:`GRID_MIN_RELATIVE` of the largest magnitude, else it is
+  float storage.  **Repeats**: consecutive samples exactly equal.
+* **Quantization regime**: ``'fine'`` when the noise before rounding has std
+  sigma = sqrt(R_0 - q^2 / 12) >= q / 2 (Widrow's quantization theorem: the rounding error is
+  then uniform and uncorrelated to 1 %), adding white noise of density q / sqrt(12 fs); else
+  ``'coarse'``.
+* **The white part** (the filter): autocovariance R_0..R_K fitted as the coefficients of its
+  spectrum (:func:`.spectrum.fit_white`); S = R_0 + 2 sum R_k, D = 2 sum k R_k,
+  ``bandwidth_hz`` = (R_0 / S) fs / 2, ``filter_moment`` = D / S samples, and for m >= K its
+  Allan variance is S tau0 / tau - 1.5 D tau0^2 / tau^2 (:meth:`AxisSensor.white_avar`).
+* **Lines** and **humps**: :mod:`.spectrum`.
 
-Cost: at most :data:`MAX_EXAMINED` (2^18) samples per axis are examined, about 0.05 s of CPU
-for 6 axes.  A longer record contributes MAX_EXAMINED / L non-overlapping Welch segments of L
-samples spread evenly over it (a 10-h record costs what 44 min cost), a shorter one all its
-segments at 50 % overlap.  L is
-64 s of samples rounded up to a power of two (8192 at 100 Hz: 0.0122-Hz bins), between 256
-and 2^15, and at most a quarter of a short record (not below 64).
+Cost: at most :data:`MAX_EXAMINED` (2^18) samples per axis, about 0.05 s of CPU for 6 axes: a
+longer record contributes MAX_EXAMINED / L non-overlapping Welch segments of L samples spread
+evenly over it, a shorter one all its segments at 50 % overlap.  L is :data:`SEGMENT_SECONDS`
+of samples rounded up to a power of two (8192 at 100 Hz), between 256 and 2^15, and at most a
+quarter of a short record (not below 64).
 """
 
 import dataclasses
@@ -79,47 +62,15 @@ class AxisSensor:
     """
     What the samples of one axis say about the sensor's processing (SI; None: not measured).
 
-    Attributes
-    ----------
-    axis, unit : str
-        Axis name and the SI unit of its samples (``rad/s`` or ``m/s^2``).
-    rate_hz : float
-        Sample rate, Hz.
-    n_examined : int
-        Finite samples examined (at most :data:`MAX_EXAMINED` in :func:`measure_sensor`).
-    segment_length, segments : int
-        Welch segment length L (samples) and segments averaged (0: no spectrum).
-    resolution : float or None
-        The LSB (SI); None when the values are not on a grid.
-    distinct_values, distinct_counted_over : int or None
-        Distinct values among ``distinct_counted_over`` samples: all examined ones on a grid,
-        else the first :data:`GRID_SAMPLES`.
-    repeated_fraction : float or None
-        Fraction of consecutive sample pairs exactly equal.
-    off_grid_fraction : float or None
-        Fraction of examined values off the grid (at most 1e-3 when ``resolution`` is set).
-    quantization : str or None
-        ``'fine'`` or ``'coarse'`` (module docstring); None without a grid.
-    quantization_density : float or None
-        Fine regime: the white-noise density rounding adds, resolution / sqrt(12 fs),
-        continuous time (rad/s/sqrt(Hz), m/s^2/sqrt(Hz)).
-    noise_to_lsb : float or None
-        Std of the white part before rounding, in LSB.
-    lag_correlation, lag_correlation_se : tuple or None
-        rho_1 .. rho_8 of the white part and their standard errors.
-    filter_length : int or None
-        Largest lag (samples) with significant correlation; 0 for uncorrelated samples.
-    bandwidth_hz : float or None
-        Noise-equivalent bandwidth of the white part, (R_0 / S) fs / 2 (fs / 2 when white).
-    filter_moment : float or None
-        D / S, samples.
-    white_autocovariance : tuple or None
-        R_0 .. R_filter_length, per sample, SI^2.
-    white_variance : float or None
-        S = R_0 + 2 sum R_k, per sample, SI^2.
-    lines, humps : list
-        :class:`~.spectrum.Line` and :class:`~.spectrum.Hump` found.
-
+    The quantities are those of the module docstring, their units :data:`JSON_UNITS`;
+    ``unit`` is the SI unit of the samples (``rad/s`` or ``m/s^2``), ``rate_hz`` their rate
+    (Hz), ``n_examined`` the finite samples examined, ``segment_length`` and ``segments`` the
+    Welch segment length L (samples) and the segments averaged (0: no spectrum).
+    ``distinct_values`` counts the distinct values among ``distinct_counted_over`` samples
+    (all examined ones on a grid, else the first :data:`GRID_SAMPLES`); ``off_grid_fraction``
+    is at most 1e-3 when ``resolution`` is set; ``quantization`` is None without a grid and
+    ``quantization_density`` is set in the fine regime only; ``filter_length`` is 0 for
+    uncorrelated samples (``bandwidth_hz`` then fs / 2).
     """
 
     axis: str

@@ -18,6 +18,7 @@ Units: the PSD is one-sided, SI^2/Hz; inside the fit it is scaled by fs/2 to per
 variance per unit normalised frequency, the units of R_k.
 """
 
+import dataclasses
 from dataclasses import dataclass
 import functools
 import itertools
@@ -82,8 +83,7 @@ class Line:
 
     def to_json(self):
         """Return a JSON-ready dict (SI)."""
-        return {'frequency_hz': self.frequency_hz, 'amplitude': self.amplitude,
-                'snr': self.snr, 'false_alarm_probability': self.false_alarm_probability}
+        return dataclasses.asdict(self)
 
 
 @dataclass(frozen=True)
@@ -103,8 +103,7 @@ class Hump:
 
     def to_json(self):
         """Return a JSON-ready dict (SI)."""
-        return {'frequency_range_hz': list(self.frequency_range_hz), 'peak_hz': self.peak_hz,
-                'peak_ratio': self.peak_ratio, 'excess_variance': self.excess_variance}
+        return {**dataclasses.asdict(self), 'frequency_range_hz': list(self.frequency_range_hz)}
 
 
 @dataclass
@@ -403,20 +402,13 @@ def fit_white(psd, nu, length, rate_hz, line_mask, background):
     """
     Fit the white part of a Welch PSD and find the humps above it; WhitePart or None.
 
-    First the bands to leave out: with k lags (k in :data:`MASK_LAGS_TRIED`) the bands more
-    than :data:`MASK_Z` standard errors above the fit are left out and the fit repeated until
-    that settles (a resonance pulls a first fit up and makes it ring; the bands left out
-    shrink back as the fit relaxes), widened by a band and humps by half their width either
-    side (a resonance's skirts reach far).  The first k whose fit then matches the bands kept
-    wins (:func:`_settle_mask`): few lags first, because a fit with many more lags than the
-    filter has follows a hump and cannot tell it from a filter.  Then lags are added one at a
-    time while significant (:func:`_forward`); rho_k is 0 beyond filter_length (within its
-    standard error, reported), and R_0..R_filter_length and the humps come from the fit with
-    filter_length lags.  A mask that reaches down to the lowest band fitted, or whose final
-    fit is no white part (R_0 or the low-frequency sum S = R_0 + 2 sum R_k not positive), is
-    the filter's main lobe taken for a hump by too stiff a fit (a 27-tap window decimated by 5
-    masks 2-67 Hz with 2 lags; a resonance does not reach down to fs / 100): more lags are
-    tried.
+    The bands to leave out come from the first k in :data:`MASK_LAGS_TRIED` whose fit matches
+    the bands kept (:func:`_settle_mask`: few lags first, as a fit with many more lags than the
+    filter follows a hump); then lags join while significant (:func:`_forward`), and
+    R_0..R_filter_length and the humps come from the fit with filter_length lags.  A mask that
+    reaches down to the lowest band fitted, or whose final fit is no white part (R_0 or
+    S = R_0 + 2 sum R_k not positive), is the filter's main lobe taken for a hump by too stiff
+    a fit: more lags are tried.  docs/method.md section 9 ("The white part") says why.
     """
     half = length // 2
     low_bin = max(int(math.ceil(length / FIT_LOW_FRACTION)), FIRST_BIN)
@@ -493,16 +485,12 @@ def _forward(bands, mask, lags):
     """
     Lags kept by forward selection; (filter_length, use_low, standard errors of rho_k).
 
-    The fit with k lags is kept when any lag in it beyond those kept so far has a coefficient
+    The fit with k lags is kept when any lag in it beyond those kept so far (not only lag k:
+    a window spanning two lags makes the one-lag fit degenerate, docs/method.md section 9) is
     more than :data:`LAG_SIGNIFICANCE` standard errors from 0 (:data:`FIRST_LAG_SIGNIFICANCE`
-    for the first), not only lag k: a window spanning two lags makes the one-lag fit
-    degenerate (a negative R_0 took the first lag's 0.53 to 0.06 on 10 s of a 22-tap window
-    decimated by 10, and the two-lag fit's second lag, 0.1, was below its level, so no filter
-    was found and a bias instability filled its deficit) (from the band errors alone: a fit with
-    too few lags misses the data, and scaling the errors by that would hide the lag that
-    mends it); two misses in a row stop.  The standard error of rho_k is that of the k-lag
-    fit (misfit included), for k up to max(filter_length, 8) (:func:`fit_white` puts the
-    final fit's in for k <= filter_length).
+    for the first), from the band errors alone (scaling them by a fit with too few lags would
+    hide the lag that mends it); two misses in a row stop.  The standard error of rho_k is the
+    k-lag fit's (misfit included), for k up to max(filter_length, 8).
     """
     filter_length, use_low, misses, rho_se = 0, None, 0, []
     for k in range(1, lags + 1):

@@ -44,18 +44,10 @@ class DeviceProcessing:
     """
     Moving average of ``window`` internal samples, every ``decimation``-th kept, then rounded.
 
-    Attributes
-    ----------
-    internal_rate_hz : float
-        Rate of the internal stream the window runs on, Hz (1000 on the 3DM-GX3-25).
-    window : int
-        Taps of the moving average (at the internal rate).
-    decimation : int
-        Every ``decimation``-th average is output: output rate = internal_rate_hz / decimation.
-    output_dtype : str or None
-        The values are rounded to this type (``'float32'``: what the device sends) and returned
-        as float64, as a driver publishes them; None leaves them unrounded.
-
+    ``internal_rate_hz``: the rate the window runs on, Hz (1000 on the 3DM-GX3-25); output
+    rate = internal_rate_hz / decimation.  The values are rounded to ``output_dtype``
+    (``'float32'``: what the device sends) and returned as float64, as a driver publishes
+    them; None leaves them unrounded.
     """
 
     internal_rate_hz: float = 1000.0

@@ -20,22 +20,10 @@ class NoiseStream:
     """
     Successive blocks of a noise model's samples through a device processing.
 
-    Parameters
-    ----------
-    model : NoiseModel or dict
-        The noise model (continuous-time coefficients, SI).
-    processing : DeviceProcessing
-        The device's window, decimation and rounding
-        (:class:`~imu_allan.core.simulation.device_processing.DeviceProcessing`); may be replaced
-        between blocks (:attr:`processing`), the internal rate staying the same.
-    seed : int or numpy.random.Generator, optional
-        Seed for reproducible output.
-    axes : sequence of str, optional
-        Columns (default: the model's axes).
-    history : int, optional
-        Internal samples kept for the window, the longest window the processing may change to
-        (default: the first processing's window).
-
+    ``model``, ``seed`` and ``axes`` as :func:`.simulate.simulate`; ``processing`` (a
+    :class:`.device_processing.DeviceProcessing`) may be replaced between blocks
+    (:attr:`processing`), the internal rate staying the same; ``history`` internal samples are
+    kept for the window: the longest window it may change to (default: the first one's).
     """
 
     def __init__(self, model, processing, seed=None, axes=None, history=None):

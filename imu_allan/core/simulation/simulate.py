@@ -224,30 +224,13 @@ def scaled_white(terms, processing):
 
 def simulate(model, n_samples, rate_hz, seed=None, axes=None, processing=None):
     """
-    Simulate ``n_samples`` at ``rate_hz`` from a noise model.
+    Simulate ``n_samples`` per axis at ``rate_hz`` (Hz) from a noise model; ``(n, A)``, SI.
 
-    Parameters
-    ----------
-    model : NoiseModel or dict
-        The noise model (a dict is read as a model file's content).
-    n_samples : int
-        Number of samples per axis.
-    rate_hz : float
-        Sample rate, Hz.
-    seed : int or numpy.random.Generator, optional
-        Seed for reproducible output.
-    axes : sequence of str, optional
-        Axes to simulate (default: the model's axes, in the package's axis order).
-    processing : DeviceProcessing, optional
-        The device's window, decimation and output rounding
-        (:class:`~imu_allan.core.simulation.device_processing.DeviceProcessing`); ``rate_hz`` must
-        be its output rate (ValueError otherwise).  None: white samples at ``rate_hz``, unrounded.
-
-    Returns
-    -------
-    numpy.ndarray
-        Shape ``(n_samples, n_axes)``, SI units, zero mean apart from the noise itself.
-
+    ``model`` is a NoiseModel or a model file's content (dict); ``seed`` an int or a numpy
+    Generator; ``axes`` the axes to simulate (default: the model's, in the package's order).
+    ``processing`` (a :class:`.device_processing.DeviceProcessing`) is the device's window,
+    decimation and rounding, ``rate_hz`` its output rate (ValueError otherwise); None gives
+    unrounded samples at ``rate_hz``.  Zero mean apart from the noise itself.
     """
     if isinstance(model, dict):
         model = NoiseModel.from_dict(model)
