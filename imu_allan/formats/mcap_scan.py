@@ -100,7 +100,7 @@ _CHUNK_OPS = frozenset((0x03, 0x04, 0x05))
 
 #: Bytes of an MCAP Message record before its data: opcode, length, channel id, sequence,
 #: log time and publish time.
-_MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
+MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
 
 #: File size from which the compiled walk (:func:`.bag_kernels.mcap_walk`) reads the chunks
 #: even when numba is not imported yet: about 0.6 M Imu messages, from where ``analyze`` loads
@@ -272,7 +272,8 @@ class McapScan:
         unpack_h = struct.Struct('<H').unpack_from
         backoff = 0
         where = 'file' if top else 'chunk'
-        views = None if top or self._kernel is None else self._kernel.mcap_views(u8)
+        kernel = None if top else self._kernel
+        views = None if kernel is None else kernel.byte_views(u8, kernel.MCAP_VIEWS)
         while pos < end:
             if views is not None:
                 # The compiled walk takes the Message records it can; this loop takes the
@@ -434,7 +435,7 @@ class McapScan:
         """Walk the Message records of u8[pos:end] compiled; return where the walk stopped."""
         kernel = self._kernel
         role, cid = self._roles()
-        room = (end - pos) // kernel.MESSAGE_HEADER + 1 if cid is not None else 0
+        room = (end - pos) // MESSAGE_HEADER + 1 if cid is not None else 0
         coll = self.collectors.get(self.channels[cid][0]) if cid is not None else None
         slots = coll.reserved(room) if coll is not None else None
         t, data = slots if slots is not None else (np.empty(room), np.empty((room, 6)))
@@ -486,7 +487,7 @@ class McapScan:
                           if self.channels.get(c, ('',))[0] == topic)
             self.collectors[topic] = Collector(
                 False, deserialize, self.force_generic,
-                capacity=indexed or self._size // (MIN_IMU_BYTES + _MESSAGE_HEADER))
+                capacity=indexed or self._size // (MIN_IMU_BYTES + MESSAGE_HEADER))
         return self.collectors[topic]
 
     def _truncated(self, pos, end, where):
