@@ -47,6 +47,9 @@ from .sqlite_pages import SQLITE_MAGIC, SqlitePages, Unsupported
 from ..core.units import AXES
 from ..errors import InputError
 
+#: The first bytes of each storage file.
+_MAGIC = {'mcap': MCAP_MAGIC, 'sqlite3': SQLITE_MAGIC, 'ros1': ROS1_MAGIC}
+
 
 def bag_kind(path):
     """Classify a path: ('ros1'|'mcap'|'sqlite3'|'dir', storage files) or raise InputError."""
@@ -68,17 +71,14 @@ def bag_kind(path):
         raise InputError(path, f'cannot read: {err.strerror}') from None
     if not head:
         raise InputError(path, 'empty file, not a bag')
-    if head.startswith(MCAP_MAGIC):
-        return 'mcap', p
-    if head.startswith(SQLITE_MAGIC):
-        return 'sqlite3', p
-    if head.startswith(ROS1_MAGIC):
-        return 'ros1', p
-    raise InputError(path, 'not a bag (no ROS 1, MCAP or sqlite3 signature)')
+    kind = next((k for k, magic in _MAGIC.items() if head.startswith(magic)), None)
+    if kind is None:
+        raise InputError(path, 'not a bag (no ROS 1, MCAP or sqlite3 signature)')
+    return kind, p
 
 
 def _dir_storage(p):
-    """Return (storage id, [files], compressed) of a rosbag2 folder from its metadata.yaml."""
+    """Return (storage id, [files], compressed, note) of a rosbag2 folder (its metadata.yaml)."""
     import yaml
     try:
         meta = yaml.safe_load((p / 'metadata.yaml').read_text())
@@ -109,11 +109,7 @@ def _signature(path):
             head = f.read(16)
     except OSError:
         return None
-    if head.startswith(MCAP_MAGIC):
-        return 'mcap'
-    if head.startswith(SQLITE_MAGIC):
-        return 'sqlite3'
-    return None
+    return next((k for k in ('mcap', 'sqlite3') if head.startswith(_MAGIC[k])), None)
 
 
 def any_reader(paths, where):
@@ -151,13 +147,18 @@ def bag_topics(path):
         scan.run()
         return {ch[0]: (ch[1], scan.counts.get(cid, 0)) for cid, ch in names.items()}
     try:
-        out = {}
-        for c in reader.connections:
-            typ, n = out.get(c.topic, (c.msgtype, 0))
-            out[c.topic] = (typ, n + c.msgcount)
-        return out
+        return _reader_topics(reader)
     finally:
         reader.close()
+
+
+def _reader_topics(reader):
+    """Return ``{topic: (type, message count)}`` of a rosbags reader's connections."""
+    out = {}
+    for c in reader.connections:
+        typ, n = out.get(c.topic, (c.msgtype, 0))
+        out[c.topic] = (typ, n + c.msgcount)
+    return out
 
 
 def list_imu_topics(path):
@@ -192,7 +193,7 @@ def read_bag(path, topic=None, fast=True):
     where = str(path)
     kind, p = bag_kind(path)
     checks = {}
-    note = None
+    storage, note = kind, None
     if kind == 'dir':
         storage, files, compressed, note = _dir_storage(p)
         if storage == 'mcap' and not compressed and fast:
@@ -214,7 +215,6 @@ def read_bag(path, topic=None, fast=True):
     if t.shape[0] == 0:
         extra = f' ({"; ".join(warnings)})' if warnings else ''
         raise InputError(path, f'topic {chosen} has no messages{extra}')
-    storage = _dir_storage(p)[0] if kind == 'dir' else kind
     integrity = INTEGRITY.get(storage, '')
     if checks.get('chunks_without_crc'):
         integrity = (f'{checks["chunks_without_crc"]} MCAP chunk(s) carry no CRC-32 (their writer '
@@ -476,13 +476,9 @@ class _SqliteSource:
             'SELECT timestamp, data FROM messages WHERE topic_id IN (%s) ORDER BY id'
             % ','.join('?' * len(ids)), ids)
         try:
-            while True:
-                batch = cur.fetchmany(65536)
-                if not batch:
-                    break
-                for s, b in batch:
-                    stamps.append(s)
-                    blobs.append(b)
+            for s, b in cur:
+                stamps.append(s)
+                blobs.append(b)
         except sqlite3.Error as err:
             self.warnings.append(f'{self.path.name}: read stopped after {len(blobs)} messages '
                                  f'({err}); the rest is skipped')
@@ -497,11 +493,7 @@ class _SqliteSource:
 
 def _chosen_connections(reader, where, topic):
     """Return the Imu topic of a rosbags reader (:func:`choose_topic`) and its connections."""
-    topics = {}
-    for c in reader.connections:
-        typ, n = topics.get(c.topic, (c.msgtype, 0))
-        topics[c.topic] = (typ, n + c.msgcount)
-    chosen = choose_topic(where, topics, topic)
+    chosen = choose_topic(where, _reader_topics(reader), topic)
     return chosen, [c for c in reader.connections if c.topic == chosen]
 
 
