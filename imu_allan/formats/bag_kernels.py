@@ -33,8 +33,7 @@ from collections import namedtuple
 
 import numpy as np
 
-from .mcap_scan import MESSAGE_HEADER  # fixed constants: no stale cache
-from .sqlite_digest import DIGEST_ROWID, DIGEST_TS
+from .sqlite_digest import DIGEST_ROWID, DIGEST_TS  # fixed constants: no stale cache
 from ..core.jit import jit, UNCACHED
 
 #: Bytes of the 37 float64 at the end of an Imu, and the first byte of a CDR Imu after its
@@ -350,6 +349,10 @@ def sqlite_index_level(u8, pages, page_size, usable, digest,
     digest[1] += np.uint64(count)
     return nchild
 
+
+#: Bytes of a Message record before its data, as ``mcap_scan.MESSAGE_HEADER`` (not imported
+#: from there: that module loads this one).
+MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
 
 #: Largest MCAP log time (u64 on disk) that is a time: beyond it, the record is damaged.
 _INT64_MAX = np.uint64((1 << 63) - 1)

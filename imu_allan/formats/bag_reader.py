@@ -168,27 +168,13 @@ def list_imu_topics(path):
 
 def read_bag(path, topic=None, fast=True):
     """
-    Read the Imu samples of one topic of a bag.
+    Read the Imu samples of one topic of a bag: ``t`` header stamps in s, ``data`` rad/s, m/s^2.
 
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        A rosbag2 folder, a bare ``.mcap`` or ``.db3`` file, or a ROS 1 ``.bag``.
-    topic : str, optional
-        Topic to read; by default the only ``sensor_msgs/Imu`` topic.
-    fast : bool
-        Use the bulk numpy decoder (False: the generic ``rosbags`` deserializer; same numbers).
-
-    Returns
-    -------
-    Samples
-        ``t`` header stamps in s (bag order), ``data`` (n, 6) rad/s and m/s^2.
-
-    Raises
-    ------
-    InputError
-        Missing path, not a bag, unreadable bag, no/several Imu topics, wrong type, empty topic.
-
+    ``path``: a rosbag2 folder, a bare ``.mcap`` or ``.db3`` file, or a ROS 1 ``.bag``;
+    ``topic``: by default the only ``sensor_msgs/Imu`` topic; ``fast``: the bulk numpy decoder
+    (False: the generic ``rosbags`` deserializer, same numbers).  Raises :class:`InputError`
+    for a missing path, not a bag, an unreadable bag, no or several Imu topics, a wrong type
+    or an empty topic.
     """
     where = str(path)
     kind, p = bag_kind(path)
