@@ -8,24 +8,15 @@ Two paths give identical numbers:
 * the fast path decodes the fixed layout of ``sensor_msgs/Imu`` in bulk with numpy
   (:mod:`imu_allan.formats.imu_cdr`).
 
-The fast path reads the storage itself, because handing over one raw message at a time
-(``AnyReader``: about 500 k/s for MCAP; the ``sqlite3`` module: about 700 k rows/s) would cap
-it below 1 M messages/s:
+The fast path walks the storage itself (one raw message at a time from rosbags would cap it
+below 1 M messages/s): :mod:`.mcap_scan`, :mod:`.sqlite_pages` (SQL queries remain the
+fallback: write-ahead log, odd layouts) and :mod:`.ros1_scan`.  This module opens the bag,
+picks the topic and dispatches to those readers.
 
-* MCAP: records and chunks are walked directly (:mod:`imu_allan.formats.mcap_scan`);
-* sqlite3: the ``messages`` table's B-tree is walked in the file
-  (:mod:`imu_allan.formats.sqlite_pages`); SQL queries remain the fallback (write-ahead log, odd
-  layouts);
-* ROS 1: chunks are walked directly (:mod:`imu_allan.formats.ros1_scan`).
-
-This module opens the bag, picks the topic and dispatches to those readers.
-
-Damaged input raises :class:`~imu_allan.errors.InputError`, or, when part of it is
-readable, returns what was read with a line in ``Samples.warnings`` saying what was skipped:
-a truncated MCAP or ROS 1 file gives its complete chunks (and the complete records of an
-uncompressed chunk cut short), a corrupt compressed chunk is skipped, a truncated sqlite3 file
-gives the rows of its intact pages. rosbags refuses such files; the generic path then uses the
-same direct readers with per-message deserialization.
+Damaged input raises :class:`~imu_allan.errors.InputError`, or, when part of it is readable,
+returns what was read with a line in ``Samples.warnings`` saying what was skipped (what each
+reader recovers: its module docstring).  rosbags refuses such files; the generic path then
+uses the same direct readers with per-message deserialization.
 
 ``t`` is the header stamp (``sec + nanosec * 1e-9`` s) in bag order (receive time order).
 """

@@ -245,10 +245,9 @@ class SimImu:
         """
         Return the :class:`NoiseModel` the simulator really produces, and notes on the conversion.
 
-        Gazebo: white N = sqrt(stddev^2 + precision^2 / 12) / sqrt(f) (the rounding term only
-        where gz-sensors rounds); Gauss-Markov sigma = dynamic_bias_stddev x sqrt(tau / 2).
-        PX4: N = the noise density; Gauss-Markov sigma = RandomWalk x sqrt(tau / 2).  Constant
-        offsets (mean, turn-on bias) do not change the Allan deviation and are left out.
+        The conversions of the module docstring (gz: N = sqrt(stddev^2 + precision^2 / 12) /
+        sqrt(f), the rounding term only where gz-sensors rounds); constant offsets (mean,
+        turn-on bias) do not change the Allan deviation and are left out.
         """
         rate = self.rate_for(data_rate_hz)
         notes = [f'{self.source}: {self.label} read as the noise it simulates']
