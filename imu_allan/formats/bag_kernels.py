@@ -52,9 +52,9 @@ def byte_view(u8, dtype):
                       strides=(1,))
 
 
-def byte_views(u8):
-    """Return the little-endian uint32 and float64 at every byte offset of ``u8`` (views)."""
-    return byte_view(u8, '<u4'), byte_view(u8, '<f8')
+def byte_views(u8, dtypes=('<u4', '<f8')):
+    """Return the ``dtypes`` at every byte offset of ``u8`` (views; default uint32, float64)."""
+    return tuple(byte_view(u8, dtype) for dtype in dtypes)
 
 
 @jit(nogil=True, inline='always')
@@ -146,13 +146,7 @@ def _get2(u8, pos):  # pragma: no cover - compiled
 
 @jit(nogil=True, inline='always')
 def cell_size(p, n1, n2, usable):  # pragma: no cover - compiled
-    """
-    Bytes a table-leaf cell takes on its page, or -1 for a payload size out of range.
-
-    As SQLite's ``cellSizePtr`` (and ``SqlitePages.cell_sizes``): the two varints, the local
-    part of the payload (all of it up to ``usable - 35`` bytes, else the share the file
-    format's overflow rule keeps on the page) and a 4-byte overflow page number; at least 4.
-    """
+    """Return the bytes one table-leaf cell takes on its page, as ``SqlitePages.cell_sizes``."""
     if p < 0 or p >= np.int64(1) << 31:
         return np.int64(-1)
     x = usable - 35
@@ -167,14 +161,7 @@ def cell_size(p, n1, n2, usable):  # pragma: no cover - compiled
 
 @jit(nogil=True, inline='always')
 def space_adds_up(u8, base, hdr, usable, used):  # pragma: no cover - compiled
-    """
-    Return True if a table-leaf page's free space adds up (``SqlitePages.space_failures``).
-
-    The cell content area, from the header's content start to the usable end, is exactly
-    the cells (``used`` bytes), the freeblocks (a chain of increasing offsets inside the
-    area) and the fragmented bytes the header counts: SQLite's integrity_check
-    ("Fragmentation of ... reported as ...").
-    """
+    """Return True if a page's space adds up, as ``SqlitePages.space_failures`` (used: cells)."""
     content = _get2(u8, hdr + 5)
     if content == 0:
         content = 65536
@@ -229,7 +216,7 @@ def sqlite_walk(views, pages, layout, wanted, rows, slow,
     for i in range(pages.shape[0]):
         base = (pages[i] - 1) * page_size
         hdr = base + 100 if pages[i] == 1 else base
-        ncell = np.int64(u8[hdr + 3]) * 256 + np.int64(u8[hdr + 4])
+        ncell = _get2(u8, hdr + 3)
         if u8[hdr] != 0x0D or 8 + 2 * ncell > page_size:
             lost += 1
             continue
@@ -239,8 +226,7 @@ def sqlite_walk(views, pages, layout, wanted, rows, slow,
         used = np.int64(0)
         fits = True
         for j in range(ncell):
-            pp = hdr + 8 + 2 * j
-            ptr = np.int64(u8[pp]) * 256 + np.int64(u8[pp + 1])
+            ptr = _get2(u8, hdr + 8 + 2 * j)
             cell = base + ptr
             # payload size, rowid, record header (size, four serial types), values
             p, n1 = _varint(u8, cell, last)
@@ -320,14 +306,13 @@ def sqlite_index_level(u8, pages, page_size, usable, digest,
             return -1
         interior = kind == 0x02
         head = 12 if interior else 8
-        ncell = np.int64(u8[hdr + 3]) * 256 + np.int64(u8[hdr + 4])
+        ncell = _get2(u8, hdr + 3)
         if hdr + head + 2 * ncell > base + page_size:
             return -1
         content = _get2(u8, hdr + 5)
         used = np.int64(0)
         for j in range(ncell):
-            pp = hdr + head + 2 * j
-            ptr = np.int64(u8[pp]) * 256 + np.int64(u8[pp + 1])
+            ptr = _get2(u8, hdr + head + 2 * j)
             if ptr < 8 or ptr > page_size - 8:
                 return -1
             cell = base + ptr
@@ -351,14 +336,12 @@ def sqlite_index_level(u8, pages, page_size, usable, digest,
             if interior:
                 if nchild >= children.shape[0]:
                     return -2
-                children[nchild] = ((np.int64(u8[cell]) << 24) | (np.int64(u8[cell + 1]) << 16)
-                                    | (np.int64(u8[cell + 2]) << 8) | np.int64(u8[cell + 3]))
+                children[nchild] = (_get2(u8, cell) << 16) | _get2(u8, cell + 2)
                 nchild += 1
         if interior:
             if nchild >= children.shape[0]:
                 return -2
-            children[nchild] = ((np.int64(u8[hdr + 8]) << 24) | (np.int64(u8[hdr + 9]) << 16)
-                                | (np.int64(u8[hdr + 10]) << 8) | np.int64(u8[hdr + 11]))
+            children[nchild] = (_get2(u8, hdr + 8) << 16) | _get2(u8, hdr + 10)
             nchild += 1
         if not space_adds_up(u8, base, hdr, usable, used):
             return -1
@@ -367,8 +350,8 @@ def sqlite_index_level(u8, pages, page_size, usable, digest,
     return nchild
 
 
-#: Bytes of a Message record before its data: opcode, length, channel id, sequence, log time
-#: and publish time.
+#: Bytes of a Message record before its data, as ``mcap_scan.MESSAGE_HEADER`` (not imported
+#: from there: that module loads this one).
 MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
 
 #: Largest MCAP log time (u64 on disk) that is a time: beyond it, the record is damaged.
@@ -378,9 +361,8 @@ _INT64_MAX = np.uint64((1 << 63) - 1)
 LEAVE, COUNT, DECODE = 0, 1, 2
 
 
-def mcap_views(u8):
-    """Return the uint16, uint32, uint64 and float64 views of ``u8`` for :func:`mcap_walk`."""
-    return tuple(byte_view(u8, dtype) for dtype in ('<u2', '<u4', '<u8', '<f8'))
+#: The views of ``u8`` :func:`mcap_walk` takes (:func:`byte_views`).
+MCAP_VIEWS = ('<u2', '<u4', '<u8', '<f8')
 
 
 @jit(nogil=True)
@@ -389,7 +371,7 @@ def mcap_walk(u8, u2, u4, u64, f8, pos, end, role, counts, log_time, off, length
     """
     Walk the Message records of u8[pos:end] until one needs the scanner.
 
-    ``u2`` / ``u4`` / ``u64`` / ``f8``: views of ``u8`` at every byte offset (:func:`mcap_views`).
+    ``u2`` / ``u4`` / ``u64`` / ``f8``: views of ``u8`` at every byte offset (:data:`MCAP_VIEWS`).
     ``role[channel id]``: :data:`DECODE` (kept rows go to ``log_time`` (ns), ``off`` /
     ``length`` (message data in ``u8``), ``ok`` and, where ok, ``t`` (s) and ``data``
     (rad/s, m/s^2)), :data:`COUNT` (only counted) or :data:`LEAVE`.  Every message walked is

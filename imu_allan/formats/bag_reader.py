@@ -8,24 +8,15 @@ Two paths give identical numbers:
 * the fast path decodes the fixed layout of ``sensor_msgs/Imu`` in bulk with numpy
   (:mod:`imu_allan.formats.imu_cdr`).
 
-The fast path reads the storage itself, because handing over one raw message at a time
-(``AnyReader``: about 500 k/s for MCAP; the ``sqlite3`` module: about 700 k rows/s) would cap
-it below 1 M messages/s:
+The fast path walks the storage itself (one raw message at a time from rosbags would cap it
+below 1 M messages/s): :mod:`.mcap_scan`, :mod:`.sqlite_pages` (SQL queries remain the
+fallback: write-ahead log, odd layouts) and :mod:`.ros1_scan`.  This module opens the bag,
+picks the topic and dispatches to those readers.
 
-* MCAP: records and chunks are walked directly (:mod:`imu_allan.formats.mcap_scan`);
-* sqlite3: the ``messages`` table's B-tree is walked in the file
-  (:mod:`imu_allan.formats.sqlite_pages`); SQL queries remain the fallback (write-ahead log, odd
-  layouts);
-* ROS 1: chunks are walked directly (:mod:`imu_allan.formats.ros1_scan`).
-
-This module opens the bag, picks the topic and dispatches to those readers.
-
-Damaged input raises :class:`~imu_allan.errors.InputError`, or, when part of it is
-readable, returns what was read with a line in ``Samples.warnings`` saying what was skipped:
-a truncated MCAP or ROS 1 file gives its complete chunks (and the complete records of an
-uncompressed chunk cut short), a corrupt compressed chunk is skipped, a truncated sqlite3 file
-gives the rows of its intact pages. rosbags refuses such files; the generic path then uses the
-same direct readers with per-message deserialization.
+Damaged input raises :class:`~imu_allan.errors.InputError`, or, when part of it is readable,
+returns what was read with a line in ``Samples.warnings`` saying what was skipped (what each
+reader recovers: its module docstring).  rosbags refuses such files; the generic path then
+uses the same direct readers with per-message deserialization.
 
 ``t`` is the header stamp (``sec + nanosec * 1e-9`` s) in bag order (receive time order).
 """
@@ -46,6 +37,9 @@ from .scan_common import choose_topic, one_line
 from .sqlite_pages import SQLITE_MAGIC, SqlitePages, Unsupported
 from ..core.units import AXES
 from ..errors import InputError
+
+#: The first bytes of each storage file.
+_MAGIC = {'mcap': MCAP_MAGIC, 'sqlite3': SQLITE_MAGIC, 'ros1': ROS1_MAGIC}
 
 
 def bag_kind(path):
@@ -68,17 +62,14 @@ def bag_kind(path):
         raise InputError(path, f'cannot read: {err.strerror}') from None
     if not head:
         raise InputError(path, 'empty file, not a bag')
-    if head.startswith(MCAP_MAGIC):
-        return 'mcap', p
-    if head.startswith(SQLITE_MAGIC):
-        return 'sqlite3', p
-    if head.startswith(ROS1_MAGIC):
-        return 'ros1', p
-    raise InputError(path, 'not a bag (no ROS 1, MCAP or sqlite3 signature)')
+    kind = next((k for k, magic in _MAGIC.items() if head.startswith(magic)), None)
+    if kind is None:
+        raise InputError(path, 'not a bag (no ROS 1, MCAP or sqlite3 signature)')
+    return kind, p
 
 
 def _dir_storage(p):
-    """Return (storage id, [files], compressed) of a rosbag2 folder from its metadata.yaml."""
+    """Return (storage id, [files], compressed, note) of a rosbag2 folder (its metadata.yaml)."""
     import yaml
     try:
         meta = yaml.safe_load((p / 'metadata.yaml').read_text())
@@ -109,11 +100,7 @@ def _signature(path):
             head = f.read(16)
     except OSError:
         return None
-    if head.startswith(MCAP_MAGIC):
-        return 'mcap'
-    if head.startswith(SQLITE_MAGIC):
-        return 'sqlite3'
-    return None
+    return next((k for k in ('mcap', 'sqlite3') if head.startswith(_MAGIC[k])), None)
 
 
 def any_reader(paths, where):
@@ -151,13 +138,18 @@ def bag_topics(path):
         scan.run()
         return {ch[0]: (ch[1], scan.counts.get(cid, 0)) for cid, ch in names.items()}
     try:
-        out = {}
-        for c in reader.connections:
-            typ, n = out.get(c.topic, (c.msgtype, 0))
-            out[c.topic] = (typ, n + c.msgcount)
-        return out
+        return _reader_topics(reader)
     finally:
         reader.close()
+
+
+def _reader_topics(reader):
+    """Return ``{topic: (type, message count)}`` of a rosbags reader's connections."""
+    out = {}
+    for c in reader.connections:
+        typ, n = out.get(c.topic, (c.msgtype, 0))
+        out[c.topic] = (typ, n + c.msgcount)
+    return out
 
 
 def list_imu_topics(path):
@@ -167,32 +159,18 @@ def list_imu_topics(path):
 
 def read_bag(path, topic=None, fast=True):
     """
-    Read the Imu samples of one topic of a bag.
+    Read the Imu samples of one topic of a bag: ``t`` header stamps in s, ``data`` rad/s, m/s^2.
 
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        A rosbag2 folder, a bare ``.mcap`` or ``.db3`` file, or a ROS 1 ``.bag``.
-    topic : str, optional
-        Topic to read; by default the only ``sensor_msgs/Imu`` topic.
-    fast : bool
-        Use the bulk numpy decoder (False: the generic ``rosbags`` deserializer; same numbers).
-
-    Returns
-    -------
-    Samples
-        ``t`` header stamps in s (bag order), ``data`` (n, 6) rad/s and m/s^2.
-
-    Raises
-    ------
-    InputError
-        Missing path, not a bag, unreadable bag, no/several Imu topics, wrong type, empty topic.
-
+    ``path``: a rosbag2 folder, a bare ``.mcap`` or ``.db3`` file, or a ROS 1 ``.bag``;
+    ``topic``: by default the only ``sensor_msgs/Imu`` topic; ``fast``: the bulk numpy decoder
+    (False: the generic ``rosbags`` deserializer, same numbers).  Raises :class:`InputError`
+    for a missing path, not a bag, an unreadable bag, no or several Imu topics, a wrong type
+    or an empty topic.
     """
     where = str(path)
     kind, p = bag_kind(path)
     checks = {}
-    note = None
+    storage, note = kind, None
     if kind == 'dir':
         storage, files, compressed, note = _dir_storage(p)
         if storage == 'mcap' and not compressed and fast:
@@ -214,7 +192,6 @@ def read_bag(path, topic=None, fast=True):
     if t.shape[0] == 0:
         extra = f' ({"; ".join(warnings)})' if warnings else ''
         raise InputError(path, f'topic {chosen} has no messages{extra}')
-    storage = _dir_storage(p)[0] if kind == 'dir' else kind
     integrity = INTEGRITY.get(storage, '')
     if checks.get('chunks_without_crc'):
         integrity = (f'{checks["chunks_without_crc"]} MCAP chunk(s) carry no CRC-32 (their writer '
@@ -476,13 +453,9 @@ class _SqliteSource:
             'SELECT timestamp, data FROM messages WHERE topic_id IN (%s) ORDER BY id'
             % ','.join('?' * len(ids)), ids)
         try:
-            while True:
-                batch = cur.fetchmany(65536)
-                if not batch:
-                    break
-                for s, b in batch:
-                    stamps.append(s)
-                    blobs.append(b)
+            for s, b in cur:
+                stamps.append(s)
+                blobs.append(b)
         except sqlite3.Error as err:
             self.warnings.append(f'{self.path.name}: read stopped after {len(blobs)} messages '
                                  f'({err}); the rest is skipped')
@@ -497,11 +470,7 @@ class _SqliteSource:
 
 def _chosen_connections(reader, where, topic):
     """Return the Imu topic of a rosbags reader (:func:`choose_topic`) and its connections."""
-    topics = {}
-    for c in reader.connections:
-        typ, n = topics.get(c.topic, (c.msgtype, 0))
-        topics[c.topic] = (typ, n + c.msgcount)
-    chosen = choose_topic(where, topics, topic)
+    chosen = choose_topic(where, _reader_topics(reader), topic)
     return chosen, [c for c in reader.connections if c.topic == chosen]
 
 

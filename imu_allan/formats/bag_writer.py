@@ -16,11 +16,10 @@ import struct
 
 import numpy as np
 
-from .imu_cdr import encode_imu
+from .imu_cdr import encode_imu, IMU_TYPE
 from ..core.units import AXES
 from ..errors import InputError
 
-IMU_TYPE = 'sensor_msgs/msg/Imu'
 STORAGES = ('mcap', 'sqlite3', 'ros1')
 
 
@@ -45,29 +44,14 @@ def _check_new(path):
 def write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', frame_id='imu_link',
                   extra_topics=None, compress=False):
     """
-    Write samples as an Imu bag.
+    Write samples (t in s, data in SI) as an Imu bag on ``topic``; return its path.
 
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        Output: a rosbag2 folder (``mcap``, ``sqlite3``; metadata version 9, as Jazzy) or a
-        ROS 1 ``.bag`` file (``ros1``). Must not exist.
-    samples : Samples
-        t in s, data in SI (rad/s, m/s^2).
-    topic : str
-        Imu topic name.
-    storage : str
-        ``'mcap'`` (Jazzy's default), ``'sqlite3'`` or ``'ros1'``.
-    frame_id : str
-        Header frame id of every message.
-    extra_topics : dict, optional
-        More topics: ``{topic: Samples}`` (written as Imu like the main topic) or
-        ``{topic: (msgtype, [(stamp_ns, message object), ...])}`` with messages built with the
-        matching rosbags typestore (ROS2_JAZZY, or ROS1_NOETIC for ``ros1``); an empty list
-        makes a topic without messages.
-    compress : bool
-        zstd chunk compression (MCAP only).
-
+    ``path`` must not exist: a rosbag2 folder (``storage`` ``'mcap'``, Jazzy's default, or
+    ``'sqlite3'``; metadata version 9, as Jazzy) or a ROS 1 ``.bag`` file (``'ros1'``).
+    ``extra_topics``: ``{topic: Samples}`` (written as Imu like the main topic) or ``{topic:
+    (msgtype, [(stamp_ns, message object), ...])}`` with messages built with the matching
+    rosbags typestore (ROS2_JAZZY, or ROS1_NOETIC for ``ros1``); an empty list makes a topic
+    without messages.  ``compress``: zstd chunk compression (MCAP only).
     """
     from rosbags.typesys import get_typestore, Stores
     if storage not in STORAGES:
@@ -83,7 +67,7 @@ def write_imu_bag(path, samples, topic='/imu/data_raw', storage='mcap', frame_id
         serialize = ts.serialize_ros1
     else:
         from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
-        ts = get_typestore(Stores.ROS2_JAZZY)
+        ts = _jazzy()
         plugin = StoragePlugin.MCAP if storage == 'mcap' else StoragePlugin.SQLITE3
         writer = Writer(p, version=9, storage_plugin=plugin)
         if compress and storage == 'mcap':
@@ -156,27 +140,12 @@ def _write_merged(writer, streams):
 
 def copy_bag_with_topic(src, dst, topic, samples, frame_id='imu_link', compress=False):
     """
-    Copy every connection and message of a bag into a new MCAP rosbag2 and add an Imu topic.
+    Copy every connection and message of bag ``src`` into a new MCAP rosbag2 ``dst``, plus a topic.
 
-    Used by ``analyze --denoise`` to write ``imu/data_denoised`` next to the original topics.
-    ROS 1 sources are converted to CDR. Messages are written in receive-time order; the new
-    topic's receive times are its header stamps.
-
-    Parameters
-    ----------
-    src : str or pathlib.Path
-        Any bag ``read_bag`` accepts.
-    dst : str or pathlib.Path
-        New rosbag2 folder (must not exist).
-    topic : str
-        Name of the added Imu topic (must not exist in ``src``).
-    samples : Samples
-        The added samples (s, SI).
-    frame_id : str
-        Header frame id of the added messages.
-    compress : bool
-        zstd chunk compression.
-
+    Used by ``analyze --denoise`` to write ``imu/data_denoised`` next to the original topics:
+    ``samples`` (s, SI) become the new Imu ``topic`` (which must not exist in ``src``), its
+    receive times their header stamps.  ROS 1 sources are converted to CDR; messages are
+    written in receive-time order; ``compress``: zstd chunk compression.
     """
     from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 

@@ -214,20 +214,12 @@ def _parse_block(path, block, first, names):
 
 def read_csv(path):
     """
-    Read a CSV sample file.
+    Read a CSV sample file: ``t`` (s), ``data`` (n, A) SI, ``axes`` the axis columns present.
 
-    Returns
-    -------
-    Samples
-        ``t`` (s), ``data`` (n, A) in SI with ``axes`` the axis columns present (AXES order),
-        ``extra`` the extra columns by name. A header with no rows gives n = 0.
-
-    Raises
-    ------
-    InputError
-        Missing/empty file, no ``t`` column, unknown or duplicate columns, wrong cell count,
-        non-numeric cells (line and column named), NaN or infinite values (first line named).
-
+    ``extra``: the extra columns by name; a header with no rows gives n = 0.  Raises
+    :class:`InputError` for a missing or empty file, no ``t`` column, unknown or duplicate
+    columns, a wrong cell count, non-numeric cells (line and column named), NaN or infinite
+    values (first line named).
     """
     try:
         with open(path, encoding='utf-8') as f:

@@ -109,6 +109,11 @@ SCALE_KEYS = {('white_scale', 'white_noise'): ('stddev', 0),
               ('bias_scale', 'gauss_markov'): ('dynamic_bias_stddev', 1)}
 
 
+def _of_sensor(axes, sensor):
+    """Return the axes of ``axes`` that belong to ``sensor`` ('gyro' or 'accel')."""
+    return [a for a in axes if is_gyro(a) == (sensor == 'gyro')]
+
+
 def _version():
     from .. import __version__
     return __version__
@@ -240,10 +245,9 @@ class SimImu:
         """
         Return the :class:`NoiseModel` the simulator really produces, and notes on the conversion.
 
-        Gazebo: white N = sqrt(stddev^2 + precision^2 / 12) / sqrt(f) (the rounding term only
-        where gz-sensors rounds); Gauss-Markov sigma = dynamic_bias_stddev x sqrt(tau / 2).
-        PX4: N = the noise density; Gauss-Markov sigma = RandomWalk x sqrt(tau / 2).  Constant
-        offsets (mean, turn-on bias) do not change the Allan deviation and are left out.
+        The conversions of the module docstring (gz: N = sqrt(stddev^2 + precision^2 / 12) /
+        sqrt(f), the rounding term only where gz-sensors rounds); constant offsets (mean,
+        turn-on bias) do not change the Allan deviation and are left out.
         """
         rate = self.rate_for(data_rate_hz)
         notes = [f'{self.source}: {self.label} read as the noise it simulates']
@@ -297,9 +301,8 @@ class SimImu:
                     tau = self.params[tau_key]
                     sensor_terms['gauss_markov'] = {
                         'sigma': gm.stationary_sigma(self.params[rw_key], tau), 'tau_c': tau}
-                for axis in AXES:
-                    if sensor_terms and is_gyro(axis) == (sensor == 'gyro'):
-                        terms[axis] = copy.deepcopy(sensor_terms)
+                for axis in _of_sensor(AXES, sensor) if sensor_terms else ():
+                    terms[axis] = copy.deepcopy(sensor_terms)
             if self.defaulted:
                 notes.append(f'plugin defaults used for {", ".join(self.defaulted)}')
         if not terms:
@@ -347,13 +350,12 @@ class SimImu:
             model, _ = self.noise_model(data_rate_hz)
             terms = model.terms
             for sensor, keys in PX4_KEYS.items():
-                for axis in AXES:
-                    if is_gyro(axis) == (sensor == 'gyro'):
-                        turn_on[axis] = {'mean': 0.0, 'sigma': self.params[keys[3]]}
-                        if axis in terms and self.params[keys[1]] == 0 and \
-                                keys[1] not in self.defaulted:  # RandomWalk set to 0: zeroed
-                            terms[axis]['gauss_markov'] = {'sigma': 0.0,
-                                                           'tau_c': self.params[keys[2]]}
+                for axis in _of_sensor(AXES, sensor):
+                    turn_on[axis] = {'mean': 0.0, 'sigma': self.params[keys[3]]}
+                    if axis in terms and self.params[keys[1]] == 0 and \
+                            keys[1] not in self.defaulted:  # RandomWalk set to 0: zeroed
+                        terms[axis]['gauss_markov'] = {'sigma': 0.0,
+                                                       'tau_c': self.params[keys[2]]}
         if not terms:
             raise InputError(self.source, f'{self.label} simulates no noise')
         return NoiseModel(terms, None, turn_on), note
@@ -472,12 +474,11 @@ class SimImu:
                 _comment_before(holder, noise, lines)
         else:
             for sensor, keys in PX4_KEYS.items():
-                axes = [a for a in steps if is_gyro(a) == (sensor == 'gyro')]
+                axes = _of_sensor(steps, sensor)
                 if not axes:
                     continue
-                measured_axes = [a for a in result.axes if is_gyro(a) == (sensor == 'gyro')]
-                values, lines = px4_values({a: final[a] for a in measured_axes}, sensor,
-                                           tau_range, rate)
+                values, lines = px4_values({a: final[a] for a in _of_sensor(result.axes, sensor)},
+                                           sensor, tau_range, rate)
                 values[keys[3]] = self.params[keys[3]]  # the turn-on bias stays
                 _set_children(elem, values)
                 lines = [f'{a}: ' + _steps_text(steps[a], a, final[a]) for a in axes] + lines
@@ -734,12 +735,7 @@ class ModelInput:
 
 
 def _model_input(fitted, rate_hz, source=None):
-    """
-    (terms per axis, rate, tau range, upper limits, source) of an Analysis / fit / model.
-
-    95 % upper limits of undetected white noise and random walk come from an Analysis's
-    ``upper_limits``, else from a FittedModel's :meth:`upper_limit`; a NoiseModel has none.
-    """
+    """Return (terms per axis, rate, tau range, upper limits used, source) of a ModelInput."""
     given = ModelInput.of(fitted)
     model, result, upper, limit_of = (given.model, given.result, given.upper_limits or {},
                                       given.upper_limit)
@@ -783,27 +779,14 @@ def export_gazebo(fitted, rate_hz=None, inflate=1.0, source=None):
     """
     Gazebo (gz-sensors) SDF ``<sensor type="imu">`` with one ``<noise>`` per axis.
 
-    Parameters
-    ----------
-    fitted : Analysis, FittedModel or NoiseModel
-        The fitted noise (an Analysis also gives the source, the band and the 95 % upper
-        limits used for undetected white noise or random walk).
-    rate_hz : float, optional
-        Sample rate the per-sample stddev refers to (default: the fit's).
-    inflate : float or (float, float)
-        White-noise and bias factors (default 1: none).
-    source : str, optional
-        The input named in the header (default: the Analysis's).
-
-    Returns
-    -------
-    values : dict
-        ``{'rate_hz', 'axes': {axis: {stddev, dynamic_bias_stddev,
-        dynamic_bias_correlation_time[, precision]}}, 'upper_limits': {axis: [terms]}}``,
-        SI; stddev per sample, dynamic_bias_stddev a continuous driving density.
-    text : str
-        The file content (:data:`GAZEBO_FILE`).
-
+    ``fitted``: an Analysis (it also gives the source, the band and the 95 % upper limits used
+    for undetected white noise or random walk), a FittedModel or a NoiseModel; ``rate_hz``:
+    the rate the per-sample stddev refers to (default: the fit's); ``inflate``: white-noise
+    and bias factors, one number for both (default 1: none); ``source``: the input named in
+    the header (default: the Analysis's).  Returns ``(values, text)``: ``{'rate_hz', 'axes':
+    {axis: {stddev, dynamic_bias_stddev, dynamic_bias_correlation_time[, precision]}},
+    'upper_limits': {axis: [terms]}}`` (SI; stddev per sample, dynamic_bias_stddev a
+    continuous driving density) and the file content (:data:`GAZEBO_FILE`).
     """
     inflate = _inflation(inflate)
     terms, rate, tau_range, marked, source = _model_input(fitted, rate_hz, source)
@@ -860,7 +843,7 @@ def export_px4(fitted, rate_hz=None, inflate=1.0, source=None):
     out = {'rate_hz': rate, 'upper_limits': marked}
     lines_all, body = [], []
     for sensor in PX4_KEYS:
-        sensor_terms = {a: t for a, t in terms.items() if is_gyro(a) == (sensor == 'gyro')}
+        sensor_terms = {a: terms[a] for a in _of_sensor(terms, sensor)}
         if not sensor_terms:
             continue
         values, lines = px4_values(sensor_terms, sensor, tau_range, rate, inflate)

@@ -23,21 +23,10 @@ def stamp_seconds(stamp):
 
 def imu_to_row(msg):
     """
-    Convert one Imu message to ``(stamp_s, row)``.
+    Convert one Imu message (rclpy or rosbags) to ``(stamp_s, row)``.
 
-    Parameters
-    ----------
-    msg : sensor_msgs/msg/Imu
-        An rclpy or rosbags message object.
-
-    Returns
-    -------
-    stamp_s : float
-        Header stamp in seconds (``sec + nanosec * 1e-9``).
-    row : numpy.ndarray
-        Shape (6,), ``[gx, gy, gz, ax, ay, az]``: angular velocity in rad/s, then linear
-        acceleration in m/s^2 (the package axis order :data:`imu_allan.core.units.AXES`).
-
+    ``stamp_s``: header stamp in s (``sec + nanosec * 1e-9``); ``row`` (6,): angular velocity
+    in rad/s, then linear acceleration in m/s^2 (:data:`imu_allan.core.units.AXES` order).
     """
     w = msg.angular_velocity
     a = msg.linear_acceleration
@@ -46,17 +35,7 @@ def imu_to_row(msg):
 
 
 def imus_to_arrays(msgs):
-    """
-    Convert a sequence of Imu messages to ``(t, data)``.
-
-    Returns
-    -------
-    t : numpy.ndarray
-        Shape (n,), header stamps in seconds.
-    data : numpy.ndarray
-        Shape (n, 6), rad/s then m/s^2, columns in :data:`imu_allan.core.units.AXES` order.
-
-    """
+    """Convert Imu messages to ``(t, data)``: (n,) stamps in s, (n, 6) as :func:`imu_to_row`."""
     msgs = list(msgs)
     n = len(msgs)
     t = np.empty(n, dtype=np.float64)
@@ -64,7 +43,6 @@ def imus_to_arrays(msgs):
     for i, msg in enumerate(msgs):
         w = msg.angular_velocity
         a = msg.linear_acceleration
-        st = msg.header.stamp
-        t[i] = st.sec + st.nanosec * 1e-9
+        t[i] = stamp_seconds(msg.header.stamp)
         data[i] = (w.x, w.y, w.z, a.x, a.y, a.z)
     return t, data

@@ -19,6 +19,7 @@ per-topic accumulator and its warnings) and :mod:`.scan_common` (file maps, topi
 compiled walks' loader).
 """
 
+import functools
 import struct
 
 import numpy as np
@@ -52,12 +53,6 @@ def _ros1_layout(slen):
     return start, start + _TAIL
 
 
-def _take_f8(rows, start, count):
-    """Read ``count`` little-endian float64 starting at byte ``start`` of every row."""
-    block = np.ascontiguousarray(rows[:, start:start + 8 * count])
-    return block.view('<f8').reshape(rows.shape[0], count)
-
-
 def _u32(rows, start):
     """Read a little-endian uint32 at byte ``start`` of every row."""
     return np.ascontiguousarray(rows[:, start:start + 4]).view('<u4')[:, 0]
@@ -75,70 +70,30 @@ def _stamp(sec, nsec):
 
 def decode_rows(rows, ros1):
     """
-    Bulk-decode equal-length serialized Imu messages.
+    Bulk-decode equal-length serialized Imu messages, one per row of a (k, L) uint8 array.
 
-    Parameters
-    ----------
-    rows : numpy.ndarray
-        Shape (k, L) uint8, one serialized message per row.
-    ros1 : bool
-        ROS 1 serialization instead of CDR.
-
-    Returns
-    -------
-    ok : numpy.ndarray
-        Shape (k,) bool, rows decoded here; the others need the generic deserializer.
-    t : numpy.ndarray
-        Shape (k,), stamps in seconds (valid where ``ok``).
-    data : numpy.ndarray
-        Shape (k, 6), rad/s and m/s^2 (valid where ``ok``).
-
+    Returns ``(ok, t, data)`` as :func:`decode_at`, reading the rows where they are (a row's
+    bytes must be contiguous; the rows may lie apart, as in a run sliced out of a file).
     """
     k, length = rows.shape
-    t = np.zeros(k)
-    data = np.zeros((k, 6))
-    ok = np.zeros(k, dtype=bool)
-    if length < 16 + _TAIL:
-        return ok, t, data
-    slen = _u32(rows, 12)
-    if ros1:
-        good = np.ones(k, dtype=bool)
-        layout = _ros1_layout
-    else:
-        # Only little-endian plain CDR (encapsulation 00 01) has this byte layout.
-        good = (rows[:, 0] == 0) & (rows[:, 1] == 1)
-        layout = _cdr_layout
-    for s in np.unique(slen[good]):
-        start, total = layout(int(s))
-        if total != length:
-            continue
-        sel = good & (slen == s)
-        sub = rows[sel] if not sel.all() else rows
-        ok[sel] = True
-        if ros1:
-            sec = _u32(sub, 4).astype(np.float64)
-        else:
-            sec = _u32(sub, 4).view('<i4').astype(np.float64)
-        nsec = _u32(sub, 8).astype(np.float64)
-        t[sel] = _stamp(sec, nsec)
-        data[sel, :3] = _take_f8(sub, start + 8 * _GYRO_OFF, 3)
-        data[sel, 3:] = _take_f8(sub, start + 8 * _ACCEL_OFF, 3)
-    return ok, t, data
+    rows = rows if rows.strides[1] == 1 else np.ascontiguousarray(rows)
+    step = rows.strides[0]
+    span = np.lib.stride_tricks.as_strided(rows, shape=(max((k - 1) * step + length, 0),),
+                                           strides=(1,))
+    return decode_at(span, np.arange(k) * step, length, ros1)
 
 
 def cdr_to_arrays(blobs):
     """
     Convert serialized (CDR) Imu messages to ``(t, data)`` as :func:`.imu_adapter.imus_to_arrays`.
 
-    The live nodes take raw bytes from their subscription and decode them here in bulk with
-    the bag reader's fixed-layout decoder (:func:`decode_rows`), about
-    ten times cheaper than building a Python message per sample; anything the layout does not
-    cover (big-endian CDR, odd lengths) is deserialized one by one and goes through
-    :func:`.imu_adapter.imu_to_row`, so the numbers are the same either way.  (Here, not in
-    :mod:`.imu_adapter`: this module imports the adapter, the adapter imports nothing of it.)
-    A live batch is almost always one stream of one frame_id: :func:`_uniform_cdr` decodes
-    it with one structured view and a dozen numpy calls (the node calls this 20 times a
-    second on cache-cold data, where each numpy call costs 5-15 us).
+    For the live nodes' raw subscriptions: the fixed-layout decoder (:func:`decode_rows`, about
+    ten times cheaper than a Python message per sample), and for what the layout does not
+    cover (big-endian CDR, odd lengths) the generic deserializer and
+    :func:`.imu_adapter.imu_to_row`, so the numbers are the same either way.  A live batch is
+    almost always one stream of one frame_id: :func:`_uniform_cdr` decodes it with one
+    structured view and a dozen numpy calls (20 batches a second on cache-cold data, where
+    each numpy call costs 5-15 us).
     """
     fast = _uniform_cdr(blobs)
     if fast is not None:
@@ -157,21 +112,14 @@ def cdr_to_arrays(blobs):
     return t, data
 
 
-#: Structured dtypes of little-endian CDR Imu messages, by (length, frame_id length).
-_UNIFORM_DTYPES = {}
-
-
+@functools.lru_cache(maxsize=None)
 def _uniform_dtype(length, slen):
     """Return the fields of a little-endian CDR Imu of ``length`` bytes (decode_rows' bytes)."""
-    key = (length, slen)
-    if key not in _UNIFORM_DTYPES:
-        start, _ = _cdr_layout(slen)
-        _UNIFORM_DTYPES[key] = np.dtype({
-            'names': ['enc', 'sec', 'nsec', 'slen', 'gyro', 'accel'],
-            'formats': ['<u2', '<i4', '<u4', '<u4', ('<f8', 3), ('<f8', 3)],
-            'offsets': [0, 4, 8, 12, start + 8 * _GYRO_OFF, start + 8 * _ACCEL_OFF],
-            'itemsize': length})
-    return _UNIFORM_DTYPES[key]
+    start, _ = _cdr_layout(slen)
+    return np.dtype({'names': ['enc', 'sec', 'nsec', 'slen', 'gyro', 'accel'],
+                     'formats': ['<u2', '<i4', '<u4', '<u4', ('<f8', 3), ('<f8', 3)],
+                     'offsets': [0, 4, 8, 12, start + 8 * _GYRO_OFF, start + 8 * _ACCEL_OFF],
+                     'itemsize': length})
 
 
 def _uniform_cdr(blobs):
@@ -204,22 +152,12 @@ def set_covariance_diagonals(blobs, variances):
     """
     Return serialized CDR Imu messages with new angular-velocity / linear-acceleration variances.
 
-    Parameters
-    ----------
-    blobs : sequence of bytes
-        Serialized ``sensor_msgs/Imu`` (as a raw subscription takes them).
-    variances : array_like
-        Shape (6,), per-sample variances in AXES order: (rad/s)^2 then (m/s^2)^2.  NaN keeps
-        that element as it is.
-
-    Returns
-    -------
-    list of bytes
-        The messages in the same order, patched in bulk with numpy: the three diagonal
-        elements of each covariance are set; off-diagonal elements and the orientation are
-        kept, and a covariance whose element 0 is -1 ("not provided", sensor_msgs/Imu) stays
-        as it is.  Messages not in the little-endian CDR layout pass unchanged.
-
+    ``blobs``: serialized ``sensor_msgs/Imu`` (as a raw subscription takes them);
+    ``variances``: (6,) per-sample variances in AXES order, (rad/s)^2 then (m/s^2)^2, NaN
+    keeps that element.  The messages come back in the same order, patched in bulk: the three
+    diagonal elements of each covariance are set; off-diagonal elements, the orientation, a
+    covariance whose element 0 is -1 ("not provided", sensor_msgs/Imu) and messages not in
+    the little-endian CDR layout are kept as they are.
     """
     variances = np.asarray(variances, dtype=float).reshape(2, 3)
     out = list(blobs)
@@ -256,12 +194,13 @@ def _words(u8):
 
 def decode_at(u8, off, length, ros1):
     """
-    Bulk-decode serialized Imu messages of one length found at byte offsets of a buffer.
+    Bulk-decode the serialized Imu messages of ``length`` bytes at byte offsets ``off`` of ``u8``.
 
-    Same result as :func:`decode_rows` on the gathered rows, but only the header and the 48
-    bytes of angular velocity and linear acceleration are gathered, as 8 words per message
-    from an overlapping word view (half the time of the 64 byte gathers this replaced).
-    Callers pass batches of about 10^4 messages so the index arrays stay small.
+    Returns ``ok`` (k,) bool, the messages decoded here (the others need the generic
+    deserializer), and where ok ``t`` (k,) stamps in s and ``data`` (k, 6) rad/s, m/s^2.  Only
+    the header and the 48 bytes of angular velocity and linear acceleration are gathered, as 8
+    words per message from an overlapping word view; callers pass batches of about 10^4
+    messages so the index arrays stay small.
     """
     k = off.shape[0]
     t = np.zeros(k)
@@ -322,23 +261,18 @@ def valid_stamp(msg):
 MIN_IMU_BYTES = 16 + _TAIL
 
 
+@functools.lru_cache(maxsize=None)
+def _store(ros1):
+    """Return the Noetic (``ros1``) or Jazzy typestore, built once on first use."""
+    from rosbags.typesys import get_typestore, Stores
+    return get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)
+
+
 def deserialize(blob, ros1=False):
-    """
-    Deserialize one Imu: CDR with the Jazzy typestore, ROS 1 (``ros1``) with the Noetic one.
-
-    Each typestore is built once, on first use.
-    """
-    store = _STORES.get(ros1)
-    if store is None:
-        from rosbags.typesys import get_typestore, Stores
-        store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_JAZZY)
-        _STORES[ros1] = store
+    """Deserialize one Imu: CDR with the Jazzy typestore, ROS 1 (``ros1``) with the Noetic one."""
     if ros1:
-        return store.deserialize_ros1(blob, IMU_TYPE)
-    return store.deserialize_cdr(blob, IMU_TYPE)
-
-
-_STORES = {}  # ros1 flag -> typestore
+        return _store(True).deserialize_ros1(blob, IMU_TYPE)
+    return _store(False).deserialize_cdr(blob, IMU_TYPE)
 
 
 # -- encoding ------------------------------------------------------------------------------
@@ -364,26 +298,11 @@ def seconds_to_stamps(t):
 
 def encode_imu(t, data6, frame_id='imu_link', ros1=False):
     """
-    Serialize Imu messages in bulk.
+    Serialize Imu messages in bulk: little-endian CDR, or ROS 1 (``ros1``).
 
-    Parameters
-    ----------
-    t : array_like
-        Shape (n,), header stamps in s.
-    data6 : array_like
-        Shape (n, 6), rad/s and m/s^2 in AXES order.
-    frame_id : str
-        Header frame id.
-    ros1 : bool
-        ROS 1 serialization instead of little-endian CDR.
-
-    Returns
-    -------
-    rows : numpy.ndarray
-        Shape (n, L) uint8, one serialized message per row.
-    stamp_ns : numpy.ndarray
-        Shape (n,) int64, the stamps in ns (used as receive times).
-
+    ``t``: (n,) header stamps in s; ``data6``: (n, 6) rad/s and m/s^2 in AXES order.  Returns
+    ``rows`` (n, L) uint8, one serialized message per row, and ``stamp_ns`` (n,) int64, the
+    stamps in ns (used as receive times).
     """
     sec, nsec, stamp_ns = seconds_to_stamps(t)
     data6 = np.asarray(data6, dtype=np.float64)

@@ -39,13 +39,8 @@ def regular_input(path, wait_s=None):
     """
     Return a path the readers can open: ``path`` itself, or a temporary copy of a FIFO.
 
-    ``wait_s`` (default :data:`FIFO_WAIT_S`) bounds the wait for a FIFO's writer.
-
-    Raises
-    ------
-    InputError
-        Missing path, a device or socket, a FIFO with no writer within ``wait_s`` seconds.
-
+    :class:`InputError` for a missing path, a device or socket, or a FIFO with no writer
+    within ``wait_s`` seconds (default :data:`FIFO_WAIT_S`).
     """
     try:
         mode = os.stat(path).st_mode

@@ -32,7 +32,7 @@ import numpy as np
 
 from .collector import Collector
 from .imu_cdr import deserialize, IMU_TYPES, MIN_IMU_BYTES
-from .scan_common import compiled_walks, map_file, one_line, Passed
+from .scan_common import ChunkScan, compiled_walks, map_file, one_line, Passed, Runs
 from ..errors import InputError
 
 MCAP_MAGIC = b'\x89MCAP0\r\n'
@@ -100,7 +100,7 @@ _CHUNK_OPS = frozenset((0x03, 0x04, 0x05))
 
 #: Bytes of an MCAP Message record before its data: opcode, length, channel id, sequence,
 #: log time and publish time.
-_MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
+MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
 
 #: File size from which the compiled walk (:func:`.bag_kernels.mcap_walk`) reads the chunks
 #: even when numba is not imported yet: about 0.6 M Imu messages, from where ``analyze`` loads
@@ -108,7 +108,7 @@ _MESSAGE_HEADER = 1 + 8 + 2 + 4 + 8 + 8
 COMPILED_MIN_BYTES = 200 << 20
 
 
-class McapScan:
+class McapScan(ChunkScan):
     """
     Walk the records of an MCAP file, collecting the messages of the wanted Imu channels.
 
@@ -116,18 +116,12 @@ class McapScan:
     """
 
     def __init__(self, path, topic=None, collect=True, force_generic=False):
-        self.path = path
-        self.topic = topic
-        self.collect = collect
-        self.force_generic = force_generic
+        super().__init__(path, topic, collect, force_generic)
         self.schemas = {}  # id -> name
         self.channels = {}  # id -> (topic, type name, encoding)
-        self.counts = defaultdict(int)
         self.summary_counts = None  # {channel id: messages} the summary states, when it does
         self.foreign_records = defaultdict(int)  # opcode -> records a chunk may not hold
         self.channel_problems = []  # Channel records that contradict the declarations
-        self.collectors = {}
-        self.warnings = []
         self.complete = False
         self.chunk_offsets = []
         self.chunk_counts = {}  # chunk offset -> {channel id: messages}, from the summary
@@ -270,9 +264,10 @@ class McapScan:
         u8 = np.frombuffer(buf, dtype=np.uint8, count=end) if self.collect else None
         unpack_q = struct.Struct('<Q').unpack_from
         unpack_h = struct.Struct('<H').unpack_from
-        backoff = 0
+        runs = Runs()
         where = 'file' if top else 'chunk'
-        views = None if top or self._kernel is None else self._kernel.mcap_views(u8)
+        kernel = None if top else self._kernel
+        views = None if kernel is None else kernel.byte_views(u8, kernel.MCAP_VIEWS)
         while pos < end:
             if views is not None:
                 # The compiled walk takes the Message records it can; this loop takes the
@@ -306,25 +301,16 @@ class McapScan:
                 self.counts[cid] += 1
                 if self.collect and self._wanted(cid):
                     coll = self._collector(cid)
-                    stride = 9 + length
-                    kmax = (end - pos) // stride
-                    if backoff == 0 and kmax > 1:
-                        block = u8[pos:pos + kmax * stride].reshape(kmax, stride)
-                        # Same opcode, length and channel id as the first record: one run.
-                        same = (block[:, 0:11] == block[0, 0:11]).all(axis=1)
-                        k = kmax if same.all() else int(np.argmin(same))
-                        if k > 1:
-                            # u64 on disk: add_rows skips and counts those beyond int64
-                            log_time = np.ascontiguousarray(
-                                block[:k, 15:23]).view('<u8')[:, 0].astype(np.uint64)
-                            coll.add_rows(log_time, block[:k, 31:])
-                            self.counts[cid] += k - 1
-                            pos += k * stride
-                            backoff = 0 if k >= 8 else 32
-                            continue
-                        backoff = 32
-                    elif backoff:
-                        backoff -= 1
+                    # a run: the same opcode, length and channel id as this record
+                    block = runs.take(u8, pos, end, 9 + length, ((0, 11),))
+                    if block is not None:
+                        # u64 on disk: add_rows skips and counts those beyond int64
+                        log_time = np.ascontiguousarray(
+                            block[:, 15:23]).view('<u8')[:, 0].astype(np.uint64)
+                        coll.add_rows(log_time, block[:, 31:])
+                        self.counts[cid] += block.shape[0] - 1
+                        pos += block.shape[0] * (9 + length)
+                        continue
                     (log_time,) = unpack_q(buf, pos + 15)
                     coll.add_one(log_time, bytes(buf[pos + 31:rec_end]))
             elif op == 0x06 and top:
@@ -434,7 +420,7 @@ class McapScan:
         """Walk the Message records of u8[pos:end] compiled; return where the walk stopped."""
         kernel = self._kernel
         role, cid = self._roles()
-        room = (end - pos) // kernel.MESSAGE_HEADER + 1 if cid is not None else 0
+        room = (end - pos) // MESSAGE_HEADER + 1 if cid is not None else 0
         coll = self.collectors.get(self.channels[cid][0]) if cid is not None else None
         slots = coll.reserved(room) if coll is not None else None
         t, data = slots if slots is not None else (np.empty(room), np.empty((room, 6)))
@@ -486,11 +472,8 @@ class McapScan:
                           if self.channels.get(c, ('',))[0] == topic)
             self.collectors[topic] = Collector(
                 False, deserialize, self.force_generic,
-                capacity=indexed or self._size // (MIN_IMU_BYTES + _MESSAGE_HEADER))
+                capacity=indexed or self._size // (MIN_IMU_BYTES + MESSAGE_HEADER))
         return self.collectors[topic]
-
-    def _truncated(self, pos, end, where):
-        self.warnings.append(f'{where} truncated at byte {pos} of {end}: rest skipped')
 
     def _chunk(self, buf, pos, rec_end):
         try:
@@ -499,15 +482,7 @@ class McapScan:
         except Exception as err:  # any decoding failure means this chunk is unreadable
             self.warnings.append(f'corrupt chunk at byte {pos} skipped ({err})' + self._lost(pos))
             return
-        try:
-            if base:
-                # Walk uncompressed chunks in place (no copy): records are [base, base + usize).
-                self._walk_slice(inner, base, base + usize)
-            else:
-                self._walk(inner, 0, usize, top=False)
-        except (struct.error, ValueError, IndexError, KeyError) as err:
-            self.warnings.append(f'malformed record in the chunk at byte {pos} '
-                                 f'({one_line(err)}): rest of that chunk skipped')
+        self._walk_chunk(inner, base, base + usize, pos)  # (uncompressed: in place, no copy)
         # everything before this chunk's end is passed (the message indexes between chunks too)
         self._passed.upto(rec_end)
 
@@ -545,11 +520,4 @@ class McapScan:
         if comp != '' or p >= end:
             self._truncated(pos, end, 'file')
             return
-        before = len(self.warnings)
-        self._walk_slice(buf, p, end)
-        del self.warnings[before:]
-        self.warnings.append(f'file truncated at byte {end} inside the chunk starting at byte '
-                             f'{pos}: its complete messages were read, the rest is lost')
-
-    def _walk_slice(self, buf, start, stop):
-        self._walk(buf[start:stop], 0, stop - start, top=False)
+        self._walk_partial(buf, p, pos, end)

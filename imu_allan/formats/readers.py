@@ -64,32 +64,13 @@ def detect_format(path):
 
 def read_samples(path, fmt='auto', topic=None, fast=True, temperature=False):
     """
-    Read IMU samples from any supported input.
+    Read IMU samples (t in s, data in SI, axes in AXES order) from a file or rosbag2 folder.
 
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        The input file or rosbag2 folder.
-    fmt : str
-        One of :data:`FORMATS`.
-    topic : str, optional
-        Imu topic for bags (ignored for other formats).
-    fast : bool
-        Bags only: bulk decoder (True) or the generic deserializer (same numbers).
-    temperature : bool
-        Bags only: also read a ``sensor_msgs/Temperature`` topic into ``Samples.temperature``
-        (:func:`~.temperature_bag.read_temperature`; None when there is none).
-
-    Returns
-    -------
-    Samples
-        t in s, data in SI, axes in AXES order.
-
-    Raises
-    ------
-    InputError
-        Unknown format, or any problem the chosen reader reports.
-
+    ``fmt``: one of :data:`FORMATS`.  Bags only: ``topic`` the Imu topic, ``fast`` the bulk
+    decoder (False: the generic deserializer, same numbers), ``temperature`` also a
+    ``sensor_msgs/Temperature`` topic into ``Samples.temperature``
+    (:func:`~.temperature_bag.read_temperature`; None when there is none).  Raises
+    :class:`InputError` for an unknown format or any problem the chosen reader reports.
     """
     if fmt not in FORMATS:
         raise InputError('--format', f'unknown format {fmt!r} (one of {", ".join(FORMATS)})')

@@ -7,7 +7,6 @@ one numpy view (as for MCAP) and also reads the complete chunks of a bag cut sho
 recording.
 """
 
-from collections import defaultdict
 from functools import partial
 import struct
 
@@ -16,7 +15,7 @@ import numpy as np
 from .collector import Collector
 from .imu_cdr import deserialize, IMU_TYPES, MIN_IMU_BYTES
 from .mcap_scan import lz4_decompress
-from .scan_common import choose_topic, map_file, one_line, Passed
+from .scan_common import choose_topic, ChunkScan, map_file, one_line, Passed, Runs
 from ..errors import InputError
 
 ROS1_MAGIC = b'#ROSBAG V2.0\n'
@@ -44,18 +43,12 @@ def _ros1_fields(buf, pos, end):
     return fields
 
 
-class Ros1Scan:
+class Ros1Scan(ChunkScan):
     """Walk the chunks of a ROS 1 bag, collecting the messages of the wanted Imu connections."""
 
     def __init__(self, path, topic=None, collect=True, force_generic=False):
-        self.path = str(path)
-        self.topic = topic
-        self.collect = collect
-        self.force_generic = force_generic
+        super().__init__(path, topic, collect, force_generic)
         self.conns = {}  # conn id -> (topic, type, md5)
-        self.counts = defaultdict(int)
-        self.collectors = {}
-        self.warnings = []
         self.unsupported = False
         self.chunk_info = {}  # chunk position -> {conn id: message count}, from the index
 
@@ -128,7 +121,7 @@ class Ros1Scan:
         u8 = np.frombuffer(buf, dtype=np.uint8, count=end) if self.collect else None
         unpack_i = struct.Struct('<I').unpack_from
         index_pos = end
-        backoff = 0
+        runs = Runs()
         where = 'file' if top else 'chunk'
         while pos < min(end, index_pos):
             if end - pos < 4:
@@ -158,29 +151,17 @@ class Ros1Scan:
                 self.counts[cid] += 1
                 if self.collect and self._wanted(cid):
                     coll = self._collector(cid)
-                    tpos = fields['time'][1] - pos
-                    stride = rec_end - pos
-                    kmax = (end - pos) // stride
-                    if backoff == 0 and kmax > 1:
-                        block = u8[pos:pos + kmax * stride].reshape(kmax, stride)
-                        # Same header bytes (length, fields, connection) except the time value.
-                        same = ((block[:, :tpos] == block[0, :tpos]).all(axis=1)
-                                & (block[:, tpos + 8:hend + 4 - pos]
-                                   == block[0, tpos + 8:hend + 4 - pos]).all(axis=1))
-                        k = kmax if same.all() else int(np.argmin(same))
-                        if k > 1:
-                            tt = np.ascontiguousarray(block[:k, tpos:tpos + 8]).view('<u4')
-                            log_time = tt[:, 0].astype(np.int64) * 1_000_000_000 + tt[:, 1]
-                            # a nanosecond field of 1e9 or more is no time: damaged record
-                            coll.add_rows(log_time, block[:k, hend + 4 - pos:],
-                                          bad=tt[:, 1] >= 1_000_000_000)
-                            self.counts[cid] += k - 1
-                            pos += k * stride
-                            backoff = 0 if k >= 8 else 32
-                            continue
-                        backoff = 32
-                    elif backoff:
-                        backoff -= 1
+                    tpos, data = fields['time'][1] - pos, hend + 4 - pos
+                    # a run: the same header bytes (length, fields, connection) but the time
+                    block = runs.take(u8, pos, end, rec_end - pos, ((0, tpos), (tpos + 8, data)))
+                    if block is not None:
+                        tt = np.ascontiguousarray(block[:, tpos:tpos + 8]).view('<u4')
+                        log_time = tt[:, 0].astype(np.int64) * 1_000_000_000 + tt[:, 1]
+                        # a nanosecond field of 1e9 or more is no time: damaged record
+                        coll.add_rows(log_time, block[:, data:], bad=tt[:, 1] >= 1_000_000_000)
+                        self.counts[cid] += block.shape[0] - 1
+                        pos += block.shape[0] * (rec_end - pos)
+                        continue
                     sec, nsec = struct.unpack('<II', fields['time'][0][:8])
                     coll.add_one(sec * 1_000_000_000 + nsec if nsec < 1_000_000_000 else None,
                                  bytes(buf[hend + 4:rec_end]))
@@ -228,9 +209,6 @@ class Ros1Scan:
         md5 = data.get('md5sum', (b'', 0))[0].decode('ascii', 'replace')
         self.conns.setdefault(cid, (topic, typ, md5))
 
-    def _truncated(self, pos, end, where):
-        self.warnings.append(f'{where} truncated at byte {pos} of {end}: rest skipped')
-
     def _chunk(self, buf, fields, start, end, pos):
         try:
             comp = fields['compression'][0].decode('ascii')
@@ -254,14 +232,10 @@ class Ros1Scan:
             return
         before = self._wanted_count()
         n_warnings = len(self.warnings)
-        try:
-            if raw is None:
-                self._walk(buf[start:end], 0, usize, top=False)
-            else:
-                self._walk(memoryview(raw), 0, usize, top=False)
-        except (struct.error, ValueError, IndexError, KeyError) as err:
-            self.warnings.append(f'malformed record in the chunk at byte {pos} '
-                                 f'({one_line(err)}): rest of that chunk skipped')
+        if raw is None:
+            self._walk_chunk(buf, start, end, pos)
+        else:
+            self._walk_chunk(memoryview(raw), 0, usize, pos)
         if len(self.warnings) > n_warnings:  # the chunk walk stopped early: say what it cost
             self.warnings[-1] += self._lost(pos, self._wanted_count() - before)
         # everything before this chunk's end is passed (the index records between chunks too)
@@ -280,11 +254,7 @@ class Ros1Scan:
         if not ok:
             self._truncated(pos, end, 'file')
             return
-        before = len(self.warnings)
-        self._walk(buf[hend + 4:end], 0, end - hend - 4, top=False)
-        del self.warnings[before:]
-        self.warnings.append(f'file truncated at byte {end} inside the chunk starting at byte '
-                             f'{pos}: its complete messages were read, the rest is lost')
+        self._walk_partial(buf, hend + 4, pos, end)
 
 
 def read_ros1_scan(where, p, topic, force_generic=False):

@@ -2,13 +2,17 @@
 What the storage scanners share besides the codec and the collector.
 
 Memory maps read front to back (:func:`map_file`, :class:`Passed`), the compiled walks' module
-when it is worth loading (:func:`compiled_walks`), the choice of the Imu topic and the
-one-line error text.  Used by :mod:`.mcap_scan`, :mod:`.sqlite_pages`, :mod:`.ros1_scan` and
-:mod:`.bag_reader`.
+when it is worth loading (:func:`compiled_walks`), the chunk scanners' common part
+(:class:`ChunkScan`, :class:`Runs`), the choice of the Imu topic and the one-line error text.
+Used by :mod:`.mcap_scan`, :mod:`.sqlite_pages`, :mod:`.ros1_scan` and :mod:`.bag_reader`.
 """
 
+from collections import defaultdict
 import mmap
+import struct
 import sys
+
+import numpy as np
 
 from .imu_cdr import IMU_TYPE, IMU_TYPES
 from ..errors import InputError
@@ -73,6 +77,71 @@ class Passed:
         if end - self.done >= self.STEP:
             release(self.mm, self.done, end)
             self.done = int(end)
+
+
+class Runs:
+    """
+    Runs of equal message records sliced out of a chunk with one numpy view (a scanner's walk).
+
+    After a run shorter than 8 records the next 32 records are taken one by one: a view for
+    every record of a file that mixes topics would cost more than it saves.
+    """
+
+    def __init__(self):
+        """No run seen yet."""
+        self.backoff = 0
+
+    def take(self, u8, pos, end, stride, spans):
+        """
+        Return the records from ``pos`` equal to the first in the byte ``spans`` (k, stride).
+
+        ``stride``: the first record's size; ``spans``: (start, stop) byte ranges that must
+        match.  None when fewer than two records match or after a short run.
+        """
+        kmax = (end - pos) // stride
+        if self.backoff or kmax < 2:
+            self.backoff = max(self.backoff - 1, 0)
+            return None
+        block = u8[pos:pos + kmax * stride].reshape(kmax, stride)
+        same = np.ones(kmax, dtype=bool)
+        for a, b in spans:
+            same &= (block[:, a:b] == block[0, a:b]).all(axis=1)
+        k = kmax if same.all() else int(np.argmin(same))
+        self.backoff = 0 if k >= 8 else 32
+        return block[:k] if k > 1 else None
+
+
+class ChunkScan:
+    """What the MCAP and ROS 1 scanners share: what they collect and their chunk warnings."""
+
+    def __init__(self, path, topic=None, collect=True, force_generic=False):
+        """Scan ``path`` for ``topic`` (None: any Imu topic); only count unless ``collect``."""
+        self.path = str(path)
+        self.topic = topic
+        self.collect = collect
+        self.force_generic = force_generic
+        self.counts = defaultdict(int)  # messages per channel (connection) id
+        self.collectors = {}  # topic -> Collector
+        self.warnings = []
+
+    def _truncated(self, pos, end, where):
+        self.warnings.append(f'{where} truncated at byte {pos} of {end}: rest skipped')
+
+    def _walk_chunk(self, buf, start, stop, pos):
+        """Walk the records buf[start:stop] of the chunk at byte ``pos`` of the file."""
+        try:
+            self._walk(buf[start:stop], 0, stop - start, top=False)
+        except (struct.error, ValueError, IndexError, KeyError) as err:
+            self.warnings.append(f'malformed record in the chunk at byte {pos} '
+                                 f'({one_line(err)}): rest of that chunk skipped')
+
+    def _walk_partial(self, buf, start, pos, end):
+        """Read the complete records from ``start`` of a chunk at ``pos`` cut off at ``end``."""
+        before = len(self.warnings)
+        self._walk(buf[start:end], 0, end - start, top=False)
+        del self.warnings[before:]
+        self.warnings.append(f'file truncated at byte {end} inside the chunk starting at byte '
+                             f'{pos}: its complete messages were read, the rest is lost')
 
 
 def one_line(err):

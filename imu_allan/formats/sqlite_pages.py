@@ -9,11 +9,9 @@ topic_id, timestamp, data), so walking the tree and decoding the cells with nump
 and it also reads what is left of a truncated file (SQLite itself refuses such a file): the
 rows of its intact pages.
 
-Two walks of the leaf pages give the same result: the numpy one here (:meth:`SqlitePages._batch`,
-the reference, about 20 vectorised passes per batch of pages) and a numba-compiled one
-(:func:`.bag_kernels.sqlite_walk`, one pass, about three times faster), used for large files or
-once numba is loaded (:func:`compiled_walk`); numba is optional, without it the numpy walk
-reads.
+The leaf pages are walked with numpy here (:meth:`SqlitePages._batch`, the reference) or, for
+large files or once numba is loaded (:func:`compiled_walk`), by :func:`.bag_kernels.sqlite_walk`
+(same result, about three times faster; numba is optional).
 """
 
 import os
@@ -57,6 +55,16 @@ def compiled_walk(npages):
 
 class Unsupported(Exception):
     """The file uses a feature the direct readers do not handle: use the other path."""
+
+
+def _be16(u8, pos):
+    """Return the big-endian uint16 at byte(s) ``pos`` of ``u8`` (as int64)."""
+    return u8[pos].astype(np.int64) * 256 + u8[pos + 1]
+
+
+def _be32(u8, pos):
+    """Return the big-endian uint32 at bytes ``pos`` of ``u8`` (as int64): page numbers."""
+    return (_be16(u8, pos) << 16) | _be16(u8, pos + 2)
 
 
 def _varints(u8, pos):
@@ -233,15 +241,13 @@ class SqlitePages:
         """Child page numbers of an interior table page, in key order."""
         u8 = self.u8
         base = (no - 1) * self.page_size
-        ncell = int(u8[hdr + 3]) * 256 + int(u8[hdr + 4])
+        ncell = int(_be16(u8, hdr + 3))
         right = struct.unpack_from('>I', self.mm, hdr + 8)[0]
         ptrs = self._ptrs(hdr, ncell, 4)
         if ptrs.size and (ptrs.max() + 4 > self.page_size or 12 + 2 * ncell > self.page_size):
             self.lost_pages += 1
             return np.zeros(0, dtype=np.int64)
-        b = u8[(base + ptrs)[:, None] + np.arange(4)].astype(np.int64)
-        children = (b[:, 0] << 24) | (b[:, 1] << 16) | (b[:, 2] << 8) | b[:, 3]
-        return np.append(children, right)
+        return np.append(_be32(u8, base + ptrs), right)
 
     def _payload(self, cell_off, page_base):
         """Full payload of one table-leaf cell (following overflow pages) and its rowid."""
@@ -328,7 +334,7 @@ class SqlitePages:
         rows = []
         for no in self.leaf_pages(root):
             base, hdr = self._page(no)
-            ncell = int(self.u8[hdr + 3]) * 256 + int(self.u8[hdr + 4])
+            ncell = int(_be16(self.u8, hdr + 3))
             ptrs = self._ptrs(hdr, ncell, 0)
             p, n1 = _varints(self.u8, base + ptrs)
             n2 = _varints(self.u8, base + ptrs + n1)[1]
@@ -358,7 +364,6 @@ class SqlitePages:
             if len(vals) >= 4 and vals[0] in ('table', 'index'):
                 self.schema_roots.append((vals[0], vals[3]))
                 self.schema_roots_by_name.append((str(vals[1]), vals[3]))
-            if len(vals) >= 4 and vals[0] in ('table', 'index'):
                 self.sql.append((*vals[:3], vals[4] if len(vals) > 4 else None))
         return out
 
@@ -477,8 +482,7 @@ class SqlitePages:
                     buf, local = self._pages_copy(level[c0:c0 + _INDEX_CHUNK])
                     hdr = (local - 1) * ps
                     inner = buf[hdr] == 0x02
-                    room = int((buf[hdr + 3][inner].astype(np.int64) * 256 + buf[hdr + 4][inner]
-                                + 1).sum())
+                    room = int((_be16(buf, hdr[inner] + 3) + 1).sum())
                     digest = np.zeros(2, dtype=np.uint64)
                     children = np.empty(room, dtype=np.int64)
                     n = kernel.sqlite_index_level(buf, local, ps, self.usable, digest,
@@ -533,7 +537,7 @@ class SqlitePages:
         interior = kind == 0x02
         if not (interior | (kind == 0x0A)).all():
             return None
-        ncell = u8[hdr + 3].astype(np.int64) * 256 + u8[hdr + 4]
+        ncell = _be16(u8, hdr + 3)
         head = np.where(interior, 12, 8)
         if (hdr + head + 2 * ncell > base + ps).any():
             return None
@@ -541,7 +545,7 @@ class SqlitePages:
         mask = j[None, :] < ncell[:, None]
         pp = (hdr + head)[:, None] + 2 * j[None, :]
         pp = pp[mask]
-        ptr = u8[pp].astype(np.int64) * 256 + u8[pp + 1]
+        ptr = _be16(u8, pp)
         cbase = np.repeat(base, ncell)
         inner = np.repeat(interior, ncell)
         if ((ptr < 8) | (ptr > ps - 8)).any():
@@ -566,12 +570,7 @@ class SqlitePages:
         ts = _be_ints(u8, rec + hs, s0)
         rowid = _be_ints(u8, rec + hs + _SERIAL_SIZE[s0], s1)
         digest = row_digests(ts, rowid)
-        ci = cell[inner]
-        b4 = u8[ci[:, None] + np.arange(4)].astype(np.int64)
-        left = (b4[:, 0] << 24) | (b4[:, 1] << 16) | (b4[:, 2] << 8) | b4[:, 3]
-        rh = hdr[interior]
-        r4 = u8[(rh + 8)[:, None] + np.arange(4)].astype(np.int64)
-        right = (r4[:, 0] << 24) | (r4[:, 1] << 16) | (r4[:, 2] << 8) | r4[:, 3]
+        left, right = _be32(u8, cell[inner]), _be32(u8, hdr[interior] + 8)
         return digest, int(ptr.size), np.concatenate([left, right])
 
     def _index_roots(self, table='messages'):
@@ -653,7 +652,7 @@ class SqlitePages:
         """
         u8, ps = self.u8, self.page_size
         hdr = (pages - 1) * ps + np.where(pages == 1, 100, 0)
-        ncell = u8[hdr + 3].astype(np.int64) * 256 + u8[hdr + 4]
+        ncell = _be16(u8, hdr + 3)
         cells = int(ncell[(u8[hdr] == 0x0D) & (8 + 2 * ncell <= ps)].sum())  # pages it walks
         order, stamp, off, length = np.empty((4, cells), dtype=np.int64)
         ok = np.empty(cells, dtype=bool)
@@ -697,7 +696,7 @@ class SqlitePages:
         else:
             u8, shift = self.u8, 0
         hdr = base + np.where(pages == 1, 100, 0)
-        ncell = u8[hdr + 3].astype(np.int64) * 256 + u8[hdr + 4]
+        ncell = _be16(u8, hdr + 3)
         good_page = (u8[hdr] == 0x0D) & (8 + 2 * ncell <= ps)
         if not good_page.all():
             self.lost_pages += int((~good_page).sum())
@@ -706,7 +705,7 @@ class SqlitePages:
         j = np.arange(maxc)
         mask = j[None, :] < ncell[:, None]
         pp = (hdr[:, None] + 8 + 2 * j[None, :])[mask]
-        ptr = u8[pp].astype(np.int64) * 256 + u8[pp + 1]
+        ptr = _be16(u8, pp)
         cbase = np.repeat(base, ncell)
         cell = cbase + ptr
         inside = (ptr >= 8) & (ptr < ps - 4)
@@ -786,7 +785,7 @@ class SqlitePages:
         if not ncell.size:
             return 0
         usable = self.usable
-        content = u8[hdr + 5].astype(np.int64) * 256 + u8[hdr + 6]
+        content = _be16(u8, hdr + 5)
         content = np.where(content == 0, 65536, content)
         page = np.repeat(np.arange(ncell.size), ncell)
         stray = (size < 0) | (ptr < content[page]) | (ptr + size > usable)
@@ -794,7 +793,7 @@ class SqlitePages:
         np.add.at(used, page, size)
         bad = np.zeros(ncell.size, dtype=bool)
         bad[page[stray]] = True
-        first = u8[hdr + 1].astype(np.int64) * 256 + u8[hdr + 2]
+        first = _be16(u8, hdr + 1)
         free = np.zeros(ncell.size, dtype=np.int64)
         for i in np.flatnonzero(first).tolist():  # freeblocks: rare in a bag (no deletes)
             fb, b0 = int(first[i]), int(base[i])
@@ -802,8 +801,8 @@ class SqlitePages:
                 if fb < content[i] or fb + 4 > usable:
                     bad[i] = True
                     break
-                nxt = int(u8[b0 + fb]) * 256 + int(u8[b0 + fb + 1])
-                free[i] += int(u8[b0 + fb + 2]) * 256 + int(u8[b0 + fb + 3])
+                nxt = int(_be16(u8, b0 + fb))
+                free[i] += int(_be16(u8, b0 + fb + 2))
                 if nxt and nxt <= fb:
                     bad[i] = True
                     break

@@ -85,19 +85,10 @@ def looks_like_thesis_log(text):
 
 def read_thesis_log(path):
     """
-    Read a thesis-format log.
+    Read a thesis-format log; :class:`InputError` if unreadable or without a valid data line.
 
-    Returns
-    -------
-    Samples
-        ``t`` in s since 1970 (from the ns stamps), ``data`` (n, 6) in AXES order: gyro rad/s,
-        accel m/s^2 (g times the header's gravity); ``gravity`` the value used.
-
-    Raises
-    ------
-    InputError
-        Missing or unreadable file, or no valid data line.
-
+    ``t`` in s since 1970 (from the ns stamps), ``data`` (n, 6) in AXES order: gyro rad/s,
+    accel m/s^2 (g times the header's gravity); ``gravity`` the value used.
     """
     try:
         with open(path, encoding='utf-8', errors='replace') as f:
