@@ -6,7 +6,7 @@ with a *baseline*: the pooled terms of every block since the axis's last reset t
 window (its EDF grows with its length).  An axis is tested once its baseline holds
 :data:`BASELINE_WINDOWS` windows: with one only, the noise type read from the baseline's slope
 (which sets both EDFs) is too noisy where flicker dominates (measured: docs/analyze.md,
-"Change test"; test/core/test_dynamic.py keeps that case).  Two tests per window and axis:
+"the change test"; test/core/test_dynamic.py keeps that case).  Two tests per window and axis:
 
 * **spectrum**: at every averaging factor m, the ratio R = AVAR_window / AVAR_baseline of two
   independent chi-square estimates is F(nu_w, nu_b)-distributed when nothing changed (NIST

@@ -124,7 +124,7 @@ class FittedModel:
         with each term not resolved held at the largest size the data allow at that level
         (the profile limit at delta chi^2 = 1): a budget is missed only when no term set the
         data cannot reject, and no size of a term they do not resolve, puts the lower end
-        below it (docs/online.md, the budget levels).
+        below it (docs/online.md, Health).
         """
         low = self.interval(axis, term)[0]
         if not math.isfinite(low):
